@@ -1,0 +1,253 @@
+"""collision_node: circle states in, predicted times to collision out.
+
+Subscribes to CircleStateArray (`state_topics`) and CircleState
+(`single_state_topics`) topics, keeps the latest state per body id, and
+publishes `collision_predictions` (CollisionPredictionArray) on every change or
+at `publish_rate`; serves `predict_collisions` (stateless); publishes
+`~/markers` for RViz/Foxglove and a DiagnosticArray on `/diagnostics` (1 Hz).
+
+The path of a message: raw bytes (recorded as received) -> deserialize ->
+CollisionPredictor.receive -> CollisionPredictor.predict -> serialize ->
+publish (and record the same bytes).
+"""
+from __future__ import annotations
+
+import sys
+import time
+from collections import deque
+from dataclasses import dataclass
+
+import numpy as np
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from rcl_interfaces.msg import SetParametersResult
+from rclpy.node import Node
+from rclpy.qos import (DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy,
+                       qos_profile_system_default)
+from rclpy.qos_overriding_options import QoSOverridingOptions
+from rclpy.serialization import deserialize_message, serialize_message
+from std_msgs.msg import Header
+from visualization_msgs.msg import MarkerArray
+
+from circle_collision_msgs.msg import CircleState, CircleStateArray, CollisionPredictionArray
+from circle_collision_msgs.srv import PredictCollisions
+from circle_collision_ros import node_parameters
+from circle_collision_ros.cli import parse_args, spin_node
+from circle_collision_ros.markers import MarkerBuilder
+from circle_collision_ros.prediction_pipeline import (CollisionPredictor, IntakeReport,
+                                                      PredictorConfig, predict_once)
+
+
+class Qos:
+    """QoS defaults (each overridable the ROS way: qos_overrides.<topic>.<entity>.<policy>)."""
+
+    # Best-effort requests match both reliable and best-effort publishers.
+    STATES = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=50,
+                        reliability=ReliabilityPolicy.BEST_EFFORT,
+                        durability=DurabilityPolicy.VOLATILE)
+    PREDICTIONS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=10,
+                             reliability=ReliabilityPolicy.RELIABLE)
+    MARKERS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1,
+                         reliability=ReliabilityPolicy.RELIABLE)
+
+
+@dataclass
+class Counters:
+    """Totals since start, reported on /diagnostics."""
+
+    messages: int = 0
+    accepted: int = 0
+    rejected: int = 0
+    ignored: int = 0
+    removed: int = 0
+    expired: int = 0
+    published: int = 0
+    errors: int = 0
+
+
+class CollisionNode(Node):
+    """The ROS face of CollisionPredictor; see the module docstring."""
+
+    WARN_THROTTLE_S = 2.0
+    LATENCY_WINDOW = 1000
+
+    def __init__(self, **kwargs) -> None:
+        super().__init__("collision_node", **kwargs)
+        node_parameters.declare_all(self)
+        for spec in node_parameters.PARAMS:
+            reason = node_parameters.validate(spec.name, node_parameters.value_of(self, spec.name))
+            if reason:
+                raise ValueError(f"parameter {reason}")
+        self.add_on_set_parameters_callback(self._validate_parameters)
+        self.add_post_set_parameters_callback(self._apply_parameters)
+        p = lambda name: node_parameters.value_of(self, name)  # noqa: E731
+
+        self.predictor = CollisionPredictor(PredictorConfig(
+            horizon=p("horizon"), dimensions=p("dimensions"), frame_id=p("frame_id"),
+            stale_timeout=p("stale_timeout"), report_all_pairs=p("report_all_pairs"),
+            max_bodies=p("max_bodies")))
+        self.counters = Counters()
+        self.latencies_s: deque[float] = deque(maxlen=self.LATENCY_WINDOW)
+        self._markers = MarkerBuilder(p("dimensions"))
+        self._marker_rate = p("marker_rate")
+        self._last_marker_time = 0.0
+        self._last_warning: dict[str, float] = {}
+
+        overrides = QoSOverridingOptions.with_default_policies()
+        self._predictions_pub = self.create_publisher(
+            CollisionPredictionArray, "collision_predictions", Qos.PREDICTIONS,
+            qos_overriding_options=overrides)
+        self._markers_pub = self.create_publisher(MarkerArray, "~/markers", Qos.MARKERS)
+        self._diagnostics_pub = self.create_publisher(DiagnosticArray, "/diagnostics",
+                                                      qos_profile_system_default)
+        self._subscriptions = []
+        for topic in p("state_topics"):
+            self._subscribe(topic, CircleStateArray)
+        for topic in p("single_state_topics"):
+            self._subscribe(topic, CircleState)
+        self.create_service(PredictCollisions, "predict_collisions", self._on_predict_request)
+
+        self._publish_timer = None
+        self._set_publish_rate(p("publish_rate"))
+        self.create_timer(1.0, self._publish_diagnostics)
+        self.get_logger().info(
+            f"predicting for {p('dimensions')}-D bodies on {list(p('state_topics'))}"
+            f" + {list(p('single_state_topics'))}, horizon {p('horizon')} s")
+
+    # -- inputs ---------------------------------------------------------------------------------
+    def _subscribe(self, topic: str, msg_type: type) -> None:
+        # raw=True: the exact received bytes are what a recording must keep.
+        sub = self.create_subscription(
+            msg_type, topic, lambda data, t=topic, m=msg_type: self._on_states(t, m, data),
+            Qos.STATES, raw=True, qos_overriding_options=QoSOverridingOptions.with_default_policies())
+        self._subscriptions.append(sub)
+
+    def _on_states(self, topic: str, msg_type: type, data: bytes) -> None:
+        started = time.perf_counter()
+        now_ns = self.get_clock().now().nanoseconds
+        self.counters.messages += 1
+        try:
+            msg = deserialize_message(data, msg_type)
+        except Exception as exc:  # a malformed payload must not stop the node
+            self.counters.rejected += 1
+            self._warn(topic, f"{topic}: undecodable {msg_type.__name__} ({exc})")
+            return
+        if msg_type is CircleStateArray:
+            report = self.predictor.receive(msg.circles, now_ns, msg.header.frame_id)
+        else:
+            report = self.predictor.receive([msg], now_ns)
+        self._account(topic, report)
+        if self._publish_timer is None and report.changed:
+            self._publish(now_ns, started)
+
+    def _account(self, topic: str, report: IntakeReport) -> None:
+        c = self.counters
+        c.accepted += report.accepted
+        c.removed += report.removed
+        c.ignored += report.ignored
+        c.expired += len(report.expired)
+        c.rejected += len(report.rejected)
+        if report.rejected:
+            shown = "; ".join(f"id '{r.body_id}': {r.reason}" for r in report.rejected[:3])
+            more = f" (+{len(report.rejected) - 3} more)" if len(report.rejected) > 3 else ""
+            self._warn(topic, f"{topic}: rejected {len(report.rejected)} state(s): {shown}{more}")
+
+    def _warn(self, key: str, text: str) -> None:
+        """A warning per key (topic) at most every WARN_THROTTLE_S."""
+        now = time.monotonic()
+        if now - self._last_warning.get(key, -1e9) >= self.WARN_THROTTLE_S:
+            self._last_warning[key] = now
+            self.get_logger().warning(text)
+
+    # -- outputs --------------------------------------------------------------------------------
+    def _on_publish_timer(self) -> None:
+        started = time.perf_counter()
+        now_ns = self.get_clock().now().nanoseconds
+        self.counters.expired += len(self.predictor.expire(now_ns))
+        self._publish(now_ns, started)
+
+    def _publish(self, now_ns: int, started: float) -> None:
+        try:
+            out = self.predictor.predict()
+        except Exception as exc:  # never let one bad scene stop the stream
+            self.counters.errors += 1
+            self._warn("predict", f"prediction failed, scene of {len(self.predictor.registry)} "
+                                  f"bodies skipped: {exc!r}")
+            return
+        self._predictions_pub.publish(serialize_message(out))
+        self.counters.published += 1
+        self.latencies_s.append(time.perf_counter() - started)
+        if self._marker_rate > 0 and time.monotonic() - self._last_marker_time >= 1.0 / self._marker_rate:
+            self._last_marker_time = time.monotonic()
+            self._markers_pub.publish(self._markers.build(self.predictor.last_snapshot, out))
+
+    def _on_predict_request(self, request: PredictCollisions.Request,
+                            response: PredictCollisions.Response) -> PredictCollisions.Response:
+        try:
+            horizon = request.horizon if request.horizon != 0.0 else self.predictor.config.horizon
+            if not (np.isfinite(horizon) and horizon > 0.0):
+                response.success, response.message = False, f"horizon must be finite and > 0, got {horizon}"
+                return response
+            ok, message, out = predict_once(request.circles, self.predictor.config, horizon)
+            response.success, response.message = ok, message
+            response.predictions = out.predictions if out is not None else []
+        except Exception as exc:  # the caller gets an answer, never a dead service
+            response.success, response.message = False, f"internal error: {exc!r}"
+        return response
+
+    def _publish_diagnostics(self) -> None:
+        c, s = self.counters, self.predictor.stats
+        lat = np.array(self.latencies_s) if self.latencies_s else np.zeros(1)
+        level = DiagnosticStatus.OK if c.errors == 0 else DiagnosticStatus.WARN
+        values = {
+            "bodies": len(self.predictor.registry), "messages": c.messages,
+            "states_accepted": c.accepted, "states_rejected": c.rejected,
+            "states_ignored_not_newer": c.ignored, "bodies_removed": c.removed,
+            "bodies_expired": c.expired, "predictions_published": c.published,
+            "candidate_pairs": s.candidate_pairs, "contacts": s.contacts,
+            "compute_ms_last": f"{s.compute_s * 1e3:.3f}",
+            "latency_ms_p50": f"{np.percentile(lat, 50) * 1e3:.3f}",
+            "latency_ms_p99": f"{np.percentile(lat, 99) * 1e3:.3f}",
+            "errors": c.errors,
+        }
+        status = DiagnosticStatus(
+            level=level, name=f"{self.get_name()}: collision prediction",
+            message="ok" if level == DiagnosticStatus.OK else f"{c.errors} prediction errors",
+            hardware_id=self.get_fully_qualified_name(),
+            values=[KeyValue(key=k, value=str(v)) for k, v in values.items()])
+        self._diagnostics_pub.publish(DiagnosticArray(header=Header(stamp=self.get_clock().now().to_msg()), status=[status]))
+
+    # -- parameters -----------------------------------------------------------------------------
+    def _validate_parameters(self, params) -> SetParametersResult:
+        for param in params:
+            reason = node_parameters.validate(param.name, param.value)
+            if reason:
+                return SetParametersResult(successful=False, reason=reason)
+        return SetParametersResult(successful=True)
+
+    def _apply_parameters(self, params) -> None:
+        changes = {p.name: p.value for p in params
+                   if p.name in ("horizon", "stale_timeout", "report_all_pairs")}
+        if changes:
+            self.predictor.reconfigure(**changes)
+        for param in params:
+            if param.name == "publish_rate":
+                self._set_publish_rate(param.value)
+            elif param.name == "marker_rate":
+                self._marker_rate = param.value
+
+    def _set_publish_rate(self, rate_hz: float) -> None:
+        if self._publish_timer is not None:
+            self.destroy_timer(self._publish_timer)
+            self._publish_timer = None
+        if rate_hz > 0.0:
+            self._publish_timer = self.create_timer(1.0 / rate_hz, self._on_publish_timer)
+
+
+def main(args: list[str] | None = None) -> int:
+    argv = sys.argv if args is None else args
+    parse_args(argv, __doc__.splitlines()[0])
+    return spin_node(CollisionNode, argv, "collision_node")
+
+
+if __name__ == "__main__":
+    sys.exit(main())

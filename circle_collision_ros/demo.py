@@ -1,0 +1,181 @@
+"""demo: run collision_node against demo_scene, show the soonest contacts live, draw the scene.
+
+Starts both executables as separate processes (as a user would), listens to
+their topics, prints a table of the soonest predicted contacts (refreshed in
+place on a terminal, plain lines otherwise), and at the end writes a PNG of
+the scene (bodies, velocity arrows, predicted contact points) and says where.
+"""
+from __future__ import annotations
+
+import argparse
+import math
+import os
+import signal
+import subprocess
+import sys
+import time
+from datetime import datetime, timezone
+from pathlib import Path
+
+import rclpy
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.node import Node
+from rclpy.qos import QoSProfile, ReliabilityPolicy
+
+from circle_collision_msgs.msg import CircleStateArray, CollisionPrediction, CollisionPredictionArray
+from circle_collision_ros.cli import keep_ros_traffic_local, parse_args
+
+STATUS_NAMES = {CollisionPrediction.NO_CONTACT: "none", CollisionPrediction.CONTACT: "contact",
+                CollisionPrediction.OVERLAPPING: "OVERLAP"}
+
+
+class DemoListener(Node):
+    """Keeps the latest scene and predictions seen on the demo's topics."""
+
+    def __init__(self) -> None:
+        super().__init__("demo_listener")
+        self.scene: CircleStateArray | None = None
+        self.predictions: CollisionPredictionArray | None = None
+        self.prediction_count = 0
+        self.create_subscription(CircleStateArray, "circle_states", self._on_scene,
+                                 QoSProfile(depth=5, reliability=ReliabilityPolicy.BEST_EFFORT))
+        self.create_subscription(CollisionPredictionArray, "collision_predictions",
+                                 self._on_predictions, 10)
+
+    def _on_scene(self, msg: CircleStateArray) -> None:
+        self.scene = msg
+
+    def _on_predictions(self, msg: CollisionPredictionArray) -> None:
+        self.predictions = msg
+        self.prediction_count += 1
+
+
+def format_table(predictions: CollisionPredictionArray | None, elapsed: float, duration: float,
+                 count: int, rows: int = 10) -> list[str]:
+    """The live view as lines of text."""
+    head = f"circle_collision_ros demo  {elapsed:5.1f}/{duration:.0f} s  predictions received: {count}"
+    if predictions is None:
+        return [head, "waiting for collision_predictions ..."]
+    contacts = [p for p in predictions.predictions if p.status != CollisionPrediction.NO_CONTACT]
+    lines = [head, f"{len(contacts)} contacts within {predictions.horizon:.1f} s; soonest:",
+             f"{'body a':>10} {'body b':>10} {'status':>8} {'ttc [s]':>8} {'closing [m/s]':>13}  contact point [m]"]
+    for p in contacts[:rows]:
+        pt = p.contact_point
+        lines.append(f"{p.id_a:>10} {p.id_b:>10} {STATUS_NAMES[p.status]:>8} {p.time_to_collision:8.3f}"
+                     f" {p.closing_speed:13.2f}  ({pt.x:7.2f}, {pt.y:7.2f})")
+    return lines
+
+
+def draw_scene(scene: CircleStateArray | None, predictions: CollisionPredictionArray | None,
+               path: Path) -> None:
+    """PNG of the bodies, their velocities and the predicted contact points."""
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from matplotlib.patches import Circle
+
+    fig, ax = plt.subplots(figsize=(8, 8), dpi=110)
+    soon: dict[str, float] = {}
+    contacts = []
+    if predictions is not None:
+        contacts = [p for p in predictions.predictions if p.status != CollisionPrediction.NO_CONTACT]
+        for p in contacts:
+            for body in (p.id_a, p.id_b):
+                soon[body] = min(soon.get(body, math.inf), p.time_to_collision)
+    if scene is not None:
+        for c in scene.circles:
+            ttc = soon.get(c.id, math.inf)
+            colour = "tab:red" if ttc < 1 else "tab:orange" if ttc < 3 else "gold" if ttc < math.inf \
+                else "tab:blue"
+            ax.add_patch(Circle((c.position.x, c.position.y), c.radius, color=colour, alpha=0.5))
+            ax.arrow(c.position.x, c.position.y, c.velocity.x, c.velocity.y, width=0.05,
+                     head_width=0.4, color="k", alpha=0.6, length_includes_head=True)
+    if contacts:
+        ax.scatter([p.contact_point.x for p in contacts], [p.contact_point.y for p in contacts],
+                   marker="x", color="crimson", s=60, zorder=3, label="predicted contact point")
+        ax.legend(loc="upper right")
+    ax.set_aspect("equal")
+    ax.autoscale_view()
+    ax.set_xlabel("x [m]")
+    ax.set_ylabel("y [m]")
+    ax.set_title("bodies (colour: time to first contact <1 s red, <3 s orange, later gold, none blue);"
+                 "\narrows: velocity over 1 s", fontsize=9)
+    fig.tight_layout()
+    fig.savefig(path)
+    plt.close(fig)
+
+
+def _add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--duration", type=float, default=10.0, help="seconds to run (default 10)")
+    parser.add_argument("--count", type=int, default=40, help="bodies in the demo scene (default 40)")
+    parser.add_argument("--seed", type=int, default=1, help="scene seed (default 1)")
+    parser.add_argument("--rate", type=float, default=30.0, help="scene publish rate in Hz (default 30)")
+    parser.add_argument("--horizon", type=float, default=5.0, help="prediction horizon in s (default 5)")
+    parser.add_argument("--runs-dir", default="runs", help="where each run's folder goes (default runs/)")
+
+
+def _start(module: str, ros_args: list[str]) -> subprocess.Popen:
+    return subprocess.Popen([sys.executable, "-m", module, "--ros-args", *ros_args])
+
+
+def main(args: list[str] | None = None) -> int:
+    argv = sys.argv if args is None else args
+    opts = parse_args(argv, __doc__.splitlines()[0], _add_arguments)
+    keep_ros_traffic_local()
+    run_dir = Path(opts.runs_dir) / datetime.now(timezone.utc).strftime("%Y%m%d-%H%M%S")
+    run_dir.mkdir(parents=True, exist_ok=True)
+    children = [
+        _start("circle_collision_ros.collision_node",
+               ["-p", f"horizon:={opts.horizon}", "--log-level", "warn"]),
+        _start("circle_collision_ros.demo_scene",
+               ["-p", f"count:={opts.count}", "-p", f"seed:={opts.seed}", "-p", f"rate:={opts.rate}"]),
+    ]
+    rclpy.init()
+    listener = DemoListener()
+    executor = SingleThreadedExecutor()
+    executor.add_node(listener)
+    tty = sys.stdout.isatty()
+    started = time.monotonic()
+    next_print = 0.0
+    try:
+        while (elapsed := time.monotonic() - started) < opts.duration:
+            executor.spin_once(timeout_sec=0.05)
+            if any(c.poll() is not None for c in children):
+                print("demo: a child process exited early; see its messages above", file=sys.stderr)
+                return 1
+            if elapsed >= next_print:
+                lines = format_table(listener.predictions, elapsed, opts.duration,
+                                     listener.prediction_count)
+                if tty:  # redraw in place: cursor home, clear screen
+                    sys.stdout.write("\x1b[H\x1b[2J" + "\n".join(lines) + "\n")
+                else:
+                    print(" | ".join(lines[:2]) if len(lines) > 3 else " | ".join(lines))
+                sys.stdout.flush()
+                next_print = elapsed + (0.25 if tty else 1.0)
+    except KeyboardInterrupt:
+        pass
+    finally:
+        for child in children:
+            if child.poll() is None:
+                child.send_signal(signal.SIGINT)
+        for child in children:
+            try:
+                child.wait(timeout=10)
+            except subprocess.TimeoutExpired:
+                child.kill()
+        executor.shutdown()
+        listener.destroy_node()
+        rclpy.try_shutdown()
+    print("\n".join(format_table(listener.predictions, opts.duration, opts.duration,
+                                 listener.prediction_count)))
+    picture = run_dir / "scene.png"
+    draw_scene(listener.scene, listener.predictions, picture)
+    print(f"scene picture: {os.path.abspath(picture)}")
+    if listener.prediction_count == 0:
+        print("demo: no predictions were received", file=sys.stderr)
+        return 1
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

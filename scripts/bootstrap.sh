@@ -1,0 +1,115 @@
+#!/usr/bin/env bash
+# Idempotent set-up: .venv with pinned dependencies, circle_collision_msgs built
+# and installed into it, circle_collision_ros installed (editable) with the ROS
+# layout (<venv>/lib/circle_collision_ros/<executable>, share/...).
+# Each step re-runs only when its inputs changed (content hashes in .venv/.bootstrap/).
+# Usage: scripts/bootstrap.sh [--freeze]    (PYTHON=python3.12 to choose the interpreter)
+set -euo pipefail
+
+ROOT=$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)
+VENV="$ROOT/.venv"
+STAMPS="$VENV/.bootstrap"
+PY_BOOT=${PYTHON:-python3}
+export ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST
+
+say() { printf '[bootstrap] %s\n' "$*" >&2; }
+die() { printf '[bootstrap] error: %s\n' "$*" >&2; exit 1; }
+
+# Hash of file contents (and names), so a step re-runs only when an input changed.
+inputs_hash() { (cd "$ROOT" && for f in "$@"; do [ -e "$f" ] && { echo "$f"; cat "$f"; }; done) | sha256sum | cut -d' ' -f1; }
+is_current() { [ -f "$STAMPS/$1" ] && [ "$(cat "$STAMPS/$1")" = "$2" ]; }
+mark() { mkdir -p "$STAMPS"; echo "$2" > "$STAMPS/$1"; }
+
+# 1. The virtual environment.
+if [ ! -x "$VENV/bin/python" ]; then
+  command -v "$PY_BOOT" >/dev/null || die "$PY_BOOT not found; install Python 3.10-3.13 or set PYTHON=..."
+  "$PY_BOOT" -c 'import sys; sys.exit(not ((3, 10) <= sys.version_info[:2] <= (3, 13)))' \
+    || die "$PY_BOOT is $("$PY_BOOT" -V 2>&1); the ROS 2 wheels need Python 3.10-3.13 (set PYTHON=...)"
+  say "creating $VENV with $("$PY_BOOT" -V 2>&1)"
+  "$PY_BOOT" -m venv "$VENV" || die "python venv failed (on Debian/Ubuntu: apt-get install python3-venv)"
+fi
+PY="$VENV/bin/python"
+PIP=("$PY" -m pip --disable-pip-version-check -q)
+
+# 2. Pinned Python dependencies (ROS 2 Kilted wheels included).
+if [ "${1:-}" = "--freeze" ]; then
+  "$PY" - > "$ROOT/constraints.txt" <<'PYEOF'
+import importlib.metadata as md
+rows = {f'{d.metadata["Name"].lower().replace("_", "-")}=={d.version}'
+        for d in md.distributions()
+        if (d.read_text("INSTALLER") or "").strip() == "pip" and d.metadata["Name"]
+        and d.metadata["Name"].lower() not in ("pip", "circle-collision-ros")}
+print("# Full pin set of the venv; regenerate with: scripts/bootstrap.sh --freeze. Used with pip -c.")
+print("\n".join(sorted(rows)))
+PYEOF
+  say "wrote constraints.txt"; exit 0
+fi
+REQS=(requirements.txt requirements-build.txt requirements-test.txt constraints.txt)
+h=$(inputs_hash "${REQS[@]}")
+if ! is_current deps "$h"; then
+  say "installing pinned dependencies"
+  "${PIP[@]}" install -r "$ROOT/requirements.txt" -r "$ROOT/requirements-build.txt" \
+    -r "$ROOT/requirements-test.txt" -c "$ROOT/constraints.txt"
+  mark deps "$h"
+  rm -f "$STAMPS/msgs"  # a new ROS wheel set means the interfaces must be rebuilt
+fi
+
+# 3. The interface package circle_collision_msgs, built with CMake into the venv.
+h=$(inputs_hash $(cd "$ROOT" && find msg_defs -type f | sort))
+if ! is_current msgs "$h"; then
+  command -v cmake >/dev/null || die "cmake not found (apt-get install cmake)"
+  command -v c++ >/dev/null || command -v g++ >/dev/null || die "no C++ compiler found (apt-get install g++)"
+  say "building msg_defs (circle_collision_msgs)"
+  BUILD="$ROOT/build/msg_defs"
+  rm -rf "$BUILD"
+  log="$ROOT/build/msg_defs.log"
+  mkdir -p "$ROOT/build"
+  if ! (export AMENT_PREFIX_PATH="$VENV" CMAKE_PREFIX_PATH="$VENV" PATH="$VENV/bin:$PATH"
+        cmake -S "$ROOT/msg_defs" -B "$BUILD" -DCMAKE_INSTALL_PREFIX="$VENV" \
+          -DPython3_EXECUTABLE="$PY" -DBUILD_TESTING=OFF -DCMAKE_BUILD_TYPE=Release \
+        && cmake --build "$BUILD" -j "$(nproc 2>/dev/null || echo 2)" \
+        && cmake --install "$BUILD") > "$log" 2>&1; then
+    tail -n 40 "$log" >&2
+    die "building msg_defs failed; full log: $log"
+  fi
+  mark msgs "$h"
+fi
+
+# 4. This package, editable (code edits take effect at once), plus the ROS
+# layout that colcon would install, linked like `colcon build --symlink-install`:
+# every data_files entry of setup.py under <venv>/share/..., and every console
+# script under <venv>/lib/circle_collision_ros/ so that `ros2 run` finds it.
+h=$(inputs_hash setup.py setup.cfg package.xml resource/circle_collision_ros \
+      $(cd "$ROOT" && ls launch/*.launch.py config/*.yaml 2>/dev/null))
+if ! is_current package "$h"; then
+  say "installing circle_collision_ros (editable) and its ROS layout"
+  "${PIP[@]}" install --no-deps --no-build-isolation -e "$ROOT"
+  (cd "$ROOT" && "$PY" - "$VENV" <<'PYEOF'
+import os, runpy, shutil, sys
+import setuptools
+
+venv = sys.argv[1]
+setup_kwargs = {}
+setuptools.setup = lambda **kw: setup_kwargs.update(kw)  # read setup.py's own declarations
+runpy.run_path("setup.py")
+package = setup_kwargs["name"]
+
+def link(src: str, dst: str) -> None:
+    os.makedirs(os.path.dirname(dst), exist_ok=True)
+    if os.path.lexists(dst):
+        os.remove(dst)
+    os.symlink(src, dst)
+
+for dest, files in setup_kwargs["data_files"]:
+    for f in files:
+        link(os.path.abspath(f), os.path.join(venv, dest, os.path.basename(f)))
+
+lib = os.path.join(venv, "lib", package)
+shutil.rmtree(lib, ignore_errors=True)  # drop executables no longer declared
+for spec in setup_kwargs["entry_points"]["console_scripts"]:
+    name = spec.split("=")[0].strip()
+    link(os.path.join(venv, "bin", name), os.path.join(lib, name))
+PYEOF
+  )
+  mark package "$h"
+fi

@@ -1,0 +1,35 @@
+"""ament_python package circle_collision_ros (works with colcon and with pip)."""
+from glob import glob
+
+from setuptools import find_packages, setup
+
+PACKAGE = "circle_collision_ros"
+
+# Console scripts; each is also linked into <prefix>/lib/circle_collision_ros/
+# (setup.cfg for colcon, scripts/bootstrap.sh for the venv) so `ros2 run` finds it.
+CONSOLE_SCRIPTS = [
+    "collision_node = circle_collision_ros.collision_node:main",
+    "demo_scene = circle_collision_ros.demo_scene:main",
+    "demo = circle_collision_ros.demo:main",
+]
+
+setup(
+    name=PACKAGE,
+    version="0.1.0",
+    packages=find_packages(exclude=["tests", "tests.*", "bench", "bench.*"]),
+    package_data={"circle_collision_ros.core": ["*.md"]},
+    data_files=[
+        ("share/ament_index/resource_index/packages", [f"resource/{PACKAGE}"]),
+        (f"share/{PACKAGE}", ["package.xml"]),
+        (f"share/{PACKAGE}/launch", sorted(glob("launch/*.launch.py"))),
+        (f"share/{PACKAGE}/config", sorted(glob("config/*.yaml"))),
+    ],
+    install_requires=["setuptools"],
+    zip_safe=False,
+    maintainer="circle_collision_ros maintainers",
+    maintainer_email="maintainers@circle-collision-ros.dev",
+    description="Predicts when moving circles and spheres will first touch.",
+    license="Apache-2.0",
+    python_requires=">=3.10",
+    entry_points={"console_scripts": CONSOLE_SCRIPTS},
+)
