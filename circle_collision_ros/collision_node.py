@@ -99,7 +99,7 @@ class CollisionNode(Node):
         self._markers_pub = self.create_publisher(MarkerArray, "~/markers", Qos.MARKERS)
         self._diagnostics_pub = self.create_publisher(DiagnosticArray, "/diagnostics",
                                                       qos_profile_system_default)
-        self._subscriptions = []
+        self._state_subscriptions = []
         for topic in p("state_topics"):
             self._subscribe(topic, CircleStateArray)
         for topic in p("single_state_topics"):
@@ -119,7 +119,7 @@ class CollisionNode(Node):
         sub = self.create_subscription(
             msg_type, topic, lambda data, t=topic, m=msg_type: self._on_states(t, m, data),
             Qos.STATES, raw=True, qos_overriding_options=QoSOverridingOptions.with_default_policies())
-        self._subscriptions.append(sub)
+        self._state_subscriptions.append(sub)
 
     def _on_states(self, topic: str, msg_type: type, data: bytes) -> None:
         started = time.perf_counter()

@@ -1,0 +1,248 @@
+"""collision_node over real DDS on localhost.
+
+Guarantees proved here:
+- as a separate process (as users run it) and in-process, predictions for
+  published states equal the core narrow phase on every pair;
+- several topics (arrays and single states) merge into one scene by id;
+- the service answers good requests with the same predictions and bad ones with
+  success=false and a message naming the circle; it never raises;
+- parameters: valid run-time changes apply, invalid ones are refused with a
+  reason, read-only ones cannot change;
+- every bad-input class is rejected while the rest of the scene is still
+  predicted, no NaN is ever published, and the node survives a 50,000-body array;
+- markers and diagnostics are published.
+"""
+from __future__ import annotations
+
+import math
+import os
+import signal
+import subprocess
+import sys
+import time
+
+import pytest
+from diagnostic_msgs.msg import DiagnosticArray
+from rclpy.parameter import Parameter
+from rclpy.qos import QoSProfile, ReliabilityPolicy
+from visualization_msgs.msg import MarkerArray
+
+from circle_collision_msgs.msg import CircleState, CircleStateArray, CollisionPredictionArray
+from circle_collision_msgs.srv import PredictCollisions
+from circle_collision_ros.collision_node import CollisionNode
+from tests.ros.conftest import spin_until
+from tests.ros.node_helpers import (BASE_NS, assert_no_nan, contacts_of, expected_contacts,
+                                    random_states, state, state_array)
+
+
+def _now_ns(node) -> int:
+    return node.get_clock().now().nanoseconds
+
+
+class Harness:
+    """A client node that publishes states and collects what the collision node sends."""
+
+    def __init__(self, client, collision_node=None) -> None:
+        self.client = client
+        self.extra = (collision_node,) if collision_node is not None else ()
+        self.predictions: list[CollisionPredictionArray] = []
+        self.markers: list[MarkerArray] = []
+        self.diagnostics: list[DiagnosticArray] = []
+        client.create_subscription(CollisionPredictionArray, "collision_predictions",
+                                   self.predictions.append, 50)
+        client.create_subscription(MarkerArray, "collision_node/markers", self.markers.append, 10)
+        client.create_subscription(DiagnosticArray, "/diagnostics", self.diagnostics.append, 10)
+        qos = QoSProfile(depth=50, reliability=ReliabilityPolicy.RELIABLE)
+        self.pub = client.create_publisher(CircleStateArray, "circle_states", qos)
+
+    def wait_matched(self) -> None:
+        assert spin_until(self.client, lambda: self.pub.get_subscription_count() > 0, 20.0,
+                          self.extra), "collision_node never subscribed"
+
+    def send(self, msg: CircleStateArray, until=None, timeout: float = 15.0) -> None:
+        count = len(self.predictions)
+        self.pub.publish(msg)
+        done = until or (lambda: len(self.predictions) > count)
+        assert spin_until(self.client, done, timeout, self.extra), "no prediction arrived"
+
+    def spin(self, seconds: float) -> None:
+        spin_until(self.client, lambda: False, seconds, self.extra)
+
+
+@pytest.fixture
+def in_process(ros_context, ros_node):
+    node = CollisionNode(context=ros_context, parameter_overrides=[
+        Parameter("horizon", value=5.0), Parameter("frame_id", value="map"),
+        Parameter("marker_rate", value=100.0),
+        Parameter("single_state_topics", value=["robot_1/circle_state"]),
+        Parameter("state_topics", value=["circle_states", "lidar/circle_states"])])
+    harness = Harness(ros_node, node)
+    harness.wait_matched()
+    yield node, harness
+    node.destroy_node()
+
+
+def _stamped_now(states, client) -> list[CircleState]:
+    now = _now_ns(client)
+    for s in states:
+        t = now - (BASE_NS - (s.header.stamp.sec * 10**9 + s.header.stamp.nanosec))
+        s.header.stamp.sec, s.header.stamp.nanosec = divmod(t, 10**9)
+    return states
+
+
+def test_separate_process_predicts_like_the_core(ros_node) -> None:
+    exe = os.path.join(sys.prefix, "lib", "circle_collision_ros", "collision_node")
+    proc = subprocess.Popen([exe, "--ros-args", "-p", "horizon:=5.0"], stdout=subprocess.PIPE,
+                            stderr=subprocess.STDOUT, text=True)
+    try:
+        harness = Harness(ros_node)
+        harness.wait_matched()
+        states = _stamped_now(random_states(40, seed=11), ros_node)
+        harness.send(state_array(states))
+        out = harness.predictions[-1]
+        assert contacts_of(out) == expected_contacts(states, 5.0)
+        assert_no_nan(out)
+    except AssertionError as exc:
+        proc.kill()
+        pytest.fail(f"{exc}\ncollision_node output:\n{proc.communicate(timeout=20)[0]}")
+    proc.send_signal(signal.SIGINT)
+    output = proc.communicate(timeout=20)[0]
+    assert proc.returncode == 0, output
+    assert "Traceback" not in output
+
+
+def test_in_process_merges_topics_by_id(in_process, ros_node) -> None:
+    node, harness = in_process
+    states = _stamped_now([state("a", (0, 0), (1, 0, 0)), state("b", (10, 0))], ros_node)
+    harness.send(state_array(states))
+    assert contacts_of(harness.predictions[-1]) == {}  # 9 s > horizon of 5 s
+    lidar = ros_node.create_publisher(CircleStateArray, "lidar/circle_states", 10)
+    single = ros_node.create_publisher(CircleState, "robot_1/circle_state", 10)
+    assert spin_until(ros_node, lambda: lidar.get_subscription_count() and single.get_subscription_count(),
+                      15.0, (node,))
+    count = len(harness.predictions)
+    c = _stamped_now([state("c", (3, 0), (-1, 0, 0))], ros_node)
+    lidar.publish(state_array(c))
+    assert spin_until(ros_node, lambda: len(harness.predictions) > count, 15.0, (node,))
+    count = len(harness.predictions)
+    d = _stamped_now([state("d", (0, 4), (1, -1, 0))], ros_node)
+    single.publish(d[0])
+    assert spin_until(ros_node, lambda: len(harness.predictions) > count, 15.0, (node,))
+    out = harness.predictions[-1]
+    assert contacts_of(out) == expected_contacts(states + c + d, 5.0)
+    assert {("a", "c"), ("a", "d")} <= set(contacts_of(out))
+    assert all(body in node.predictor.registry for body in "abcd")
+
+
+def test_markers_and_diagnostics_are_published(in_process, ros_node) -> None:
+    node, harness = in_process
+    harness.send(state_array(_stamped_now([state("a", (0, 0), (1, 0, 0)), state("b", (3, 0))], ros_node)))
+    assert spin_until(ros_node, lambda: harness.markers and harness.diagnostics, 15.0, (node,))
+    markers = harness.markers[-1].markers
+    assert markers[0].action == markers[0].DELETEALL
+    assert {m.ns for m in markers[1:]} == {"bodies", "contacts"}
+    values = {kv.key: kv.value for kv in harness.diagnostics[-1].status[0].values}
+    assert values["bodies"] == "2" and int(values["predictions_published"]) >= 1
+
+
+def test_parameters_validated_and_applied(in_process) -> None:
+    node, _ = in_process
+    bad = node.set_parameters([Parameter("horizon", value=-1.0)])[0]
+    assert not bad.successful and "horizon" in bad.reason
+    assert not node.set_parameters([Parameter("stale_timeout", value=math.nan)])[0].successful
+    assert node.predictor.config.horizon == 5.0
+    assert node.set_parameters([Parameter("horizon", value=2.5)])[0].successful
+    assert node.predictor.config.horizon == 2.5
+    assert node.set_parameters([Parameter("report_all_pairs", value=True)])[0].successful
+    assert node.predictor.config.report_all_pairs
+    assert not node.set_parameters([Parameter("dimensions", value=3)])[0].successful  # read-only
+    assert node.set_parameters([Parameter("publish_rate", value=20.0)])[0].successful
+    assert node._publish_timer is not None
+
+
+def test_publish_rate_mode_publishes_without_new_input(in_process, ros_node) -> None:
+    node, harness = in_process
+    harness.send(state_array(_stamped_now([state("a", (0, 0))], ros_node)))
+    node.set_parameters([Parameter("publish_rate", value=20.0)])
+    count = len(harness.predictions)
+    harness.spin(1.0)
+    assert len(harness.predictions) - count >= 5
+
+
+@pytest.mark.parametrize("field, value, reason", [
+    ("radius", -1.0, "radius is negative"), ("radius", math.nan, "radius is nan"),
+    ("position.x", math.inf, "position.x is inf"), ("id", "", "empty id"),
+    ("frame", "odom", "not the scene frame"), ("stamp", 0, "stamp is zero"),
+    ("stamp", 10**6, "in the future"), ("duplicate", None, "more than once"),
+])
+def test_bad_input_rejected_rest_predicted(in_process, ros_node, field, value, reason) -> None:
+    node, harness = in_process
+    good = [state("a", (0, 0), (1, 0, 0)), state("b", (3, 0))]
+    bad = state("bad", (50, 50))
+    if field == "radius":
+        bad.radius = value
+    elif field == "position.x":
+        bad.position.x = value
+    elif field == "id":
+        bad.id = value
+    elif field == "frame":
+        bad.header.frame_id = value
+    states = _stamped_now(good + [bad], ros_node)
+    if field == "stamp":
+        bad.header.stamp.sec = value if value == 0 else bad.header.stamp.sec + value
+        bad.header.stamp.nanosec = 0
+    if field == "duplicate":
+        states.append(state("bad", (60, 60), stamp_ns=_now_ns(ros_node)))
+    rejected_before = node.counters.rejected
+    harness.send(state_array(states))
+    out = harness.predictions[-1]
+    assert contacts_of(out) == {("a", "b"): pytest.approx(2.0)}
+    assert_no_nan(out)
+    assert node.counters.rejected > rejected_before
+    assert "bad" not in node.predictor.registry
+
+
+def test_empty_array_does_not_break_the_node(in_process, ros_node) -> None:
+    node, harness = in_process
+    harness.pub.publish(CircleStateArray())
+    harness.spin(1.0)
+    assert node.counters.messages >= 1
+    harness.send(state_array(_stamped_now([state("a", (0, 0), (1, 0, 0)), state("b", (3, 0))], ros_node)))
+    assert contacts_of(harness.predictions[-1]) == {("a", "b"): pytest.approx(2.0)}
+
+
+@pytest.mark.slow
+def test_huge_array_is_survived(in_process, ros_node) -> None:
+    node, harness = in_process
+    node.set_parameters([Parameter("marker_rate", value=0.0)])
+    huge = random_states(50_000, seed=2, spread=5_000.0)
+    harness.send(state_array(_stamped_now(huge, ros_node)), timeout=120.0)
+    out = harness.predictions[-1]
+    assert len(node.predictor.registry) == 10_000  # max_bodies
+    assert node.counters.rejected >= 40_000
+    assert_no_nan(out)
+    harness.send(state_array(_stamped_now([state("a", (0, 0), (1, 0, 0)), state("zz", (3, 0))], ros_node)))
+
+
+def test_service_good_and_bad_requests(in_process, ros_node) -> None:
+    node, _ = in_process
+    client = ros_node.create_client(PredictCollisions, "predict_collisions")
+    assert spin_until(ros_node, client.service_is_ready, 15.0, (node,))
+
+    def call(request):
+        future = client.call_async(request)
+        assert spin_until(ros_node, future.done, 15.0, (node,))
+        return future.result()
+
+    states = random_states(30, seed=4)
+    good = call(PredictCollisions.Request(circles=states, horizon=0.0))
+    assert good.success and good.message == ""
+    assert {(p.id_a, p.id_b): p.time_to_collision for p in good.predictions if p.status} == \
+        expected_contacts(states, 5.0)
+    bad_states = [state("a", (0, 0)), state("b", (1, 1), r=math.nan)]
+    bad = call(PredictCollisions.Request(circles=bad_states, horizon=1.0))
+    assert not bad.success and bad.message.startswith("circles[1] (id 'b'): radius is nan")
+    assert not call(PredictCollisions.Request(circles=states, horizon=-2.0)).success
+    assert not call(PredictCollisions.Request(circles=states, horizon=math.inf)).success
+    empty = call(PredictCollisions.Request(circles=[], horizon=1.0))
+    assert empty.success and empty.predictions == []

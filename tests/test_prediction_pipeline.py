@@ -1,0 +1,182 @@
+"""CollisionPredictor: the node's path from messages to predictions, without a ROS graph.
+
+Guarantees proved here:
+- predictions equal the core narrow phase on every pair of the scene propagated
+  to the newest stamp (bitwise-equal times);
+- every bad-input class is rejected with a reason naming the field, and the
+  good states of the same message are still used;
+- latest state wins by stamp (late and duplicated states are ignored);
+  removal, expiry and max_bodies behave as documented;
+- the same inputs in the same order give bit-identical outputs.
+"""
+from __future__ import annotations
+
+import math
+
+import pytest
+
+from circle_collision_msgs.msg import CollisionPrediction
+from circle_collision_ros.prediction_pipeline import CollisionPredictor, PredictorConfig, predict_once
+from tests.ros.node_helpers import (BASE_NS, assert_no_nan, contacts_of, expected_contacts,
+                                    random_states, state)
+
+NOW = BASE_NS + 10_000_000
+
+
+def test_matches_core_on_every_pair() -> None:
+    states = random_states(60, seed=3)
+    predictor = CollisionPredictor(PredictorConfig(horizon=5.0))
+    report = predictor.receive(states, NOW)
+    assert report.accepted == 60 and not report.rejected
+    out = predictor.predict()
+    want = expected_contacts(states, 5.0)
+    assert want, "scene should have contacts"
+    assert contacts_of(out) == want
+    times = [p.time_to_collision for p in out.predictions]
+    assert times == sorted(times)
+    assert out.header.stamp.sec * 10**9 + out.header.stamp.nanosec == max(
+        s.header.stamp.sec * 10**9 + s.header.stamp.nanosec for s in states)
+    assert_no_nan(out)
+
+
+def test_three_d_scene_matches_core() -> None:
+    states = random_states(40, seed=5, dimensions=3, spread=10.0)
+    predictor = CollisionPredictor(PredictorConfig(horizon=4.0, dimensions=3))
+    predictor.receive(states, NOW)
+    assert contacts_of(predictor.predict()) == expected_contacts(states, 4.0, dimensions=3)
+
+
+def test_two_d_mode_ignores_z() -> None:
+    a = state("a", (0, 0, 100.0), (1, 0, 0))
+    b = state("b", (5, 0, -100.0))
+    predictor = CollisionPredictor(PredictorConfig(horizon=10.0))
+    predictor.receive([a, b], NOW)
+    (p,) = predictor.predict().predictions
+    assert p.time_to_collision == 4.0 and p.contact_point.z == 0.0
+
+
+def test_overlapping_status_and_details() -> None:
+    predictor = CollisionPredictor(PredictorConfig(horizon=10.0))
+    predictor.receive([state("a", (0, 0), r=1.0), state("b", (1.5, 0), r=1.0),
+                       state("c", (10, 0), (-1, 0, 0), r=1.0)], NOW)
+    out = {(p.id_a, p.id_b): p for p in predictor.predict().predictions}
+    assert out[("a", "b")].status == CollisionPrediction.OVERLAPPING
+    assert out[("a", "b")].time_to_collision == 0.0
+    bc = out[("b", "c")]
+    assert bc.status == CollisionPrediction.CONTACT and bc.time_to_collision == pytest.approx(6.5)
+    assert (bc.normal.x, bc.normal.y) == pytest.approx((1.0, 0.0))
+    assert bc.closing_speed == pytest.approx(1.0)
+    assert bc.contact_point.x == pytest.approx(2.5)
+    stamp_ns = bc.contact_time.sec * 10**9 + bc.contact_time.nanosec
+    assert stamp_ns == BASE_NS + 6_500_000_000
+
+
+@pytest.mark.parametrize("mutate, reason", [
+    (lambda s: setattr(s.position, "x", math.nan), "position.x is nan"),
+    (lambda s: setattr(s.velocity, "y", math.inf), "velocity.y is inf"),
+    (lambda s: setattr(s.acceleration, "z", -math.inf), "acceleration.z is -inf"),
+    (lambda s: setattr(s, "radius", math.nan), "radius is nan"),
+    (lambda s: setattr(s, "radius", -0.5), "radius is negative"),
+    (lambda s: setattr(s, "id", ""), "empty id"),
+    (lambda s: setattr(s.header, "frame_id", "odom"), "frame 'odom' is not the scene frame 'map'"),
+    (lambda s: (setattr(s.header.stamp, "sec", 0), setattr(s.header.stamp, "nanosec", 0)),
+     "header.stamp is zero"),
+    (lambda s: setattr(s.header.stamp, "sec", s.header.stamp.sec + 3600), "in the future"),
+], ids=["nan", "inf", "neg-inf", "nan-radius", "negative-radius", "empty-id", "wrong-frame",
+        "zero-stamp", "future-stamp"])
+def test_bad_state_rejected_rest_predicted(mutate, reason) -> None:
+    states = [state("a", (0, 0), (1, 0, 0)), state("b", (5, 0)), state("bad", (2.5, 3), (0, -1, 0))]
+    mutate(states[2])
+    predictor = CollisionPredictor(PredictorConfig(frame_id="map", horizon=10.0))
+    report = predictor.receive(states, NOW)
+    assert report.accepted == 2 and len(report.rejected) == 1
+    assert reason in report.rejected[0].reason and report.rejected[0].index == 2
+    out = predictor.predict()
+    assert contacts_of(out) == {("a", "b"): 4.0}
+    assert_no_nan(out)
+
+
+def test_duplicate_ids_in_one_message_are_all_rejected() -> None:
+    predictor = CollisionPredictor(PredictorConfig())
+    report = predictor.receive([state("a", (0, 0)), state("a", (9, 9)), state("b", (3, 0))], NOW)
+    assert report.accepted == 1 and [r.body_id for r in report.rejected] == ["a", "a"]
+    assert "more than once" in report.rejected[0].reason
+
+
+def test_empty_message_changes_nothing() -> None:
+    predictor = CollisionPredictor(PredictorConfig())
+    report = predictor.receive([], NOW)
+    assert not report.changed
+    assert predictor.predict().predictions == []
+
+
+def test_first_frame_is_adopted_then_enforced() -> None:
+    predictor = CollisionPredictor(PredictorConfig(frame_id=""))
+    predictor.receive([state("a", (0, 0), frame="odom")], NOW)
+    report = predictor.receive([state("b", (0, 0), frame="map")], NOW)
+    assert predictor.frame_id == "odom" and "not the scene frame 'odom'" in report.rejected[0].reason
+
+
+def test_latest_stamp_wins_and_late_states_are_ignored() -> None:
+    predictor = CollisionPredictor(PredictorConfig(horizon=100.0))
+    predictor.receive([state("a", (0, 0), (1, 0, 0), stamp_ns=BASE_NS), state("b", (10, 0))], NOW)
+    late = predictor.receive([state("a", (0, 0), (-1, 0, 0), stamp_ns=BASE_NS - 1)], NOW)
+    dup = predictor.receive([state("a", (0, 0), (1, 0, 0), stamp_ns=BASE_NS)], NOW)
+    assert late.ignored == 1 and dup.ignored == 1 and not late.changed and not dup.changed
+    assert contacts_of(predictor.predict()) == {("a", "b"): 9.0}
+
+
+def test_states_are_propagated_to_the_newest_stamp() -> None:
+    # a was seen 2 s before b: at b's stamp a has moved 2 m, so contact is 2 s sooner.
+    predictor = CollisionPredictor(PredictorConfig(horizon=100.0))
+    predictor.receive([state("a", (0, 0), (1, 0, 0), stamp_ns=BASE_NS - 2_000_000_000),
+                       state("b", (10, 0), stamp_ns=BASE_NS)], NOW)
+    assert contacts_of(predictor.predict()) == {("a", "b"): 7.0}
+
+
+def test_removal_and_expiry() -> None:
+    predictor = CollisionPredictor(PredictorConfig(stale_timeout=1.0))
+    predictor.receive([state("a", (0, 0)), state("b", (1, 0))], NOW)
+    report = predictor.receive([state("a", (0, 0), stamp_ns=BASE_NS + 1, remove=True)], NOW)
+    assert report.removed == 1 and "a" not in predictor.registry
+    report = predictor.receive([], NOW + 1_500_000_000)
+    assert report.expired == ["b"] and len(predictor.registry) == 0
+
+
+def test_max_bodies_bounds_the_scene() -> None:
+    predictor = CollisionPredictor(PredictorConfig(max_bodies=10))
+    report = predictor.receive(random_states(25, seed=1), NOW)
+    assert report.accepted == 10 and len(report.rejected) == 15
+    assert "scene is full" in report.rejected[0].reason
+
+
+def test_report_all_pairs_lists_no_contact_pairs_without_nan() -> None:
+    predictor = CollisionPredictor(PredictorConfig(report_all_pairs=True, horizon=1.0))
+    predictor.receive(random_states(12, seed=9, spread=30.0), NOW)
+    out = predictor.predict()
+    assert len(out.predictions) == 12 * 11 // 2
+    none = [p for p in out.predictions if p.status == CollisionPrediction.NO_CONTACT]
+    assert none and all(p.time_to_collision == math.inf for p in none)
+    assert_no_nan(out)
+
+
+def test_same_inputs_give_bit_identical_outputs() -> None:
+    runs = []
+    for _ in range(2):
+        predictor = CollisionPredictor(PredictorConfig())
+        outs = []
+        for k in range(5):
+            predictor.receive(random_states(30, seed=k, stamp_ns=BASE_NS + k * 33_000_000), NOW + k)
+            outs.append(predictor.predict())
+        runs.append(outs)
+    assert runs[0] == runs[1]  # message equality compares float fields exactly
+
+
+def test_predict_once_names_the_bad_circle() -> None:
+    states = [state("a", (0, 0)), state("b", (5, 0), r=-1.0)]
+    ok, message, out = predict_once(states, PredictorConfig())
+    assert not ok and out is None
+    assert message.startswith("circles[1] (id 'b'): radius is negative")
+    ok, message, out = predict_once([state("a", (0, 0), (1, 0, 0)), state("b", (5, 0))],
+                                    PredictorConfig(), horizon=10.0)
+    assert ok and contacts_of(out) == {("a", "b"): 4.0}
