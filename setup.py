@@ -11,6 +11,7 @@ CONSOLE_SCRIPTS = [
     "collision_node = circle_collision_ros.collision_node:main",
     "demo_scene = circle_collision_ros.demo_scene:main",
     "demo = circle_collision_ros.demo:main",
+    "replay = circle_collision_ros.replay:main",
 ]
 
 setup(

@@ -12,10 +12,11 @@ publish (and record the same bytes).
 """
 from __future__ import annotations
 
+import json
 import sys
 import time
 from collections import deque
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass
 
 import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
@@ -25,12 +26,13 @@ from rclpy.qos import (DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityP
                        qos_profile_system_default)
 from rclpy.qos_overriding_options import QoSOverridingOptions
 from rclpy.serialization import deserialize_message, serialize_message
-from std_msgs.msg import Header
+from std_msgs.msg import Header, String
 from visualization_msgs.msg import MarkerArray
 
 from circle_collision_msgs.msg import CircleState, CircleStateArray, CollisionPredictionArray
 from circle_collision_msgs.srv import PredictCollisions
 from circle_collision_ros import node_parameters
+from circle_collision_ros.bag_recorder import BagRecorder, RecordingError
 from circle_collision_ros.cli import parse_args, spin_node
 from circle_collision_ros.markers import MarkerBuilder
 from circle_collision_ros.prediction_pipeline import (CollisionPredictor, IntakeReport,
@@ -85,6 +87,7 @@ class CollisionNode(Node):
             horizon=p("horizon"), dimensions=p("dimensions"), frame_id=p("frame_id"),
             stale_timeout=p("stale_timeout"), report_all_pairs=p("report_all_pairs"),
             max_bodies=p("max_bodies")))
+        self.predictor.warm_up()  # pay numba's compile/cache load before the first message
         self.counters = Counters()
         self.latencies_s: deque[float] = deque(maxlen=self.LATENCY_WINDOW)
         self._markers = MarkerBuilder(p("dimensions"))
@@ -100,11 +103,16 @@ class CollisionNode(Node):
         self._diagnostics_pub = self.create_publisher(DiagnosticArray, "/diagnostics",
                                                       qos_profile_system_default)
         self._state_subscriptions = []
+        self._state_types: dict[str, type] = {}
         for topic in p("state_topics"):
             self._subscribe(topic, CircleStateArray)
         for topic in p("single_state_topics"):
             self._subscribe(topic, CircleState)
         self.create_service(PredictCollisions, "predict_collisions", self._on_predict_request)
+        self._recorder: BagRecorder | None = None
+        self._recording_error = ""
+        if p("record_path"):
+            self._start_recording(p("record_path"))
 
         self._publish_timer = None
         self._set_publish_rate(p("publish_rate"))
@@ -115,16 +123,19 @@ class CollisionNode(Node):
 
     # -- inputs ---------------------------------------------------------------------------------
     def _subscribe(self, topic: str, msg_type: type) -> None:
+        resolved = self.resolve_topic_name(topic)  # one name for warnings, recording, replay
         # raw=True: the exact received bytes are what a recording must keep.
         sub = self.create_subscription(
-            msg_type, topic, lambda data, t=topic, m=msg_type: self._on_states(t, m, data),
+            msg_type, resolved, lambda data, t=resolved, m=msg_type: self._on_states(t, m, data),
             Qos.STATES, raw=True, qos_overriding_options=QoSOverridingOptions.with_default_policies())
         self._state_subscriptions.append(sub)
+        self._state_types[resolved] = msg_type
 
     def _on_states(self, topic: str, msg_type: type, data: bytes) -> None:
         started = time.perf_counter()
         now_ns = self.get_clock().now().nanoseconds
         self.counters.messages += 1
+        self._record(topic, data, now_ns)  # before decoding: even garbage is kept for debugging
         try:
             msg = deserialize_message(data, msg_type)
         except Exception as exc:  # a malformed payload must not stop the node
@@ -173,7 +184,11 @@ class CollisionNode(Node):
             self._warn("predict", f"prediction failed, scene of {len(self.predictor.registry)} "
                                   f"bodies skipped: {exc!r}")
             return
-        self._predictions_pub.publish(serialize_message(out))
+        data = serialize_message(out)
+        self._predictions_pub.publish(data)
+        # Log time = the clock reading the prediction was computed at, so replay can
+        # recompute it at the same instant (expiry depends on it).
+        self._record(self._predictions_pub.topic_name, data, now_ns)
         self.counters.published += 1
         self.latencies_s.append(time.perf_counter() - started)
         if self._marker_rate > 0 and time.monotonic() - self._last_marker_time >= 1.0 / self._marker_rate:
@@ -216,6 +231,49 @@ class CollisionNode(Node):
             values=[KeyValue(key=k, value=str(v)) for k, v in values.items()])
         self._diagnostics_pub.publish(DiagnosticArray(header=Header(stamp=self.get_clock().now().to_msg()), status=[status]))
 
+    # -- recording ------------------------------------------------------------------------------
+    def _start_recording(self, path: str) -> None:
+        """Open the bag; an unusable record_path refuses start-up (no silent non-recording)."""
+        try:
+            self._recorder = BagRecorder(path)
+            for topic, msg_type in self._state_types.items():
+                self._recorder.add_topic(topic, _ros_type_name(msg_type))
+            self._recorder.add_topic(self._predictions_pub.topic_name,
+                                     _ros_type_name(CollisionPredictionArray))
+            self._recorder.add_topic(self._config_topic, "std_msgs/msg/String")
+        except RecordingError as exc:
+            raise ValueError(f"record_path: {exc}") from exc
+        self._record_config()
+        self.get_logger().info(f"recording to {self._recorder.path}")
+
+    @property
+    def _config_topic(self) -> str:
+        # Recorded only (not published): the configuration in force, for replay.
+        return f"{self.get_fully_qualified_name()}/config"
+
+    def _record_config(self) -> None:
+        config = dict(asdict(self.predictor.config),
+                      publish_rate=node_parameters.value_of(self, "publish_rate"))
+        data = serialize_message(String(data=json.dumps(config, sort_keys=True)))
+        self._record(self._config_topic, data, self.get_clock().now().nanoseconds)
+
+    def _record(self, topic: str, data: bytes, log_time_ns: int) -> None:
+        if self._recorder is None or self._recording_error:
+            return
+        try:
+            self._recorder.write(topic, data, log_time_ns)
+        except RecordingError as exc:  # keep predicting; say so loudly, once
+            self._recording_error = str(exc)
+            self.get_logger().error(f"recording stopped, predictions continue: {exc}")
+
+    def destroy_node(self) -> None:
+        if self._recorder is not None:
+            try:
+                self._recorder.close()
+            except RecordingError as exc:
+                self.get_logger().error(f"closing the recording failed: {exc}")
+        super().destroy_node()
+
     # -- parameters -----------------------------------------------------------------------------
     def _validate_parameters(self, params) -> SetParametersResult:
         for param in params:
@@ -229,6 +287,7 @@ class CollisionNode(Node):
                    if p.name in ("horizon", "stale_timeout", "report_all_pairs")}
         if changes:
             self.predictor.reconfigure(**changes)
+            self._record_config()
         for param in params:
             if param.name == "publish_rate":
                 self._set_publish_rate(param.value)
@@ -247,6 +306,11 @@ def main(args: list[str] | None = None) -> int:
     argv = sys.argv if args is None else args
     parse_args(argv, __doc__.splitlines()[0])
     return spin_node(CollisionNode, argv, "collision_node")
+
+
+def _ros_type_name(msg_type: type) -> str:
+    """'circle_collision_msgs/msg/CircleStateArray' for the class (rosbag2's type names)."""
+    return f"{msg_type.__module__.split('.')[0]}/msg/{msg_type.__name__}"
 
 
 if __name__ == "__main__":

@@ -25,6 +25,7 @@ from rclpy.qos import QoSProfile, ReliabilityPolicy
 from circle_collision_msgs.msg import CircleStateArray, CollisionPrediction, CollisionPredictionArray
 from circle_collision_ros.cli import keep_ros_traffic_local, parse_args
 
+STARTUP_TIMEOUT_S = 120.0
 STATUS_NAMES = {CollisionPrediction.NO_CONTACT: "none", CollisionPrediction.CONTACT: "contact",
                 CollisionPrediction.OVERLAPPING: "OVERLAP"}
 
@@ -112,10 +113,21 @@ def _add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--rate", type=float, default=30.0, help="scene publish rate in Hz (default 30)")
     parser.add_argument("--horizon", type=float, default=5.0, help="prediction horizon in s (default 5)")
     parser.add_argument("--runs-dir", default="runs", help="where each run's folder goes (default runs/)")
+    parser.add_argument("--no-record", action="store_true", help="do not record the run to MCAP")
+    parser.add_argument("--dimensions", type=int, choices=(2, 3), default=2, help="2 circles, 3 spheres")
+    parser.add_argument("--bad-fraction", type=float, default=0.0,
+                        help="fraction of malformed states mixed into the scene (default 0)")
 
 
 def _start(module: str, ros_args: list[str]) -> subprocess.Popen:
     return subprocess.Popen([sys.executable, "-m", module, "--ros-args", *ros_args])
+
+
+def _all_running(children: list[subprocess.Popen]) -> bool:
+    if any(c.poll() is not None for c in children):
+        print("demo: a child process exited early; see its messages above", file=sys.stderr)
+        return False
+    return True
 
 
 def main(args: list[str] | None = None) -> int:
@@ -124,24 +136,36 @@ def main(args: list[str] | None = None) -> int:
     keep_ros_traffic_local()
     run_dir = Path(opts.runs_dir) / datetime.now(timezone.utc).strftime("%Y%m%d-%H%M%S")
     run_dir.mkdir(parents=True, exist_ok=True)
+    bag = run_dir / "bag"
+    node_args = ["-p", f"horizon:={opts.horizon}", "-p", f"dimensions:={opts.dimensions}",
+                 "--log-level", "error"]
+    if not opts.no_record:
+        node_args[:0] = ["-p", f"record_path:={bag}"]
     children = [
-        _start("circle_collision_ros.collision_node",
-               ["-p", f"horizon:={opts.horizon}", "--log-level", "warn"]),
+        _start("circle_collision_ros.collision_node", node_args),
         _start("circle_collision_ros.demo_scene",
-               ["-p", f"count:={opts.count}", "-p", f"seed:={opts.seed}", "-p", f"rate:={opts.rate}"]),
+               ["-p", f"count:={opts.count}", "-p", f"seed:={opts.seed}", "-p", f"rate:={opts.rate}",
+                "-p", f"dimensions:={opts.dimensions}", "-p", f"bad_fraction:={opts.bad_fraction}"]),
     ]
     rclpy.init()
     listener = DemoListener()
     executor = SingleThreadedExecutor()
     executor.add_node(listener)
     tty = sys.stdout.isatty()
-    started = time.monotonic()
-    next_print = 0.0
     try:
+        # The clock starts with the first prediction: a first start may compile the numba
+        # kernels (cached afterwards), which must not eat the demo's time.
+        print("starting collision_node and demo_scene ...", flush=True)
+        waited = time.monotonic()
+        while listener.prediction_count == 0 and time.monotonic() - waited < STARTUP_TIMEOUT_S:
+            executor.spin_once(timeout_sec=0.1)
+            if not _all_running(children):
+                return 1
+        started = time.monotonic()
+        next_print = 0.0
         while (elapsed := time.monotonic() - started) < opts.duration:
             executor.spin_once(timeout_sec=0.05)
-            if any(c.poll() is not None for c in children):
-                print("demo: a child process exited early; see its messages above", file=sys.stderr)
+            if not _all_running(children):
                 return 1
             if elapsed >= next_print:
                 lines = format_table(listener.predictions, elapsed, opts.duration,
@@ -171,6 +195,8 @@ def main(args: list[str] | None = None) -> int:
     picture = run_dir / "scene.png"
     draw_scene(listener.scene, listener.predictions, picture)
     print(f"scene picture: {os.path.abspath(picture)}")
+    if not opts.no_record:
+        print(f"recording: {os.path.abspath(bag)}  (check it: replay {bag})")
     if listener.prediction_count == 0:
         print("demo: no predictions were received", file=sys.stderr)
         return 1

@@ -12,6 +12,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
+from rclpy.exceptions import ParameterUninitializedException
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 
@@ -82,7 +83,10 @@ def declare_all(node: Node) -> None:
 
 def value_of(node: Node, name: str) -> Any:
     """Current value, with the declared default for a typed-but-unset parameter."""
-    value = node.get_parameter(name).value
+    try:
+        value = node.get_parameter(name).value
+    except ParameterUninitializedException:  # declared by type only and not overridden
+        return SPECS[name].default
     return SPECS[name].default if value is None else value
 
 

@@ -16,6 +16,8 @@ import time
 from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
 
+import numpy as np
+
 from circle_collision_msgs.msg import CircleState, CollisionPredictionArray
 from circle_collision_ros.body_registry import BodyRegistry, BodyState, UpdateResult
 from circle_collision_ros.core import predict_all_pairs
@@ -81,6 +83,12 @@ class CollisionPredictor:
         self.registry = BodyRegistry(config.max_bodies)
         self.stats = PredictionStats()
         self.last_snapshot = None  # the SceneSnapshot of the last predict(), for markers
+
+    def warm_up(self) -> None:
+        """Run the core once on a tiny scene so the first real message pays no JIT/cache load."""
+        d = self.config.dimensions
+        z = np.zeros((2, d))
+        predict_all_pairs(np.eye(2, d), z, z, np.ones(2), self.config.horizon)
 
     def reconfigure(self, **changes) -> None:
         """Apply run-time changes (horizon, stale_timeout, report_all_pairs)."""

@@ -113,3 +113,19 @@ PYEOF
   )
   mark package "$h"
 fi
+
+# 5. Compile the numba kernels once into their on-disk cache (__pycache__), so that the
+# first node start or test does not pay the compile; re-runs when the core changes.
+h=$(inputs_hash $(cd "$ROOT" && ls circle_collision_ros/core/*.py) constraints.txt)
+if ! is_current numba "$h"; then
+  say "compiling the numba kernels into their cache"
+  (cd "$ROOT" && "$PY" -c '
+import numpy as np
+from circle_collision_ros.core import predict_all_pairs, time_to_collision
+for d in (2, 3):
+    z = np.zeros((2, d))
+    predict_all_pairs(np.eye(2, d), z, z, np.ones(2), 1.0)
+    time_to_collision(z[0], z[0], z[0], 1.0, z[1], z[1], z[1], 1.0, 1.0)
+')
+  mark numba "$h"
+fi
