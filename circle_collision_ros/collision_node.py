@@ -256,6 +256,10 @@ class CollisionNode(Node):
                       publish_rate=node_parameters.value_of(self, "publish_rate"))
         data = serialize_message(String(data=json.dumps(config, sort_keys=True)))
         self._record(self._config_topic, data, self.get_clock().now().nanoseconds)
+        try:  # also as bag metadata, for tools that look there rather than at topics
+            self._recorder.write_config(config)
+        except RecordingError as exc:
+            self._recording_error = self._recording_error or str(exc)
 
     def _record(self, topic: str, data: bytes, log_time_ns: int) -> None:
         if self._recorder is None or self._recording_error:

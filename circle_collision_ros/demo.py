@@ -110,10 +110,12 @@ def _add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--duration", type=float, default=10.0, help="seconds to run (default 10)")
     parser.add_argument("--count", type=int, default=40, help="bodies in the demo scene (default 40)")
     parser.add_argument("--seed", type=int, default=1, help="scene seed (default 1)")
+    parser.add_argument("--area", type=float, default=60.0, help="side of the scene's square/cube in m")
     parser.add_argument("--rate", type=float, default=30.0, help="scene publish rate in Hz (default 30)")
     parser.add_argument("--horizon", type=float, default=5.0, help="prediction horizon in s (default 5)")
     parser.add_argument("--runs-dir", default="runs", help="where each run's folder goes (default runs/)")
     parser.add_argument("--no-record", action="store_true", help="do not record the run to MCAP")
+    parser.add_argument("--bag", help="bag directory to record to (default: <run folder>/bag)")
     parser.add_argument("--dimensions", type=int, choices=(2, 3), default=2, help="2 circles, 3 spheres")
     parser.add_argument("--bad-fraction", type=float, default=0.0,
                         help="fraction of malformed states mixed into the scene (default 0)")
@@ -136,7 +138,7 @@ def main(args: list[str] | None = None) -> int:
     keep_ros_traffic_local()
     run_dir = Path(opts.runs_dir) / datetime.now(timezone.utc).strftime("%Y%m%d-%H%M%S")
     run_dir.mkdir(parents=True, exist_ok=True)
-    bag = run_dir / "bag"
+    bag = Path(opts.bag) if opts.bag else run_dir / "bag"
     node_args = ["-p", f"horizon:={opts.horizon}", "-p", f"dimensions:={opts.dimensions}",
                  "--log-level", "error"]
     if not opts.no_record:
@@ -145,6 +147,7 @@ def main(args: list[str] | None = None) -> int:
         _start("circle_collision_ros.collision_node", node_args),
         _start("circle_collision_ros.demo_scene",
                ["-p", f"count:={opts.count}", "-p", f"seed:={opts.seed}", "-p", f"rate:={opts.rate}",
+                "-p", f"area_size:={opts.area}",
                 "-p", f"dimensions:={opts.dimensions}", "-p", f"bad_fraction:={opts.bad_fraction}"]),
     ]
     rclpy.init()
