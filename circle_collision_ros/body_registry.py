@@ -9,6 +9,9 @@ the same scene bit for bit:
 - staleness is judged on the receiving clock passed in by the caller (the node's
   clock live, the recorded receive time in replay), never read here;
 - bodies are ordered by id when exported, independent of arrival order.
+
+Storage is a set of arrays indexed by slot plus an id -> slot map, so a batch
+of states is merged with a few vectorised assignments.
 """
 from __future__ import annotations
 
@@ -16,17 +19,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-
-@dataclass(frozen=True)
-class BodyState:
-    """One body's state as received: stamp (ns since epoch) and SI quantities."""
-
-    stamp_ns: int
-    received_ns: int
-    radius: float
-    position: tuple[float, float, float]
-    velocity: tuple[float, float, float]
-    acceleration: tuple[float, float, float]
+from circle_collision_ros.state_batch import StateBatch
 
 
 @dataclass(frozen=True)
@@ -41,14 +34,13 @@ class SceneSnapshot:
     radii: np.ndarray
 
 
-class UpdateResult:
-    """What an update did with one state."""
+@dataclass(frozen=True)
+class MergeResult:
+    """Row indices (into the batch) by outcome."""
 
-    ACCEPTED = "accepted"
-    NOT_NEWER = "not newer than the body's current state"
-    REMOVED = "removed"
-    UNKNOWN_REMOVAL = "removal of an unknown id"
-    FULL = "scene full"
+    accepted: np.ndarray
+    not_newer: np.ndarray
+    full: np.ndarray
 
 
 class BodyRegistry:
@@ -56,72 +48,125 @@ class BodyRegistry:
 
     Parameters
     ----------
-    max_bodies : new ids beyond this many are refused (UpdateResult.FULL), which
+    max_bodies : new ids beyond this many are refused (MergeResult.full), which
         bounds memory and compute when a source floods the node.
     """
 
     def __init__(self, max_bodies: int) -> None:
         self.max_bodies = max_bodies
-        self._bodies: dict[str, BodyState] = {}
         self.reference_ns: int | None = None
+        self._slot: dict[str, int] = {}
+        self._ids: list[str] = []
+        self._order: np.ndarray | None = None  # slots sorted by id; None when membership changed
+        self._alloc(16)
+
+    def _alloc(self, capacity: int) -> None:
+        old = getattr(self, "_stamp", None)
+        n = len(self._ids)
+        stamp, received = np.zeros(capacity, np.int64), np.zeros(capacity, np.int64)
+        radius, vectors = np.zeros(capacity), np.zeros((capacity, 9))
+        if old is not None:
+            stamp[:n], received[:n] = self._stamp[:n], self._received[:n]
+            radius[:n], vectors[:n] = self._radius[:n], self._vectors[:n]
+        self._stamp, self._received, self._radius, self._vectors = stamp, received, radius, vectors
 
     def __len__(self) -> int:
-        return len(self._bodies)
+        return len(self._ids)
 
     def __contains__(self, body_id: str) -> bool:
-        return body_id in self._bodies
+        return body_id in self._slot
 
-    def update(self, body_id: str, state: BodyState) -> str:
-        """Store `state` if it is newer than what `body_id` has; returns an UpdateResult."""
-        old = self._bodies.get(body_id)
-        if old is not None and state.stamp_ns <= old.stamp_ns:
-            return UpdateResult.NOT_NEWER
-        if old is None and len(self._bodies) >= self.max_bodies:
-            return UpdateResult.FULL
-        self._bodies[body_id] = state
-        if self.reference_ns is None or state.stamp_ns > self.reference_ns:
-            self.reference_ns = state.stamp_ns
-        return UpdateResult.ACCEPTED
+    def merge(self, batch: StateBatch, rows: np.ndarray, received_ns: int) -> MergeResult:
+        """Store rows of `batch` (distinct ids, validated) that are newer than what is held."""
+        rows = np.asarray(rows, dtype=np.int64)
+        slots = np.fromiter((self._slot.get(batch.ids[k], -1) for k in rows.tolist()),
+                            dtype=np.int64, count=rows.size)
+        stamps = batch.stamp_ns[rows]
+        known = slots >= 0
+        newer = np.ones(rows.size, dtype=bool)
+        newer[known] = stamps[known] > self._stamp[slots[known]]
+        fresh = np.flatnonzero(~known)
+        room = max(0, self.max_bodies - len(self._ids))
+        full = fresh[room:]
+        fresh = fresh[:room]
+        if fresh.size:
+            if len(self._ids) + fresh.size > self._stamp.shape[0]:
+                self._alloc(max(2 * self._stamp.shape[0], len(self._ids) + fresh.size))
+            start = len(self._ids)
+            slots[fresh] = np.arange(start, start + fresh.size)
+            for k, slot in zip(rows[fresh].tolist(), slots[fresh].tolist()):
+                self._slot[batch.ids[k]] = slot
+                self._ids.append(batch.ids[k])
+            self._order = None
+        take = newer.copy()
+        take[full] = False
+        target, source = slots[take], rows[take]
+        self._stamp[target] = batch.stamp_ns[source]
+        self._received[target] = received_ns
+        self._radius[target] = batch.radius[source]
+        self._vectors[target, 0:3] = batch.position[source]
+        self._vectors[target, 3:6] = batch.velocity[source]
+        self._vectors[target, 6:9] = batch.acceleration[source]
+        if source.size:
+            newest = int(batch.stamp_ns[source].max())
+            if self.reference_ns is None or newest > self.reference_ns:
+                self.reference_ns = newest
+        return MergeResult(accepted=source, not_newer=rows[~newer], full=rows[full])
 
-    def remove(self, body_id: str, stamp_ns: int) -> str:
+    def remove(self, body_id: str, stamp_ns: int) -> bool:
         """Remove `body_id` unless its current state is newer than the removal."""
-        old = self._bodies.get(body_id)
-        if old is None:
-            return UpdateResult.UNKNOWN_REMOVAL
-        if stamp_ns < old.stamp_ns:
-            return UpdateResult.NOT_NEWER
-        del self._bodies[body_id]
-        return UpdateResult.REMOVED
+        slot = self._slot.get(body_id)
+        if slot is None or stamp_ns < self._stamp[slot]:
+            return False
+        self._drop(slot)
+        return True
+
+    def _drop(self, slot: int) -> None:
+        # Swap-remove: the last slot moves into the hole, so arrays stay dense.
+        last = len(self._ids) - 1
+        del self._slot[self._ids[slot]]
+        if slot != last:
+            moved = self._ids[last]
+            self._ids[slot] = moved
+            self._slot[moved] = slot
+            for arr in (self._stamp, self._received, self._radius, self._vectors):
+                arr[slot] = arr[last]
+        self._ids.pop()
+        self._order = None
 
     def expire(self, now_ns: int, stale_timeout_s: float) -> list[str]:
         """Drop bodies not received within `stale_timeout_s` of `now_ns`; returns their ids."""
         limit = now_ns - int(round(stale_timeout_s * 1e9))
-        stale = [body_id for body_id, s in self._bodies.items() if s.received_ns < limit]
-        for body_id in stale:
-            del self._bodies[body_id]
-        return stale
+        stale = np.flatnonzero(self._received[:len(self._ids)] < limit)
+        gone = [self._ids[s] for s in stale.tolist()]
+        for body_id in gone:
+            self._drop(self._slot[body_id])
+        return gone
 
     def clear(self) -> None:
-        self._bodies.clear()
+        self._slot.clear()
+        self._ids.clear()
+        self._order = None
         self.reference_ns = None
 
     def snapshot(self, dimensions: int) -> SceneSnapshot:
         """Every body propagated to the reference time (exact under the model).
 
-        p + v dt + a dt^2/2 and v + a dt with dt = (reference - stamp) >= 0, so a
-        body's prediction does not depend on when other bodies were stamped.
+        p + dt (v + (dt/2) a) and v + dt a with dt = (reference - stamp) >= 0, so
+        a body's prediction does not depend on when other bodies were stamped.
         """
-        ids = sorted(self._bodies)
+        if self._order is None:
+            self._order = np.array(sorted(range(len(self._ids)), key=self._ids.__getitem__),
+                                   dtype=np.int64)
+        order = self._order
         ref = self.reference_ns if self.reference_ns is not None else 0
-        n = len(ids)
-        stamps = np.fromiter((self._bodies[i].stamp_ns for i in ids), dtype=np.int64, count=n)
-        radii = np.fromiter((self._bodies[i].radius for i in ids), dtype=np.float64, count=n)
-        p = np.array([self._bodies[i].position for i in ids], dtype=np.float64).reshape(n, 3)
-        v = np.array([self._bodies[i].velocity for i in ids], dtype=np.float64).reshape(n, 3)
-        a = np.array([self._bodies[i].acceleration for i in ids], dtype=np.float64).reshape(n, 3)
+        v9 = self._vectors[order]
+        p, v, a = v9[:, 0:3], v9[:, 3:6], v9[:, 6:9]
         # Integer subtraction first: stamps ~1.7e18 ns would lose sub-us detail as floats.
-        dt = ((ref - stamps).astype(np.float64) * 1e-9)[:, None]
+        dt = ((ref - self._stamp[order]).astype(np.float64) * 1e-9)[:, None]
         p = p + dt * (v + (0.5 * dt) * a)
         v = v + dt * a
         d = dimensions
-        return SceneSnapshot(ref, ids, p[:, :d].copy(), v[:, :d].copy(), a[:, :d].copy(), radii)
+        return SceneSnapshot(ref, [self._ids[s] for s in order.tolist()], np.ascontiguousarray(p[:, :d]),
+                             np.ascontiguousarray(v[:, :d]), np.ascontiguousarray(a[:, :d]),
+                             self._radius[order])

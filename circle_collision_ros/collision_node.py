@@ -25,7 +25,7 @@ from rclpy.node import Node
 from rclpy.qos import (DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy,
                        qos_profile_system_default)
 from rclpy.qos_overriding_options import QoSOverridingOptions
-from rclpy.serialization import deserialize_message, serialize_message
+from rclpy.serialization import serialize_message
 from std_msgs.msg import Header, String
 from visualization_msgs.msg import MarkerArray
 
@@ -33,6 +33,7 @@ from circle_collision_msgs.msg import CircleState, CircleStateArray, CollisionPr
 from circle_collision_msgs.srv import PredictCollisions
 from circle_collision_ros import node_parameters
 from circle_collision_ros.bag_recorder import BagRecorder, RecordingError
+from circle_collision_ros.cdr_codec import CdrError, decode_states
 from circle_collision_ros.cli import parse_args, spin_node
 from circle_collision_ros.markers import MarkerBuilder
 from circle_collision_ros.prediction_pipeline import (CollisionPredictor, IntakeReport,
@@ -137,15 +138,12 @@ class CollisionNode(Node):
         self.counters.messages += 1
         self._record(topic, data, now_ns)  # before decoding: even garbage is kept for debugging
         try:
-            msg = deserialize_message(data, msg_type)
-        except Exception as exc:  # a malformed payload must not stop the node
+            batch = decode_states(data, msg_type)
+        except CdrError as exc:  # a malformed payload must not stop the node
             self.counters.rejected += 1
             self._warn(topic, f"{topic}: undecodable {msg_type.__name__} ({exc})")
             return
-        if msg_type is CircleStateArray:
-            report = self.predictor.receive(msg.circles, now_ns, msg.header.frame_id)
-        else:
-            report = self.predictor.receive([msg], now_ns)
+        report = self.predictor.receive_batch(batch, now_ns)
         self._account(topic, report)
         if self._publish_timer is None and report.changed:
             self._publish(now_ns, started)
@@ -178,13 +176,13 @@ class CollisionNode(Node):
 
     def _publish(self, now_ns: int, started: float) -> None:
         try:
-            out = self.predictor.predict()
+            prediction = self.predictor.predict()
+            data = prediction.to_cdr()
         except Exception as exc:  # never let one bad scene stop the stream
             self.counters.errors += 1
             self._warn("predict", f"prediction failed, scene of {len(self.predictor.registry)} "
                                   f"bodies skipped: {exc!r}")
             return
-        data = serialize_message(out)
         self._predictions_pub.publish(data)
         # Log time = the clock reading the prediction was computed at, so replay can
         # recompute it at the same instant (expiry depends on it).
@@ -193,7 +191,7 @@ class CollisionNode(Node):
         self.latencies_s.append(time.perf_counter() - started)
         if self._marker_rate > 0 and time.monotonic() - self._last_marker_time >= 1.0 / self._marker_rate:
             self._last_marker_time = time.monotonic()
-            self._markers_pub.publish(self._markers.build(self.predictor.last_snapshot, out))
+            self._markers_pub.publish(self._markers.build(prediction))
 
     def _on_predict_request(self, request: PredictCollisions.Request,
                             response: PredictCollisions.Response) -> PredictCollisions.Response:
@@ -202,9 +200,9 @@ class CollisionNode(Node):
             if not (np.isfinite(horizon) and horizon > 0.0):
                 response.success, response.message = False, f"horizon must be finite and > 0, got {horizon}"
                 return response
-            ok, message, out = predict_once(request.circles, self.predictor.config, horizon)
+            ok, message, prediction = predict_once(request.circles, self.predictor.config, horizon)
             response.success, response.message = ok, message
-            response.predictions = out.predictions if out is not None else []
+            response.predictions = prediction.to_message().predictions if prediction is not None else []
         except Exception as exc:  # the caller gets an answer, never a dead service
             response.success, response.message = False, f"internal error: {exc!r}"
         return response
@@ -252,6 +250,8 @@ class CollisionNode(Node):
         return f"{self.get_fully_qualified_name()}/config"
 
     def _record_config(self) -> None:
+        if self._recorder is None or self._recording_error:
+            return
         config = dict(asdict(self.predictor.config),
                       publish_rate=node_parameters.value_of(self, "publish_rate"))
         data = serialize_message(String(data=json.dumps(config, sort_keys=True)))
@@ -291,12 +291,13 @@ class CollisionNode(Node):
                    if p.name in ("horizon", "stale_timeout", "report_all_pairs")}
         if changes:
             self.predictor.reconfigure(**changes)
-            self._record_config()
         for param in params:
             if param.name == "publish_rate":
                 self._set_publish_rate(param.value)
             elif param.name == "marker_rate":
                 self._marker_rate = param.value
+        if changes or any(p.name == "publish_rate" for p in params):
+            self._record_config()  # replay must know what was in force from here on
 
     def _set_publish_rate(self, rate_hz: float) -> None:
         if self._publish_timer is not None:

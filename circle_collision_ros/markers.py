@@ -8,13 +8,13 @@ DELETEALL so bodies and contacts that disappeared do not linger.
 """
 from __future__ import annotations
 
-from builtin_interfaces.msg import Duration
+from builtin_interfaces.msg import Duration, Time
 from geometry_msgs.msg import Point, Pose, Quaternion, Vector3
 from std_msgs.msg import ColorRGBA, Header
 from visualization_msgs.msg import Marker, MarkerArray
 
-from circle_collision_msgs.msg import CollisionPrediction, CollisionPredictionArray
-from circle_collision_ros.body_registry import SceneSnapshot
+from circle_collision_msgs.msg import CollisionPrediction
+from circle_collision_ros.prediction_messages import ScenePrediction
 
 
 class Urgency:
@@ -59,13 +59,15 @@ class MarkerBuilder:
         self._body_ids = StableIds()
         self._pair_ids = StableIds()
 
-    def build(self, snapshot: SceneSnapshot, predictions: CollisionPredictionArray) -> MarkerArray:
-        header = Header(stamp=predictions.header.stamp, frame_id=predictions.header.frame_id)
+    def build(self, prediction: ScenePrediction) -> MarkerArray:
+        snapshot = prediction.snapshot
+        sec, nanosec = prediction.stamp
+        header = Header(stamp=Time(sec=sec, nanosec=nanosec), frame_id=prediction.frame_id)
         soonest: dict[str, float] = {}
-        contacts = [p for p in predictions.predictions if p.status != CollisionPrediction.NO_CONTACT]
-        for p in contacts:
-            for body in (p.id_a, p.id_b):
-                soonest[body] = min(soonest.get(body, float("inf")), p.time_to_collision)
+        contacts = [row for row in prediction.rows() if row[2] != CollisionPrediction.NO_CONTACT]
+        for id_a, id_b, _, ttc, *_ in contacts:
+            for body in (id_a, id_b):
+                soonest[body] = min(soonest.get(body, float("inf")), ttc)
         markers = [Marker(header=header, action=Marker.DELETEALL)]
         shape = Marker.SPHERE if self.dimensions == 3 else Marker.CYLINDER
         for k, body in enumerate(snapshot.ids):
@@ -79,10 +81,11 @@ class MarkerBuilder:
                 scale=Vector3(x=diameter, y=diameter,
                               z=diameter if self.dimensions == 3 else self.FLAT_HEIGHT_M),
                 color=Urgency.colour(soonest.get(body, float("inf"))), lifetime=Duration()))
-        for p in contacts:
-            d = self.CONTACT_DIAMETER_M
+        d = self.CONTACT_DIAMETER_M
+        for id_a, id_b, _, ttc, _, point, *_ in contacts:
             markers.append(Marker(
-                header=header, ns="contacts", id=self._pair_ids((p.id_a, p.id_b)), type=Marker.SPHERE,
-                action=Marker.ADD, pose=Pose(position=p.contact_point, orientation=Quaternion(w=1.0)),
-                scale=Vector3(x=d, y=d, z=d), color=Urgency.colour(p.time_to_collision)))
+                header=header, ns="contacts", id=self._pair_ids((id_a, id_b)), type=Marker.SPHERE,
+                action=Marker.ADD, pose=Pose(position=Point(x=point[0], y=point[1], z=point[2]),
+                                             orientation=Quaternion(w=1.0)),
+                scale=Vector3(x=d, y=d, z=d), color=Urgency.colour(ttc)))
         return MarkerArray(markers=markers)

@@ -1,14 +1,14 @@
-"""From received circle states to a CollisionPredictionArray, without a ROS graph.
+"""From received circle states to predictions, without a ROS graph.
 
 This is the one path every prediction takes: the live node calls it from its
-callbacks, the `replay` tool calls it with recorded messages and receive times,
-and the service calls its stateless variant. Given the same messages and the
-same `now_ns` values in the same order it returns the same predictions, bit for
-bit (see body_registry for why).
+callbacks with the received bytes, the `replay` tool calls it with recorded
+bytes and receive times, and the service calls its stateless variant. Given the
+same inputs and the same `now_ns` values in the same order it returns the same
+predictions, bit for bit (see body_registry for why).
 
-    states -> state_validation.check_state -> BodyRegistry (latest per id)
-           -> snapshot at the reference time -> core.predict_all_pairs
-           -> prediction_messages.build_prediction_array
+    bytes -> cdr_codec.decode_states -> StateBatch -> state_validation.check_batch
+          -> BodyRegistry.merge (latest per id) -> snapshot at the reference time
+          -> core.predict_all_pairs -> ScenePrediction (.to_cdr() / .to_message())
 """
 from __future__ import annotations
 
@@ -18,12 +18,12 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from circle_collision_msgs.msg import CircleState, CollisionPredictionArray
-from circle_collision_ros.body_registry import BodyRegistry, BodyState, UpdateResult
+from circle_collision_msgs.msg import CircleState
+from circle_collision_ros.body_registry import BodyRegistry
 from circle_collision_ros.core import predict_all_pairs
-from circle_collision_ros.prediction_messages import build_prediction_array
-from circle_collision_ros.state_validation import (Rejection, check_state, duplicate_ids,
-                                                   stamp_ns, state_frame)
+from circle_collision_ros.prediction_messages import ScenePrediction
+from circle_collision_ros.state_batch import StateBatch
+from circle_collision_ros.state_validation import Rejection, check_batch
 
 
 @dataclass(frozen=True)
@@ -68,21 +68,14 @@ class PredictionStats:
     compute_s: float = 0.0
 
 
-def _body_state(state: CircleState, received_ns: int) -> BodyState:
-    p, v, a = state.position, state.velocity, state.acceleration
-    return BodyState(stamp_ns(state), received_ns, float(state.radius),
-                     (p.x, p.y, p.z), (v.x, v.y, v.z), (a.x, a.y, a.z))
-
-
 class CollisionPredictor:
-    """Stateful scene prediction from CircleState messages (no rclpy node needed)."""
+    """Stateful scene prediction from circle states (no rclpy node needed)."""
 
     def __init__(self, config: PredictorConfig) -> None:
         self.config = config
         self.frame_id = config.frame_id
         self.registry = BodyRegistry(config.max_bodies)
         self.stats = PredictionStats()
-        self.last_snapshot = None  # the SceneSnapshot of the last predict(), for markers
 
     def warm_up(self) -> None:
         """Run the core once on a tiny scene so the first real message pays no JIT/cache load."""
@@ -94,82 +87,72 @@ class CollisionPredictor:
         """Apply run-time changes (horizon, stale_timeout, report_all_pairs)."""
         self.config = replace(self.config, **changes)
 
-    def ingest(self, states: Sequence[CircleState], now_ns: int | None,
-               array_frame: str = "") -> IntakeReport:
-        """Validate `states` (one message) and merge the good ones into the scene.
+    def ingest(self, batch: StateBatch, now_ns: int | None) -> IntakeReport:
+        """Validate one message's states and merge the good ones into the scene.
 
         now_ns : receiving clock (ns) used for the future-stamp check and as the
             bodies' receive time for expiry; None skips the future check (service).
         """
-        report = IntakeReport()
-        received = now_ns if now_ns is not None else 0
-        dups = duplicate_ids(states)
-        for index, state in enumerate(states):
-            if state.id in dups:
-                report.rejected.append(Rejection(index, state.id, "id appears more than once in the message"))
-                continue
-            reason = check_state(state, frame_id=self.frame_id, now_ns=now_ns, array_frame=array_frame)
-            if reason is not None:
-                report.rejected.append(Rejection(index, state.id, reason))
-                continue
-            if state.remove:
-                outcome = self.registry.remove(state.id, stamp_ns(state))
-                report.removed += outcome == UpdateResult.REMOVED
-                report.ignored += outcome != UpdateResult.REMOVED
-                continue
-            outcome = self.registry.update(state.id, _body_state(state, received))
-            if outcome == UpdateResult.ACCEPTED:
-                report.accepted += 1
-                if not self.frame_id:
-                    self.frame_id = state_frame(state, array_frame)  # adopt the first frame seen
-            elif outcome == UpdateResult.FULL:
-                report.rejected.append(Rejection(
-                    index, state.id, f"scene is full (max_bodies={self.config.max_bodies})"))
+        check = check_batch(batch, frame_id=self.frame_id, now_ns=now_ns)
+        report = IntakeReport(rejected=check.rejections)
+        good = check.good
+        if good.any() and not self.frame_id:
+            self.frame_id = check.frame_id  # adopt the first frame seen
+        updates = np.flatnonzero(good & ~batch.remove)
+        merged = self.registry.merge(batch, updates, now_ns if now_ns is not None else 0)
+        report.accepted = int(merged.accepted.size)
+        report.ignored = int(merged.not_newer.size)
+        report.rejected += [Rejection(int(k), batch.ids[k],
+                                      f"scene is full (max_bodies={self.config.max_bodies})")
+                            for k in merged.full.tolist()]
+        for k in np.flatnonzero(good & batch.remove).tolist():
+            if self.registry.remove(batch.ids[k], int(batch.stamp_ns[k])):
+                report.removed += 1
             else:
-                report.ignored += 1
+                report.ignored += 1  # unknown id, or older than the body's state
+        return report
+
+    def receive_batch(self, batch: StateBatch, now_ns: int) -> IntakeReport:
+        """One received message: ingest its states, then expire stale bodies at `now_ns`."""
+        report = self.ingest(batch, now_ns)
+        report.expired = self.expire(now_ns)
         return report
 
     def receive(self, states: Sequence[CircleState], now_ns: int, array_frame: str = "") -> IntakeReport:
-        """One received message: ingest its states, then expire stale bodies at `now_ns`."""
-        report = self.ingest(states, now_ns, array_frame)
-        report.expired = self.expire(now_ns)
-        return report
+        """receive_batch for message objects (array_frame: the enclosing array's frame)."""
+        return self.receive_batch(StateBatch.from_messages(states, array_frame), now_ns)
 
     def expire(self, now_ns: int) -> list[str]:
         """Drop bodies not received within stale_timeout of `now_ns`."""
         return self.registry.expire(now_ns, self.config.stale_timeout)
 
-    def predict(self, horizon: float | None = None) -> CollisionPredictionArray:
+    def predict(self, horizon: float | None = None) -> ScenePrediction:
         """Predictions for the current scene, counted from the reference time."""
         started = time.perf_counter()
         horizon = self.config.horizon if horizon is None else horizon
-        snapshot = self.last_snapshot = self.registry.snapshot(self.config.dimensions)
+        snapshot = self.registry.snapshot(self.config.dimensions)
         pairs = predict_all_pairs(snapshot.positions, snapshot.velocities,
                                   snapshot.accelerations, snapshot.radii, horizon)
-        out = build_prediction_array(snapshot, pairs, horizon, self.frame_id,
-                                     self.config.report_all_pairs)
         self.stats = PredictionStats(bodies=len(snapshot.ids), contacts=len(pairs.ttc),
                                      candidate_pairs=int(getattr(pairs, "candidate_pairs", -1)),
                                      compute_s=time.perf_counter() - started)
-        return out
+        return ScenePrediction(snapshot, pairs, horizon, self.frame_id, self.config.report_all_pairs)
 
 
 def predict_once(states: Sequence[CircleState], config: PredictorConfig,
-                 horizon: float | None = None) -> tuple[bool, str, CollisionPredictionArray | None]:
+                 horizon: float | None = None) -> tuple[bool, str, ScenePrediction | None]:
     """Stateless prediction for one set of states (the service).
 
     All states are propagated to the newest stamp among them. Returns
-    (success, message, predictions); the message names the first bad state.
+    (success, message, prediction); the message names the first bad state.
     """
+    removals = sum(1 for s in states if s.remove)
+    if removals:
+        return False, f"{removals} circle(s) have remove=true, which a stateless request cannot use", None
     predictor = CollisionPredictor(replace(config, max_bodies=max(len(states), 1)))
-    report = predictor.ingest(states, now_ns=None)
+    report = predictor.ingest(StateBatch.from_messages(states), now_ns=None)
     if report.rejected:
         bad = report.rejected[0]
         more = f" (and {len(report.rejected) - 1} more)" if len(report.rejected) > 1 else ""
         return False, f"circles[{bad.index}] (id '{bad.body_id}'): {bad.reason}{more}", None
-    removals = sum(1 for s in states if s.remove)
-    if removals:
-        return False, f"{removals} circle(s) have remove=true, which a stateless request cannot use", None
-    if report.ignored:
-        return False, "duplicate ids in the request", None
     return True, "", predictor.predict(horizon)

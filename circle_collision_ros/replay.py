@@ -24,6 +24,7 @@ from std_msgs.msg import String
 
 from circle_collision_msgs.msg import CircleState, CircleStateArray, CollisionPredictionArray
 from circle_collision_ros.bag_reader import RECORDED_TYPES, BagError, BagRecord, open_bag
+from circle_collision_ros.cdr_codec import CdrError, decode_states
 from circle_collision_ros.prediction_pipeline import CollisionPredictor, PredictorConfig
 
 
@@ -108,16 +109,19 @@ def replay_offline(records, config: PredictorConfig | None = None) -> ReplayRepo
         if predictor is None:
             predictor = CollisionPredictor(PredictorConfig())  # bag without a config record
         if record.type_name in RecordedTypes.INPUTS:
-            msg = deserialize_message(record.data, RecordedTypes.INPUTS[record.type_name])
-            if isinstance(msg, CircleStateArray):
-                predictor.receive(msg.circles, record.log_time_ns, msg.header.frame_id)
-            else:
-                predictor.receive([msg], record.log_time_ns)
+            try:
+                batch = decode_states(record.data, RecordedTypes.INPUTS[record.type_name])
+            except CdrError:
+                batch = None  # the node rejected it the same way; nothing entered the scene
+            if batch is not None:
+                predictor.receive_batch(batch, record.log_time_ns)
             report.inputs += 1
         elif record.type_name == RecordedTypes.PREDICTIONS:
             recorded = deserialize_message(record.data, CollisionPredictionArray)
             predictor.expire(record.log_time_ns)
-            replayed = predictor.predict(horizon=recorded.horizon)
+            # The same bytes the node publishes, decoded the same way as the recording.
+            replayed = deserialize_message(predictor.predict(horizon=recorded.horizon).to_cdr(),
+                                           CollisionPredictionArray)
             report.predictions += 1
             compare_predictions(recorded, replayed, f"prediction #{report.predictions}", report)
     return report

@@ -1,17 +1,19 @@
-"""Checks on incoming CircleState messages, free of side effects.
+"""Checks on incoming circle states, free of side effects.
 
-Each check returns ``None`` for a usable state or a short reason naming the
-field and the bad value; callers decide what to do with it (the node warns,
-throttled, naming topic and id; the service answers ``success: false``).
+`check_batch` returns which states of a batch are usable and, for each one
+that is not, a short reason naming the field and the bad value. Callers decide
+what to do with it (the node warns, throttled, naming topic and id; the service
+answers `success: false`). The checks are vectorised: a clean batch of 1,000
+states costs well under a millisecond; reasons are formatted only for bad rows.
 """
 from __future__ import annotations
 
-import math
 from collections import Counter
-from collections.abc import Sequence
 from dataclasses import dataclass
 
-from circle_collision_msgs.msg import CircleState
+import numpy as np
+
+from circle_collision_ros.state_batch import StateBatch
 
 
 class StampLimits:
@@ -22,71 +24,85 @@ class StampLimits:
     the future for every other body.
     """
 
-    MAX_FUTURE_S = 1.0
+    MAX_FUTURE_NS = 1_000_000_000
 
 
 @dataclass(frozen=True)
 class Rejection:
-    """One state refused: which body (id may be empty), and why."""
+    """One state refused: its index in the message, its id (may be empty), and why."""
 
     index: int
     body_id: str
     reason: str
 
 
-def stamp_ns(state: CircleState) -> int:
-    """Header stamp as integer nanoseconds (exact: no float rounding)."""
-    return state.header.stamp.sec * 1_000_000_000 + state.header.stamp.nanosec
+@dataclass(frozen=True)
+class BatchCheck:
+    """Outcome of check_batch: usable rows, rejections, and the scene frame to use."""
+
+    good: np.ndarray  # (N,) bool
+    rejections: list[Rejection]
+    frame_id: str
 
 
-def state_frame(state: CircleState, array_frame: str = "") -> str:
-    """The state's frame: its own header's, else that of the enclosing array."""
-    return state.header.frame_id or array_frame
+_VECTORS = ("position", "velocity", "acceleration")
 
 
-def check_state(state: CircleState, *, frame_id: str, now_ns: int | None,
-                array_frame: str = "") -> str | None:
-    """Reason why `state` cannot be used, or None if it can.
+def _reason(batch: StateBatch, k: int, frame_id: str, now_ns: int | None, dup: bool) -> str:
+    """The first problem of row k, in a fixed order (so the message is deterministic)."""
+    if not batch.ids[k]:
+        return "empty id"
+    if dup:
+        return "id appears more than once in the message"
+    if not batch.remove[k]:  # a removal needs only id and stamp; its geometry is ignored
+        r = float(batch.radius[k])
+        if not np.isfinite(r):
+            return f"radius is {r}"
+        if r < 0.0:
+            return f"radius is negative ({r})"
+        for name in _VECTORS:
+            for axis, value in zip("xyz", getattr(batch, name)[k].tolist()):
+                if not np.isfinite(value):
+                    return f"{name}.{axis} is {value}"
+        if frame_id and batch.frames[k] != frame_id:
+            return (f"frame '{batch.frames[k]}' is not the scene frame '{frame_id}'"
+                    f" (no tf here: publish in '{frame_id}')")
+    stamp = int(batch.stamp_ns[k])
+    if stamp <= 0:
+        return "header.stamp is zero (unset)"
+    if now_ns is not None and stamp - now_ns > StampLimits.MAX_FUTURE_NS:
+        return f"header.stamp is {(stamp - now_ns) * 1e-9:.3f} s in the future"
+    raise AssertionError("row flagged bad without a reason")  # masks and reasons disagree
+
+
+def check_batch(batch: StateBatch, *, frame_id: str, now_ns: int | None) -> BatchCheck:
+    """Which states are usable.
 
     Parameters
     ----------
-    state : the message to check.
-    frame_id : the scene's frame; "" accepts any (the caller adopts the first).
-    now_ns : receiving clock in ns, for the future-stamp check; None skips it.
-    array_frame : frame of the enclosing CircleStateArray header, used when
-        the state's own header has none.
+    frame_id : the scene frame; "" adopts the frame of the first otherwise-good
+        state (returned in BatchCheck.frame_id).
+    now_ns : receiving clock in ns for the future-stamp check; None skips it.
     """
-    if not state.id:
-        return "empty id"
-    if state.remove:
-        # A removal needs only id and stamp; its geometry is ignored by contract.
-        return _check_stamp(state, now_ns)
-    if not math.isfinite(state.radius):
-        return f"radius is {state.radius}"
-    if state.radius < 0.0:
-        return f"radius is negative ({state.radius})"
-    for name, vec in (("position", state.position), ("velocity", state.velocity),
-                      ("acceleration", state.acceleration)):
-        for axis in ("x", "y", "z"):
-            value = getattr(vec, axis)
-            if not math.isfinite(value):
-                return f"{name}.{axis} is {value}"
-    frame = state_frame(state, array_frame)
-    if frame_id and frame != frame_id:
-        return f"frame '{frame}' is not the scene frame '{frame_id}' (no tf here: publish in '{frame_id}')"
-    return _check_stamp(state, now_ns)
-
-
-def _check_stamp(state: CircleState, now_ns: int | None) -> str | None:
-    stamp = stamp_ns(state)
-    if stamp <= 0:
-        return "header.stamp is zero (unset)"
-    if now_ns is not None and stamp - now_ns > StampLimits.MAX_FUTURE_S * 1e9:
-        return f"header.stamp is {(stamp - now_ns) * 1e-9:.3f} s in the future"
-    return None
-
-
-def duplicate_ids(states: Sequence[CircleState]) -> set[str]:
-    """Ids that occur more than once in one message (all copies are ambiguous)."""
-    counts = Counter(s.id for s in states)
-    return {body_id for body_id, n in counts.items() if n > 1 and body_id}
+    n = len(batch)
+    if n == 0:
+        return BatchCheck(np.zeros(0, dtype=bool), [], frame_id)
+    counts = Counter(batch.ids)
+    dup = np.fromiter((counts[i] > 1 for i in batch.ids), dtype=bool, count=n)
+    empty = np.fromiter((not i for i in batch.ids), dtype=bool, count=n)
+    finite = np.isfinite(batch.radius) & np.isfinite(batch.position).all(axis=1) \
+        & np.isfinite(batch.velocity).all(axis=1) & np.isfinite(batch.acceleration).all(axis=1)
+    geometry_bad = ~batch.remove & (~finite | (batch.radius < 0.0))
+    stamp_bad = batch.stamp_ns <= 0
+    if now_ns is not None:
+        stamp_bad |= batch.stamp_ns - now_ns > StampLimits.MAX_FUTURE_NS
+    bad = empty | dup | geometry_bad | stamp_bad
+    if not frame_id:
+        candidates = np.flatnonzero(~bad & ~batch.remove)
+        if candidates.size:
+            frame_id = batch.frames[int(candidates[0])]
+    if frame_id:
+        bad |= ~batch.remove & np.fromiter((f != frame_id for f in batch.frames), dtype=bool, count=n)
+    rejections = [Rejection(int(k), batch.ids[k], _reason(batch, int(k), frame_id, now_ns, bool(dup[k])))
+                  for k in np.flatnonzero(bad)]
+    return BatchCheck(~bad, rejections, frame_id)

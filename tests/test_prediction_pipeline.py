@@ -28,7 +28,7 @@ def test_matches_core_on_every_pair() -> None:
     predictor = CollisionPredictor(PredictorConfig(horizon=5.0))
     report = predictor.receive(states, NOW)
     assert report.accepted == 60 and not report.rejected
-    out = predictor.predict()
+    out = predictor.predict().to_message()
     want = expected_contacts(states, 5.0)
     assert want, "scene should have contacts"
     assert contacts_of(out) == want
@@ -43,7 +43,7 @@ def test_three_d_scene_matches_core() -> None:
     states = random_states(40, seed=5, dimensions=3, spread=10.0)
     predictor = CollisionPredictor(PredictorConfig(horizon=4.0, dimensions=3))
     predictor.receive(states, NOW)
-    assert contacts_of(predictor.predict()) == expected_contacts(states, 4.0, dimensions=3)
+    assert contacts_of(predictor.predict().to_message()) == expected_contacts(states, 4.0, dimensions=3)
 
 
 def test_two_d_mode_ignores_z() -> None:
@@ -51,7 +51,7 @@ def test_two_d_mode_ignores_z() -> None:
     b = state("b", (5, 0, -100.0))
     predictor = CollisionPredictor(PredictorConfig(horizon=10.0))
     predictor.receive([a, b], NOW)
-    (p,) = predictor.predict().predictions
+    (p,) = predictor.predict().to_message().predictions
     assert p.time_to_collision == 4.0 and p.contact_point.z == 0.0
 
 
@@ -59,7 +59,7 @@ def test_overlapping_status_and_details() -> None:
     predictor = CollisionPredictor(PredictorConfig(horizon=10.0))
     predictor.receive([state("a", (0, 0), r=1.0), state("b", (1.5, 0), r=1.0),
                        state("c", (10, 0), (-1, 0, 0), r=1.0)], NOW)
-    out = {(p.id_a, p.id_b): p for p in predictor.predict().predictions}
+    out = {(p.id_a, p.id_b): p for p in predictor.predict().to_message().predictions}
     assert out[("a", "b")].status == CollisionPrediction.OVERLAPPING
     assert out[("a", "b")].time_to_collision == 0.0
     bc = out[("b", "c")]
@@ -91,7 +91,7 @@ def test_bad_state_rejected_rest_predicted(mutate, reason) -> None:
     report = predictor.receive(states, NOW)
     assert report.accepted == 2 and len(report.rejected) == 1
     assert reason in report.rejected[0].reason and report.rejected[0].index == 2
-    out = predictor.predict()
+    out = predictor.predict().to_message()
     assert contacts_of(out) == {("a", "b"): 4.0}
     assert_no_nan(out)
 
@@ -107,7 +107,7 @@ def test_empty_message_changes_nothing() -> None:
     predictor = CollisionPredictor(PredictorConfig())
     report = predictor.receive([], NOW)
     assert not report.changed
-    assert predictor.predict().predictions == []
+    assert predictor.predict().to_message().predictions == []
 
 
 def test_first_frame_is_adopted_then_enforced() -> None:
@@ -123,7 +123,7 @@ def test_latest_stamp_wins_and_late_states_are_ignored() -> None:
     late = predictor.receive([state("a", (0, 0), (-1, 0, 0), stamp_ns=BASE_NS - 1)], NOW)
     dup = predictor.receive([state("a", (0, 0), (1, 0, 0), stamp_ns=BASE_NS)], NOW)
     assert late.ignored == 1 and dup.ignored == 1 and not late.changed and not dup.changed
-    assert contacts_of(predictor.predict()) == {("a", "b"): 9.0}
+    assert contacts_of(predictor.predict().to_message()) == {("a", "b"): 9.0}
 
 
 def test_states_are_propagated_to_the_newest_stamp() -> None:
@@ -131,7 +131,7 @@ def test_states_are_propagated_to_the_newest_stamp() -> None:
     predictor = CollisionPredictor(PredictorConfig(horizon=100.0))
     predictor.receive([state("a", (0, 0), (1, 0, 0), stamp_ns=BASE_NS - 2_000_000_000),
                        state("b", (10, 0), stamp_ns=BASE_NS)], NOW)
-    assert contacts_of(predictor.predict()) == {("a", "b"): 7.0}
+    assert contacts_of(predictor.predict().to_message()) == {("a", "b"): 7.0}
 
 
 def test_removal_and_expiry() -> None:
@@ -141,6 +141,7 @@ def test_removal_and_expiry() -> None:
     assert report.removed == 1 and "a" not in predictor.registry
     report = predictor.receive([], NOW + 1_500_000_000)
     assert report.expired == ["b"] and len(predictor.registry) == 0
+    assert not predictor.receive([state("zz", (0, 0), stamp_ns=BASE_NS + 2, remove=True)], NOW).changed
 
 
 def test_max_bodies_bounds_the_scene() -> None:
@@ -153,7 +154,7 @@ def test_max_bodies_bounds_the_scene() -> None:
 def test_report_all_pairs_lists_no_contact_pairs_without_nan() -> None:
     predictor = CollisionPredictor(PredictorConfig(report_all_pairs=True, horizon=1.0))
     predictor.receive(random_states(12, seed=9, spread=30.0), NOW)
-    out = predictor.predict()
+    out = predictor.predict().to_message()
     assert len(out.predictions) == 12 * 11 // 2
     none = [p for p in out.predictions if p.status == CollisionPrediction.NO_CONTACT]
     assert none and all(p.time_to_collision == math.inf for p in none)
@@ -167,7 +168,7 @@ def test_same_inputs_give_bit_identical_outputs() -> None:
         outs = []
         for k in range(5):
             predictor.receive(random_states(30, seed=k, stamp_ns=BASE_NS + k * 33_000_000), NOW + k)
-            outs.append(predictor.predict())
+            outs.append(predictor.predict().to_message())
         runs.append(outs)
     assert runs[0] == runs[1]  # message equality compares float fields exactly
 
@@ -179,4 +180,4 @@ def test_predict_once_names_the_bad_circle() -> None:
     assert message.startswith("circles[1] (id 'b'): radius is negative")
     ok, message, out = predict_once([state("a", (0, 0), (1, 0, 0)), state("b", (5, 0))],
                                     PredictorConfig(), horizon=10.0)
-    assert ok and contacts_of(out) == {("a", "b"): 4.0}
+    assert ok and contacts_of(out.to_message()) == {("a", "b"): 4.0}

@@ -56,7 +56,7 @@ class Harness:
         self.pub = client.create_publisher(CircleStateArray, "circle_states", qos)
 
     def wait_matched(self) -> None:
-        assert spin_until(self.client, lambda: self.pub.get_subscription_count() > 0, 20.0,
+        assert spin_until(self.client, lambda: self.pub.get_subscription_count() > 0, 60.0,
                           self.extra), "collision_node never subscribed"
 
     def send(self, msg: CircleStateArray, until=None, timeout: float = 15.0) -> None:
@@ -221,7 +221,10 @@ def test_huge_array_is_survived(in_process, ros_node) -> None:
     assert len(node.predictor.registry) == 10_000  # max_bodies
     assert node.counters.rejected >= 40_000
     assert_no_nan(out)
-    harness.send(state_array(_stamped_now([state("a", (0, 0), (1, 0, 0)), state("zz", (3, 0))], ros_node)))
+    # Still alive and predicting: two known bodies (new ids would be refused, the scene is full).
+    harness.send(state_array(_stamped_now([state("b000", (0, 0), (1, 0, 0)), state("b001", (3, 0))],
+                                          ros_node)))
+    assert ("b000", "b001") in contacts_of(harness.predictions[-1])
 
 
 def test_service_good_and_bad_requests(in_process, ros_node) -> None:

@@ -1,0 +1,486 @@
+"""Broad phase: cull body pairs that provably cannot touch within a time window.
+
+Every body moves on a parabola ``p(t) = p + v t + a t^2 / 2``.  Over a window
+``[t0, t1]`` its centre stays inside the exact axis-aligned box of that arc
+(per axis the extremes are at the window ends or where ``v_k + a_k t`` crosses
+zero).  Inflating the box by the radius gives a swept bound of the body; two
+bodies whose swept bounds are disjoint cannot touch in the window.
+
+Surviving pairs then pass a second, tighter test on the *relative* motion
+``d(t) = p_b(t) - p_a(t)``: the box of ``d`` over the window must come within
+``r_a + r_b`` of the origin.  This also removes apart pairs that do not move
+relative to each other (static, or identical motion: ``d`` is a point).
+
+Guarantee (the "never lose a contact" property): a pair is dropped only if its
+exact centre distance stays above ``r_a + r_b`` by more than a safety margin
+over the whole window.  The margin (``_REL_MARGIN`` times the pair's motion
+scale, plus ``_COORD_MARGIN`` times the absolute coordinates, plus
+``_ABS_MARGIN``) absorbs rounding both here and in any narrow phase whose
+squared-distance polynomial is accurate to ~1e4 ulps of its own scale: a
+spurious grazing root needs the true clearance to be below about
+``sqrt(err) * scale`` ~ 1e-6 * scale, which the margin exceeds.  The margin
+enlarges bounds by micrometres per metre of motion, which costs nothing in
+cull rate.
+
+Two pair generators are provided, both producing exactly the set of pairs with
+overlapping bounds that pass the relative test: sort-and-sweep along the axis
+of largest centre spread (default) and a uniform grid (cell = mean bound
+extent).  ``bench/bench_scene.py`` chose the sweep: equal on uniform scenes
+(10k bodies / 1 km^2: ~6 ms each), 1.2-1.7x faster on corridors, mixed sizes
+and dense clusters; the grid wins only when bodies crowd two perpendicular
+strips (~1.7x).  Per-body incremental queries (``Scene``) use a hashed grid
+(:func:`cell_keys`), since a sweep cannot answer a single query cheaply.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+__all__ = [
+    "swept_bounds",
+    "candidate_pairs",
+    "propagate",
+]
+
+#: Relative safety margin on the motion scale (metres per metre of motion).
+_REL_MARGIN = 4e-6
+#: Relative safety margin on absolute coordinates (covers p_b - p_a rounding, ~4500 ulp).
+_COORD_MARGIN = 1e-12
+#: Absolute safety margin in metres (keeps the test non-strict for all-zero input).
+_ABS_MARGIN = 1e-12
+#: A body whose bound covers more grid cells than this is checked against all bodies instead.
+_MAX_CELLS_PER_BODY = 64
+
+
+def propagate(p: np.ndarray, v: np.ndarray, a: np.ndarray, dt) -> tuple[np.ndarray, np.ndarray]:
+    """State after ``dt`` seconds under constant acceleration.
+
+    ``p + v dt + a dt^2 / 2`` and ``v + a dt``; rows with ``dt == 0`` are
+    returned bit-for-bit unchanged (so a state is never re-rounded when it is
+    already at the requested time).  ``dt`` is a scalar or shape ``(N,)``.
+    """
+    p = np.asarray(p, dtype=np.float64)
+    v = np.asarray(v, dtype=np.float64)
+    a = np.asarray(a, dtype=np.float64)
+    dt = np.asarray(dt, dtype=np.float64)
+    dtc = dt[..., None] if dt.ndim else dt
+    p2 = p + v * dtc + 0.5 * a * dtc * dtc
+    v2 = v + a * dtc
+    same = np.broadcast_to(dtc == 0.0, p2.shape)
+    return np.where(same, p, p2), np.where(same, v, v2)
+
+
+def swept_bounds(p: np.ndarray, v: np.ndarray, a: np.ndarray, r: np.ndarray,
+                 t0, t1) -> tuple[np.ndarray, np.ndarray]:
+    """Exact AABB of each body over ``[t0, t1]``, inflated by radius + margin.
+
+    Parameters
+    ----------
+    p, v, a : (N, D) arrays, m, m/s, m/s^2, given at time 0.
+    r : (N,) radii, m.
+    t0, t1 : scalars or (N,) window bounds in s relative to the state time, t0 <= t1.
+
+    Returns
+    -------
+    lo, hi : (N, D) float64 arrays, m.
+    """
+    p = np.asarray(p, dtype=np.float64)
+    v = np.asarray(v, dtype=np.float64)
+    a = np.asarray(a, dtype=np.float64)
+    r = np.asarray(r, dtype=np.float64)
+    t0 = np.broadcast_to(np.asarray(t0, dtype=np.float64), r.shape)[:, None]
+    t1 = np.broadcast_to(np.asarray(t1, dtype=np.float64), r.shape)[:, None]
+
+    def at(t):
+        return p + v * t + 0.5 * a * t * t
+
+    x0 = at(t0)
+    x1 = at(t1)
+    lo = np.minimum(x0, x1)
+    hi = np.maximum(x0, x1)
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+        ts = -v / a
+    inside = (a != 0.0) & (ts > t0) & (ts < t1)
+    if inside.any():
+        xs = at(np.where(inside, ts, t0))
+        lo = np.where(inside, np.minimum(lo, xs), lo)
+        hi = np.where(inside, np.maximum(hi, xs), hi)
+    tm = np.maximum(np.abs(t0), np.abs(t1))
+    motion = np.sum(np.abs(v) * tm + 0.5 * np.abs(a) * tm * tm, axis=1)
+    coord = np.max(np.abs(p), axis=1) + motion
+    pad = r + _REL_MARGIN * (r + motion) + _COORD_MARGIN * coord + _ABS_MARGIN
+    return lo - pad[:, None], hi + pad[:, None]
+
+
+# ---------------------------------------------------------------------------
+# numba kernels
+# ---------------------------------------------------------------------------
+
+@njit(cache=True, inline="always")
+def _rel_keep(p, v, a, r, tref, i, j, t_start, t_end):
+    """True unless the pair provably cannot touch in [max(t_start, tref_i, tref_j), t_end]."""
+    tp = max(t_start, max(tref[i], tref[j]))
+    W = t_end - tp
+    if W < 0.0:
+        W = 0.0
+    dti = tp - tref[i]
+    dtj = tp - tref[j]
+    D = p.shape[1]
+    R = r[i] + r[j]
+    dist2 = 0.0
+    scale = R
+    coord = 0.0
+    for k in range(D):
+        pi = p[i, k]
+        vi = v[i, k]
+        if dti != 0.0:
+            pi = p[i, k] + v[i, k] * dti + 0.5 * a[i, k] * dti * dti
+            vi = v[i, k] + a[i, k] * dti
+        pj = p[j, k]
+        vj = v[j, k]
+        if dtj != 0.0:
+            pj = p[j, k] + v[j, k] * dtj + 0.5 * a[j, k] * dtj * dtj
+            vj = v[j, k] + a[j, k] * dtj
+        dp = pj - pi
+        dv = vj - vi
+        da = a[j, k] - a[i, k]
+        x1 = dp + dv * W + 0.5 * da * W * W
+        lo = min(dp, x1)
+        hi = max(dp, x1)
+        if da != 0.0:
+            ts = -dv / da
+            if ts > 0.0 and ts < W:
+                xs = dp + dv * ts + 0.5 * da * ts * ts
+                lo = min(lo, xs)
+                hi = max(hi, xs)
+        if lo > 0.0:
+            dist2 += lo * lo
+        elif hi < 0.0:
+            dist2 += hi * hi
+        scale += abs(dp) + abs(dv) * W + 0.5 * abs(da) * W * W
+        coord = max(coord, max(abs(pi), abs(pj)))
+    m = 4e-6 * scale + 1e-12 * coord + 1e-12  # _REL_MARGIN, _COORD_MARGIN, _ABS_MARGIN
+    lim = R + m
+    return dist2 <= lim * lim
+
+
+@njit(cache=True, inline="always")
+def _boxes_overlap(lo, hi, i, j):
+    for k in range(lo.shape[1]):
+        if lo[j, k] > hi[i, k] or lo[i, k] > hi[j, k]:
+            return False
+    return True
+
+
+@njit(cache=True)
+def _grow(arr, k):
+    out = np.empty(max(16, 2 * arr.shape[0]), dtype=arr.dtype)
+    out[:k] = arr[:k]
+    return out
+
+
+@njit(cache=True)
+def _sweep_kernel(lo, hi, order, ax, p, v, a, r, tref, t_start, t_end, use_rel):
+    n = order.shape[0]
+    cap = max(16, 4 * n)
+    I = np.empty(cap, dtype=np.int64)
+    J = np.empty(cap, dtype=np.int64)
+    k = 0
+    n_box = 0
+    for s in range(n):
+        i = order[s]
+        hx = hi[i, ax]
+        for t in range(s + 1, n):
+            j = order[t]
+            if lo[j, ax] > hx:
+                break
+            if not _boxes_overlap(lo, hi, i, j):
+                continue
+            a_ = min(i, j)
+            b_ = max(i, j)
+            n_box += 1
+            if use_rel and not _rel_keep(p, v, a, r, tref, a_, b_, t_start, t_end):
+                continue
+            if k == I.shape[0]:
+                I = _grow(I, k)
+                J = _grow(J, k)
+            I[k] = a_
+            J[k] = b_
+            k += 1
+    return I[:k].copy(), J[:k].copy(), n_box
+
+
+@njit(cache=True)
+def _grid_kernel(lo, hi, cell, origin, p, v, a, r, tref, t_start, t_end, use_rel, max_cells):
+    n, D = lo.shape
+    clo = np.empty((n, D), dtype=np.int64)
+    chi = np.empty((n, D), dtype=np.int64)
+    ncell = np.empty(n, dtype=np.int64)
+    span = np.zeros(D, dtype=np.int64)
+    big = np.zeros(n, dtype=np.bool_)
+    total = 0
+    for i in range(n):
+        c = 1
+        for k in range(D):
+            l_ = np.int64(math.floor((lo[i, k] - origin[k]) / cell))
+            h_ = np.int64(math.floor((hi[i, k] - origin[k]) / cell))
+            clo[i, k] = l_
+            chi[i, k] = h_
+            c *= (h_ - l_ + 1)
+            if c > max_cells:
+                c = max_cells + 1
+            span[k] = max(span[k], h_ + 1)
+        ncell[i] = c
+        if c > max_cells:
+            big[i] = True
+        else:
+            total += c
+    # linear cell key; the caller picks `cell` so that the product fits in int64
+    mult = np.ones(D, dtype=np.int64)
+    for k in range(1, D):
+        mult[k] = mult[k - 1] * (span[k - 1] + 1)
+    keys = np.empty(total, dtype=np.int64)
+    body = np.empty(total, dtype=np.int64)
+    e = 0
+    idx = np.zeros(D, dtype=np.int64)
+    for i in range(n):
+        if big[i]:
+            continue
+        for k in range(D):
+            idx[k] = clo[i, k]
+        while True:
+            key = 0
+            for k in range(D):
+                key += idx[k] * mult[k]
+            keys[e] = key
+            body[e] = i
+            e += 1
+            # odometer increment over the cell range
+            k = 0
+            while k < D:
+                idx[k] += 1
+                if idx[k] <= chi[i, k]:
+                    break
+                idx[k] = clo[i, k]
+                k += 1
+            if k == D:
+                break
+    order = np.argsort(keys, kind="mergesort")
+    cap = max(16, 4 * n)
+    I = np.empty(cap, dtype=np.int64)
+    J = np.empty(cap, dtype=np.int64)
+    k_out = 0
+    n_box = 0
+    s = 0
+    while s < total:
+        key = keys[order[s]]
+        t = s
+        while t < total and keys[order[t]] == key:
+            t += 1
+        # decode this cell's integer coordinates
+        rem = key
+        for kk in range(D - 1, -1, -1):
+            idx[kk] = rem // mult[kk]
+            rem -= idx[kk] * mult[kk]
+        for u in range(s, t):
+            i = body[order[u]]
+            for w in range(u + 1, t):
+                j = body[order[w]]
+                if not _boxes_overlap(lo, hi, i, j):
+                    continue
+                # report the pair only from the cell holding the low corner of the
+                # boxes' intersection, so each pair is produced exactly once
+                mine = True
+                for kk in range(D):
+                    if max(clo[i, kk], clo[j, kk]) != idx[kk]:
+                        mine = False
+                        break
+                if not mine:
+                    continue
+                a_ = min(i, j)
+                b_ = max(i, j)
+                n_box += 1
+                if use_rel and not _rel_keep(p, v, a, r, tref, a_, b_, t_start, t_end):
+                    continue
+                if k_out == I.shape[0]:
+                    I = _grow(I, k_out)
+                    J = _grow(J, k_out)
+                I[k_out] = a_
+                J[k_out] = b_
+                k_out += 1
+        s = t
+    # bodies too large for the grid: test against everyone
+    for i in range(n):
+        if not big[i]:
+            continue
+        for j in range(n):
+            if j == i or (big[j] and j < i):
+                continue
+            if not _boxes_overlap(lo, hi, i, j):
+                continue
+            a_ = min(i, j)
+            b_ = max(i, j)
+            n_box += 1
+            if use_rel and not _rel_keep(p, v, a, r, tref, a_, b_, t_start, t_end):
+                continue
+            if k_out == I.shape[0]:
+                I = _grow(I, k_out)
+                J = _grow(J, k_out)
+            I[k_out] = a_
+            J[k_out] = b_
+            k_out += 1
+    return I[:k_out].copy(), J[:k_out].copy(), n_box
+
+
+def choose_cell_size(lo: np.ndarray, hi: np.ndarray) -> tuple[float, np.ndarray]:
+    """Grid cell edge (m) and origin for the given bounds.
+
+    The edge is the mean bound extent (so a typical body covers about 2^D
+    cells), enlarged if needed so that linear cell keys fit in int64.
+    """
+    D = lo.shape[1]
+    ext = np.max(hi - lo, axis=1)
+    cell = float(np.mean(ext)) if ext.size else 1.0
+    origin = lo.min(axis=0) if lo.size else np.zeros(D)
+    span = float(np.max(hi.max(axis=0) - origin)) if lo.size else 0.0
+    per_dim = 2.0 ** (60 // D - 1)
+    cell = max(cell, span / per_dim, 1e-9 * max(1.0, span))
+    if not math.isfinite(cell) or cell <= 0.0:
+        cell = 1.0
+    return cell, origin
+
+
+def candidate_pairs(lo: np.ndarray, hi: np.ndarray, *, p=None, v=None, a=None, r=None,
+                    tref=None, t_start: float = 0.0, t_end: float = 0.0,
+                    method: str = "sweep") -> tuple[np.ndarray, np.ndarray, int]:
+    """Pairs ``(i, j)``, ``i < j``, whose bounds overlap (and that pass the relative test).
+
+    Parameters
+    ----------
+    lo, hi : (N, D) bounds from :func:`swept_bounds`.
+    p, v, a, r, tref : optional body states (given at times ``tref``, s). When
+        given, a pair is kept only if its relative motion can come within
+        ``r_i + r_j`` (+ margin) of contact over ``[max(t_start, tref_i, tref_j), t_end]``.
+    method : ``"sweep"`` (default) or ``"grid"``; both return the same pair set.
+
+    Returns
+    -------
+    i, j : int64 arrays, unordered; n_box : number of bound-overlapping pairs.
+    """
+    lo = np.ascontiguousarray(lo, dtype=np.float64)
+    hi = np.ascontiguousarray(hi, dtype=np.float64)
+    n, D = lo.shape
+    use_rel = p is not None
+    if not use_rel:
+        p = v = a = np.zeros((n, D))
+        r = tref = np.zeros(n)
+    p = np.ascontiguousarray(p, dtype=np.float64)
+    v = np.ascontiguousarray(v, dtype=np.float64)
+    a = np.ascontiguousarray(a, dtype=np.float64)
+    r = np.ascontiguousarray(r, dtype=np.float64)
+    tref = np.zeros(n) if tref is None else np.ascontiguousarray(tref, dtype=np.float64)
+    if n < 2:
+        e = np.empty(0, dtype=np.int64)
+        return e, e.copy(), 0
+    if method == "sweep":
+        centres = 0.5 * (lo + hi)
+        ax = int(np.argmax(centres.var(axis=0)))
+        order = np.argsort(lo[:, ax], kind="stable")
+        return _sweep_kernel(lo, hi, order, ax, p, v, a, r, tref, float(t_start), float(t_end), use_rel)
+    if method == "grid":
+        cell, origin = choose_cell_size(lo, hi)
+        return _grid_kernel(lo, hi, cell, origin, p, v, a, r, tref, float(t_start), float(t_end),
+                            use_rel, _MAX_CELLS_PER_BODY)
+    raise ValueError(f"unknown broad-phase method {method!r}")
+
+
+@njit(cache=True)
+def _relative_filter_kernel(p, v, a, r, tref, I, J, t_start, t_end):
+    out = np.empty(I.shape[0], dtype=np.bool_)
+    for k in range(I.shape[0]):
+        out[k] = _rel_keep(p, v, a, r, tref, I[k], J[k], t_start, t_end)
+    return out
+
+
+def relative_filter(p, v, a, r, tref, I, J, t_start: float, t_end: float) -> np.ndarray:
+    """Boolean mask: pair ``(I[k], J[k])`` may touch within ``[max(t_start, tref), t_end]``.
+
+    The same test (and margin) as the one fused into :func:`candidate_pairs`;
+    ``I[k]`` plays body a (the narrow phase's ``p_a``).
+    """
+    return _relative_filter_kernel(
+        np.ascontiguousarray(p, dtype=np.float64), np.ascontiguousarray(v, dtype=np.float64),
+        np.ascontiguousarray(a, dtype=np.float64), np.ascontiguousarray(r, dtype=np.float64),
+        np.ascontiguousarray(tref, dtype=np.float64), np.ascontiguousarray(I, dtype=np.int64),
+        np.ascontiguousarray(J, dtype=np.int64), float(t_start), float(t_end))
+
+
+# ---------------------------------------------------------------------------
+# hashed grid for incremental (per body) neighbour queries
+# ---------------------------------------------------------------------------
+
+@njit(cache=True, inline="always")
+def _hash_cell(idx):
+    # wrap-around int64 hash of integer cell coordinates; collisions only add
+    # candidates (every candidate still passes the exact bound-overlap test)
+    h = np.int64(0)
+    for k in range(idx.shape[0]):
+        h = h * np.int64(-7046029254386353131) + idx[k] + np.int64(0x9E3779B97F4A7C15 - (1 << 64))
+    return h
+
+
+@njit(cache=True)
+def cell_keys(lo, hi, cell, max_cells):
+    """Hashed keys of the grid cells covered by each bound, flattened.
+
+    Returns ``(keys, owner, big)``: ``keys[e]`` is a cell of body ``owner[e]``;
+    bodies covering more than ``max_cells`` cells get no keys and ``big=True``.
+    """
+    n, D = lo.shape
+    clo = np.empty((n, D), dtype=np.int64)
+    chi = np.empty((n, D), dtype=np.int64)
+    big = np.zeros(n, dtype=np.bool_)
+    total = 0
+    for i in range(n):
+        c = 1
+        for k in range(D):
+            l_ = math.floor(lo[i, k] / cell)
+            h_ = math.floor(hi[i, k] / cell)
+            if h_ - l_ >= max_cells:
+                c = max_cells + 1
+                l_ = 0.0
+                h_ = 0.0
+            clo[i, k] = np.int64(l_)
+            chi[i, k] = np.int64(h_)
+            c *= (chi[i, k] - clo[i, k] + 1)
+            if c > max_cells:
+                c = max_cells + 1
+        if c > max_cells:
+            big[i] = True
+        else:
+            total += c
+    keys = np.empty(total, dtype=np.int64)
+    owner = np.empty(total, dtype=np.int64)
+    idx = np.empty(D, dtype=np.int64)
+    e = 0
+    for i in range(n):
+        if big[i]:
+            continue
+        for k in range(D):
+            idx[k] = clo[i, k]
+        while True:
+            keys[e] = _hash_cell(idx)
+            owner[e] = i
+            e += 1
+            k = 0
+            while k < D:
+                idx[k] += 1
+                if idx[k] <= chi[i, k]:
+                    break
+                idx[k] = clo[i, k]
+                k += 1
+            if k == D:
+                break
+    return keys, owner, big

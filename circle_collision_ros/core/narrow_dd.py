@@ -1,0 +1,108 @@
+"""Error-free transformations and double-double (dd) helpers for numba kernels.
+
+A dd value is a pair ``(hi, lo)`` of float64 with ``|lo| <= ulp(hi)/2``; it
+carries ~106 significant bits.  These helpers are only used where float64
+would cancel catastrophically: forming relative coordinates (``p_a - p_b`` at
+map/UTM magnitudes), and the final residual ``|g(t)|^2 - R^2`` near a root.
+
+Why these are safe (references: Dekker 1971; Ogita, Rump & Oishi 2005):
+
+* ``two_sum`` is exact for any finite float64 pair under round-to-nearest
+  (Knuth), no branch on magnitudes needed.
+* ``two_prod`` uses a hardware fused multiply-add (``llvm.fma.f64``): the
+  rounding error of ``a*b`` is exactly ``fma(a, b, -a*b)`` unless the
+  product under/overflows, which needs |inputs| beyond ~1e150 (documented
+  input range of the narrow phase).  LLVM falls back to a correctly rounded
+  libm ``fma`` on CPUs without the instruction, so results never change.
+* numba compiles without ``fastmath``, so LLVM never reassociates these
+  sequences (reassociation would silently turn the error terms into 0).
+"""
+from __future__ import annotations
+
+from fractions import Fraction
+
+from numba import config, njit, types
+from numba.extending import intrinsic
+
+
+if config.DISABLE_JIT:  # pure-Python debugging mode: exact rational FMA
+
+    def _fma(a, b, c):
+        return float(Fraction(a) * Fraction(b) + Fraction(c))
+
+else:
+
+    @intrinsic
+    def _fma(typingctx, a, b, c):  # pragma: no cover - compiled
+        """Fused multiply-add ``a*b + c`` with a single rounding."""
+        sig = types.float64(types.float64, types.float64, types.float64)
+
+        def codegen(context, builder, signature, args):
+            return builder.fma(args[0], args[1], args[2])
+
+        return sig, codegen
+
+
+@njit(cache=True, inline="always")
+def two_sum(a: float, b: float):
+    """Exact ``a + b = s + e`` (Knuth's branch-free TwoSum)."""
+    s = a + b
+    bb = s - a
+    e = (a - (s - bb)) + (b - bb)
+    return s, e
+
+
+@njit(cache=True, inline="always")
+def fast_two_sum(a: float, b: float):
+    """Exact ``a + b = s + e``; requires ``|a| >= |b|`` or ``a == 0``."""
+    s = a + b
+    e = b - (s - a)
+    return s, e
+
+
+@njit(cache=True, inline="always")
+def two_prod(a: float, b: float):
+    """Exact ``a * b = p + e`` via FMA."""
+    p = a * b
+    e = _fma(a, b, -p)
+    return p, e
+
+
+@njit(cache=True, inline="always")
+def dd_add(ah: float, al: float, bh: float, bl: float):
+    """Accurate dd + dd (the IEEE-style variant, relative error ~2u^2).
+
+    The cheaper "sloppy" add is NOT used: it loses all accuracy when the two
+    operands nearly cancel, which is exactly the situation near a contact
+    (``dp + t*dv`` with ``|dp| >> R``).
+    """
+    s, e = two_sum(ah, bh)
+    t, f = two_sum(al, bl)
+    e += t
+    s, e = fast_two_sum(s, e)
+    e += f
+    return fast_two_sum(s, e)
+
+
+@njit(cache=True, inline="always")
+def dd_mul_d(ah: float, al: float, b: float):
+    """dd * float64, relative error ~2u^2."""
+    p, e = two_prod(ah, b)
+    e = _fma(al, b, e)
+    return fast_two_sum(p, e)
+
+
+@njit(cache=True, inline="always")
+def dd_mul(ah: float, al: float, bh: float, bl: float):
+    """dd * dd, relative error ~4u^2 (the lo*lo term is below that)."""
+    p, e = two_prod(ah, bh)
+    e += ah * bl + al * bh
+    return fast_two_sum(p, e)
+
+
+@njit(cache=True, inline="always")
+def dd_sqr(ah: float, al: float):
+    """dd squared."""
+    p, e = two_prod(ah, ah)
+    e += 2.0 * ah * al
+    return fast_two_sum(p, e)
