@@ -8,8 +8,9 @@ stamped with the send time, and receives the predictions. Because the node's
 reference time is the newest stamp, each prediction's header.stamp names the
 input it answers, so
 
-- end-to-end latency = receive time of the prediction - stamp of its input
-  (publisher -> DDS -> node -> DDS -> subscriber, on one machine);
+- end-to-end latency = receive time of the prediction - time of the publish
+  call of its input (DDS -> node -> DDS, on one machine; the input's bytes are
+  built before that call, so building them is not counted);
 - node latency = the node's own figure (callback entry -> publish), read from
   its /diagnostics (p50/p99 over its last 1000 updates).
 
@@ -23,6 +24,7 @@ import argparse
 import json
 import os
 import signal
+import struct
 import subprocess
 import sys
 import time
@@ -37,20 +39,25 @@ from diagnostic_msgs.msg import DiagnosticArray  # noqa: E402
 from rclpy.qos import QoSProfile, ReliabilityPolicy  # noqa: E402
 
 from circle_collision_msgs.msg import CircleStateArray, CollisionPredictionArray  # noqa: E402
+from circle_collision_ros.cdr_codec import encode_state_array  # noqa: E402
 from circle_collision_ros.demo_scene import SyntheticScene  # noqa: E402
-from circle_collision_ros.prediction_messages import ns_to_time  # noqa: E402
-
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-from tests.ros.node_helpers import state  # noqa: E402
+from circle_collision_ros.state_batch import StateBatch  # noqa: E402
 
 
-def _scene_message(scene: SyntheticScene, stamp_ns: int) -> CircleStateArray:
-    msg = CircleStateArray()
-    msg.header.stamp = ns_to_time(stamp_ns)
-    msg.header.frame_id = "map"
-    msg.circles = [state(f"b{k:05d}", scene.p[k], scene.v[k], scene.a[k], float(scene.radii[k]),
-                         stamp_ns=stamp_ns) for k in range(scene.count)]
-    return msg
+def scene_bytes(scene: SyntheticScene, stamp_ns: int) -> bytes:
+    """The scene as serialized CircleStateArray bytes, every state stamped `stamp_ns`."""
+    n = scene.count
+    batch = StateBatch(ids=[f"b{k:05d}" for k in range(n)], frames=["map"] * n,
+                       stamp_ns=np.full(n, stamp_ns, dtype=np.int64), radius=scene.radii,
+                       position=scene.p, velocity=scene.v, acceleration=scene.a,
+                       remove=np.zeros(n, dtype=bool))
+    return encode_state_array(batch, stamp_ns, "map")
+
+
+def _stamp_of(data: bytes) -> int:
+    """header.stamp of serialized bytes (int32 sec, uint32 nanosec after the 4-byte CDR header)."""
+    sec, nanosec = struct.unpack_from("<iI", data, 4)
+    return sec * 1_000_000_000 + nanosec
 
 
 def _percentiles(values: list[float]) -> tuple[float, float]:
@@ -69,31 +76,41 @@ def measure(bodies: int, seconds: float, rate: float) -> dict:
     client = rclpy.create_node("bench_node_client")
     latencies: list[float] = []
     received: list[int] = []
+    published_at: dict[int, int] = {}  # input stamp -> wall time of the publish call
     diagnostics: dict[str, str] = {}
 
-    def on_prediction(msg: CollisionPredictionArray) -> None:
+    def on_prediction(data: bytes) -> None:
         now = time.time_ns()
-        stamp = msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec
-        latencies.append((now - stamp) * 1e-9)
+        sent = published_at.get(_stamp_of(data))
+        if sent is not None:
+            latencies.append((now - sent) * 1e-9)
         received.append(now)
+
+    def publish(stamp_ns: int) -> None:
+        data = scene_bytes(scene, stamp_ns)
+        published_at[stamp_ns] = time.time_ns()
+        pub.publish(data)
 
     def on_diagnostics(msg: DiagnosticArray) -> None:
         for status in msg.status:
             if "collision prediction" in status.name:
                 diagnostics.update({kv.key: kv.value for kv in status.values})
 
-    client.create_subscription(CollisionPredictionArray, "collision_predictions", on_prediction, 100)
+    # Raw: only the stamp is read, so the client's own decoding adds nothing to the figures.
+    client.create_subscription(CollisionPredictionArray, "collision_predictions", on_prediction, 100,
+                               raw=True)
     client.create_subscription(DiagnosticArray, "/diagnostics", on_diagnostics, 10)
     pub = client.create_publisher(CircleStateArray, "circle_states",
                                   QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE))
-    scene = SyntheticScene(bodies, size=max(60.0, 6.0 * np.sqrt(bodies)), dimensions=2, seed=bodies)
+    # The density of the issue's scale scene (3,000 bodies per km^2): ~333 m^2 per body.
+    scene = SyntheticScene(bodies, size=float(np.sqrt(bodies * 333.0)), dimensions=2, seed=bodies)
     try:
         deadline = time.monotonic() + 60
         while pub.get_subscription_count() == 0 and time.monotonic() < deadline:
             rclpy.spin_once(client, timeout_sec=0.1)
         # Warm-up: the first messages may meet cold caches; not measured.
         for _ in range(10):
-            pub.publish(_scene_message(scene, time.time_ns()))
+            publish(time.time_ns())
             rclpy.spin_once(client, timeout_sec=1.0 / rate)
         end = time.monotonic() + 1.0
         while time.monotonic() < end:
@@ -106,7 +123,7 @@ def measure(bodies: int, seconds: float, rate: float) -> dict:
         while time.monotonic() - start < seconds:
             if time.monotonic() >= next_send:
                 scene.step(period)
-                pub.publish(_scene_message(scene, time.time_ns()))
+                publish(time.time_ns())
                 sent += 1
                 next_send += period
             rclpy.spin_once(client, timeout_sec=max(0.0, min(0.005, next_send - time.monotonic())))
@@ -120,7 +137,7 @@ def measure(bodies: int, seconds: float, rate: float) -> dict:
         burst_start = time.monotonic()
         burst_sent = 0
         while time.monotonic() - burst_start < min(3.0, seconds):
-            pub.publish(_scene_message(scene, time.time_ns()))
+            publish(time.time_ns())
             burst_sent += 1
             rclpy.spin_once(client, timeout_sec=0.0)
         burst_time = time.monotonic() - burst_start

@@ -131,10 +131,11 @@ class CollisionPredictor:
         started = time.perf_counter()
         horizon = self.config.horizon if horizon is None else horizon
         snapshot = self.registry.snapshot(self.config.dimensions)
-        pairs = predict_all_pairs(snapshot.positions, snapshot.velocities,
-                                  snapshot.accelerations, snapshot.radii, horizon)
+        pairs, core_stats = predict_all_pairs(snapshot.positions, snapshot.velocities,
+                                              snapshot.accelerations, snapshot.radii, horizon,
+                                              return_stats=True)
         self.stats = PredictionStats(bodies=len(snapshot.ids), contacts=len(pairs.ttc),
-                                     candidate_pairs=int(getattr(pairs, "candidate_pairs", -1)),
+                                     candidate_pairs=core_stats["n_candidates"],
                                      compute_s=time.perf_counter() - started)
         return ScenePrediction(snapshot, pairs, horizon, self.frame_id, self.config.report_all_pairs)
 
