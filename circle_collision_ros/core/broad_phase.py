@@ -181,6 +181,17 @@ def _grow(arr, k):
     return out
 
 
+@njit(cache=True, inline="always")
+def _push(I, J, k, i, j):
+    """Append pair (i, j) at k, growing the buffers as needed; returns (I, J, k + 1)."""
+    if k == I.shape[0]:
+        I = _grow(I, k)
+        J = _grow(J, k)
+    I[k] = i
+    J[k] = j
+    return I, J, k + 1
+
+
 @njit(cache=True)
 def _sweep_kernel(lo, hi, order, ax, p, v, a, r, tref, t_start, t_end, use_rel):
     n = order.shape[0]
@@ -203,12 +214,7 @@ def _sweep_kernel(lo, hi, order, ax, p, v, a, r, tref, t_start, t_end, use_rel):
             n_box += 1
             if use_rel and not _rel_keep(p, v, a, r, tref, a_, b_, t_start, t_end):
                 continue
-            if k == I.shape[0]:
-                I = _grow(I, k)
-                J = _grow(J, k)
-            I[k] = a_
-            J[k] = b_
-            k += 1
+            I, J, k = _push(I, J, k, a_, b_)
     return I[:k].copy(), J[:k].copy(), n_box
 
 
@@ -304,12 +310,7 @@ def _grid_kernel(lo, hi, cell, origin, p, v, a, r, tref, t_start, t_end, use_rel
                 n_box += 1
                 if use_rel and not _rel_keep(p, v, a, r, tref, a_, b_, t_start, t_end):
                     continue
-                if k_out == I.shape[0]:
-                    I = _grow(I, k_out)
-                    J = _grow(J, k_out)
-                I[k_out] = a_
-                J[k_out] = b_
-                k_out += 1
+                I, J, k_out = _push(I, J, k_out, a_, b_)
         s = t
     # bodies too large for the grid: test against everyone
     for i in range(n):
@@ -325,12 +326,7 @@ def _grid_kernel(lo, hi, cell, origin, p, v, a, r, tref, t_start, t_end, use_rel
             n_box += 1
             if use_rel and not _rel_keep(p, v, a, r, tref, a_, b_, t_start, t_end):
                 continue
-            if k_out == I.shape[0]:
-                I = _grow(I, k_out)
-                J = _grow(J, k_out)
-            I[k_out] = a_
-            J[k_out] = b_
-            k_out += 1
+            I, J, k_out = _push(I, J, k_out, a_, b_)
     return I[:k_out].copy(), J[:k_out].copy(), n_box
 
 
