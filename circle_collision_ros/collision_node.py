@@ -41,16 +41,28 @@ from circle_collision_ros.prediction_pipeline import (CollisionPredictor, Intake
 
 
 class Qos:
-    """QoS defaults (each overridable the ROS way: qos_overrides.<topic>.<entity>.<policy>)."""
+    """QoS defaults (each overridable the ROS way: qos_overrides.<topic>.<entity>.<policy>).
 
-    # Best-effort requests match both reliable and best-effort publishers.
-    STATES = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=50,
-                        reliability=ReliabilityPolicy.BEST_EFFORT,
-                        durability=DurabilityPolicy.VOLATILE)
-    PREDICTIONS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=10,
-                             reliability=ReliabilityPolicy.RELIABLE)
-    MARKERS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1,
-                         reliability=ReliabilityPolicy.RELIABLE)
+    Functions, not shared instances: rclpy applies QoS overrides by mutating
+    the profile it is given, which would leak one node's overrides into the next.
+    """
+
+    @staticmethod
+    def states() -> QoSProfile:
+        # Best-effort requests match both reliable and best-effort publishers.
+        return QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=50,
+                          reliability=ReliabilityPolicy.BEST_EFFORT,
+                          durability=DurabilityPolicy.VOLATILE)
+
+    @staticmethod
+    def predictions() -> QoSProfile:
+        return QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=10,
+                          reliability=ReliabilityPolicy.RELIABLE)
+
+    @staticmethod
+    def markers() -> QoSProfile:
+        return QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1,
+                          reliability=ReliabilityPolicy.RELIABLE)
 
 
 @dataclass
@@ -98,9 +110,9 @@ class CollisionNode(Node):
 
         overrides = QoSOverridingOptions.with_default_policies()
         self._predictions_pub = self.create_publisher(
-            CollisionPredictionArray, "collision_predictions", Qos.PREDICTIONS,
+            CollisionPredictionArray, "collision_predictions", Qos.predictions(),
             qos_overriding_options=overrides)
-        self._markers_pub = self.create_publisher(MarkerArray, "~/markers", Qos.MARKERS)
+        self._markers_pub = self.create_publisher(MarkerArray, "~/markers", Qos.markers())
         self._diagnostics_pub = self.create_publisher(DiagnosticArray, "/diagnostics",
                                                       qos_profile_system_default)
         self._state_subscriptions = []
@@ -128,7 +140,7 @@ class CollisionNode(Node):
         # raw=True: the exact received bytes are what a recording must keep.
         sub = self.create_subscription(
             msg_type, resolved, lambda data, t=resolved, m=msg_type: self._on_states(t, m, data),
-            Qos.STATES, raw=True, qos_overriding_options=QoSOverridingOptions.with_default_policies())
+            Qos.states(), raw=True, qos_overriding_options=QoSOverridingOptions.with_default_policies())
         self._state_subscriptions.append(sub)
         self._state_types[resolved] = msg_type
 

@@ -256,3 +256,38 @@ def test_service_good_and_bad_requests(in_process, ros_node) -> None:
     assert not call(PredictCollisions.Request(circles=states, horizon=math.inf)).success
     empty = call(PredictCollisions.Request(circles=[], horizon=1.0))
     assert empty.success and empty.predictions == []
+
+
+def test_params_file_and_qos_override(tmp_path) -> None:
+    """config/collision_node.yaml loads with --params-file; QoS overrides apply the ROS way."""
+    from pathlib import Path
+
+    from rclpy.context import Context
+    import rclpy
+    from rclpy.qos import ReliabilityPolicy as RP
+
+    params = Path(__file__).resolve().parents[2] / "config" / "collision_node.yaml"
+    overrides = tmp_path / "qos.yaml"
+    overrides.write_text("collision_node:\n  ros__parameters:\n    horizon: 7.5\n"
+                         "    qos_overrides:\n      /circle_states:\n        subscription:\n"
+                         "          reliability: reliable\n")
+    context = Context()
+    rclpy.init(context=context, args=["collision_node", "--ros-args", "--params-file", str(params),
+                                      "--params-file", str(overrides)])
+    try:
+        node = CollisionNode(context=context)
+        assert node.predictor.config.horizon == 7.5 and node.predictor.config.stale_timeout == 2.0
+        (sub,) = [s for s in node.subscriptions if s.topic_name == "/circle_states"]
+        assert sub.qos_profile.reliability == RP.RELIABLE
+        node.destroy_node()
+    finally:
+        context.try_shutdown()
+
+
+def test_best_effort_publishers_are_accepted(in_process, ros_node) -> None:
+    node, harness = in_process
+    best_effort = ros_node.create_publisher(
+        CircleStateArray, "circle_states", QoSProfile(depth=10, reliability=ReliabilityPolicy.BEST_EFFORT))
+    harness.send(state_array(_stamped_now([state("a", (0, 0), (1, 0, 0)), state("b", (3, 0))], ros_node)),
+                 pub=best_effort)
+    assert contacts_of(harness.predictions[-1]) == {("a", "b"): pytest.approx(2.0)}
