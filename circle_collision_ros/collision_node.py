@@ -155,7 +155,12 @@ class CollisionNode(Node):
             self.counters.rejected += 1
             self._warn(topic, f"{topic}: undecodable {msg_type.__name__} ({exc})")
             return
-        report = self.predictor.receive_batch(batch, now_ns)
+        try:
+            report = self.predictor.receive_batch(batch, now_ns)
+        except Exception as exc:  # a bug must cost one message, not the node
+            self.counters.errors += 1
+            self._warn("receive", f"{topic}: message of {len(batch)} states skipped: {exc!r}")
+            return
         self._account(topic, report)
         if self._publish_timer is None and report.changed:
             self._publish(now_ns, started)
