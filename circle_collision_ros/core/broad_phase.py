@@ -182,6 +182,17 @@ def _grow(arr, k):
 
 
 @njit(cache=True, inline="always")
+def _next_cell(idx, first, last):
+    """Odometer step of cell index `idx` over the box [first, last]; False after the last cell."""
+    for k in range(idx.shape[0]):
+        idx[k] += 1
+        if idx[k] <= last[k]:
+            return True
+        idx[k] = first[k]
+    return False
+
+
+@njit(cache=True, inline="always")
 def _push(I, J, k, i, j):
     """Append pair (i, j) at k, growing the buffers as needed; returns (I, J, k + 1)."""
     if k == I.shape[0]:
@@ -263,15 +274,7 @@ def _grid_kernel(lo, hi, cell, origin, p, v, a, r, tref, t_start, t_end, use_rel
             keys[e] = key
             body[e] = i
             e += 1
-            # odometer increment over the cell range
-            k = 0
-            while k < D:
-                idx[k] += 1
-                if idx[k] <= chi[i, k]:
-                    break
-                idx[k] = clo[i, k]
-                k += 1
-            if k == D:
+            if not _next_cell(idx, clo[i], chi[i]):
                 break
     order = np.argsort(keys, kind="mergesort")
     cap = max(16, 4 * n)
@@ -470,13 +473,6 @@ def cell_keys(lo, hi, cell, max_cells):
             keys[e] = _hash_cell(idx)
             owner[e] = i
             e += 1
-            k = 0
-            while k < D:
-                idx[k] += 1
-                if idx[k] <= chi[i, k]:
-                    break
-                idx[k] = clo[i, k]
-                k += 1
-            if k == D:
+            if not _next_cell(idx, clo[i], chi[i]):
                 break
     return keys, owner, big
