@@ -11,23 +11,41 @@ Method (numerical decisions are justified next to the code, DynamO
 1. Relative quantities are formed *exactly* as double-double values
    (TwoSum), so map/UTM coordinates (~1e6 m) lose nothing, and the answer
    is that of the inputs exactly as given.
-2. The quartic is never expanded for root finding.  ``f`` is monotone
+2. Cheap exact-safe rejection for a finite horizon: if one coordinate of
+   ``g`` stays beyond ``+-R`` on all of ``[0, H]`` (swept interval of a
+   quadratic, with a rounding margin) there is no contact (``_axis_reject``);
+   likewise if ``|dp| - H|dv| - H^2|da|/2 > R``.
+3. The quartic is never expanded for root finding.  ``f`` is monotone
    between stationary points, which are roots of the cubic
    ``c(t) = g . g' = f'/2``; ``c`` is monotone between the roots of the
    quadratic ``q = c' = |g'|^2 + g . da``, which are found in closed form from
    its vertex.  Only *local minima* of ``f`` (``c`` crossing - to +) can start
-   a contact, so at most two brackets are ever examined, in time order.
-3. Every function is evaluated geometrically from ``g(t)`` (not from power
-   coefficients); the sign of ``f`` at bracket ends and the final residual are
-   evaluated in double-double, so tiny radii at large distances are safe.
-4. Roots are found by a safeguarded step that is *exact for straight-line
+   a contact, so at most two brackets are ever examined, in time order.  The
+   root of ``c`` on a piece starts from its closed form (depressed cubic about
+   the inflection point, Cardano / trigonometric) -- a guess only -- and is
+   finished by safeguarded Newton, stopped by its own error estimate.
+4. Every function is evaluated geometrically from ``g(t)`` (not from power
+   coefficients).  Signs that decide contact vs no contact are taken from a
+   float64 evaluation only when it exceeds a rigorous rounding-error bound
+   (``_F_ERR``), else from a double-double evaluation (compensated Horner for
+   ``g``, exact TwoProd/TwoSum for ``|g|^2 - R^2``), so tiny radii at large
+   distances are safe.  A certainly negative ``f`` at a Newton iterate on
+   ``c`` already brackets the contact (the minimum is then not needed).
+5. Roots are found by a safeguarded step that is *exact for straight-line
    motion* (the entering root of the local quadratic model, written in the
-   cancellation-free form), falling back to bisection; then polished with a
-   double-double residual, which gives ~0.5 ulp for well-conditioned contacts.
-5. A local minimum whose exact value is ``<= 0`` is a contact even if no
+   cancellation-free form), falling back to bisection; the float64 phase
+   stops when the model's truncation estimate is < 1e-7 relative (cubic
+   convergence), then a double-double residual polishes it -- one step when
+   its truncation + rounding estimate is < 1e-4 ulp, which gives the
+   correctly rounded root for well-conditioned contacts.
+6. A local minimum whose exact value is ``<= 0`` is a contact even if no
    float ``t`` makes ``f <= 0`` (tangent grazes, point bodies with ``R = 0``):
    the closest-approach distance is computed from the cross product
    ``|g x g'| / |g'|``, which does not cancel.
+
+Planar inputs run through 2-component tuples (the helpers are specialised
+per length with ``numba.extending.overload``); a 3-D input with ``z = 0``
+gives bitwise the same result.
 
 Public entry points
 -------------------
@@ -49,19 +67,27 @@ import math
 
 import numpy as np
 from numba import njit, prange
+from numba.extending import overload
 
 from circle_collision_ros.core.narrow_dd import (
     dd_add,
     dd_mul,
-    dd_mul_d,
     dd_sqr,
     two_prod,
     two_sum,
 )
 
-__all__ = ["time_to_collision", "_ttc_scalar", "_ttc_kernel", "_ttc_kernel_par"]
+__all__ = ["time_to_collision", "_ttc_scalar", "_ttc_kernel", "_ttc_kernel_par",
+           "_ttc_kernel_h", "_ttc_kernel_par_h"]
 
 _EPS = 2.220446049250313e-16  # float64 machine epsilon (2u)
+# Error bound of f = |g|^2 - R^2 evaluated in float64 from the high parts of
+# the relative state (Horner g, see _g): |dg| <= 6u S with
+# S = |dp| + t|dv| + t^2|da|/2 (incl. the dropped dd low parts, |lo| <= u|hi|),
+# so | |g~|^2 - |g|^2 | <= ~12u S^2; the dot product adds 3u S^2, R^2 from the
+# high part of R = r_a + r_b and its rounding ~3u R^2, the subtraction u.
+# Total < 17u (S^2 + R^2) = 8.5 eps (S^2 + R^2); 16 eps gives ~2x margin.
+_F_ERR = 16.0 * _EPS
 _INF = math.inf
 _NAN = math.nan
 
@@ -71,28 +97,89 @@ _NAN = math.nan
 # --------------------------------------------------------------------------
 
 
-@njit(cache=True, inline="always")
+# Vector helpers on tuples of length D = 2 or 3.  The numba implementations
+# are selected per tuple length at compile time (``overload``), so planar
+# pairs carry no z = 0 components through the solver; a 3-D computation with
+# z = 0 gives bitwise the same values (x + 0 = x, except the sign of a zero).
+# The plain Python bodies are used under NUMBA_DISABLE_JIT.
+
+
 def _g(P, V, A, t):
+    """g(t) = dp + t (dv + t da/2) in float64 (Horner in t)."""
+    h = 0.5 * t
+    return tuple(P[k] + t * (V[k] + h * A[k]) for k in range(len(P)))
+
+
+def _gd(V, A, t):
+    """g'(t) = dv + t da."""
+    return tuple(V[k] + t * A[k] for k in range(len(V)))
+
+
+def _dot(x, y):
+    s = x[0] * y[0] + x[1] * y[1]
+    return s + x[2] * y[2] if len(x) == 3 else s
+
+
+def _cross2(x, y):
+    """|x cross y|^2 (in 2-D the square of the scalar cross product)."""
+    cz = x[0] * y[1] - x[1] * y[0]
+    if len(x) == 2:
+        return cz * cz
+    cx = x[1] * y[2] - x[2] * y[1]
+    cy = x[2] * y[0] - x[0] * y[2]
+    return cx * cx + cy * cy + cz * cz
+
+
+@overload(_g)
+def _ov_g(P, V, A, t):
     # Horner in t: g = dp + t (dv + t da/2).  Absolute error ~u*S with
     # S = |dp| + t|dv| + t^2|da|/2, i.e. the scale of the terms, which is the
     # best any float64 evaluation can do; digits lost by cancellation near a
     # contact are recovered by the double-double residual later.
-    h = 0.5 * t
-    return (
-        P[0] + t * (V[0] + h * A[0]),
-        P[1] + t * (V[1] + h * A[1]),
-        P[2] + t * (V[2] + h * A[2]),
-    )
+    if P.count == 2:
+        def impl(P, V, A, t):
+            h = 0.5 * t
+            return (P[0] + t * (V[0] + h * A[0]), P[1] + t * (V[1] + h * A[1]))
+        return impl
+
+    def impl3(P, V, A, t):
+        h = 0.5 * t
+        return (
+            P[0] + t * (V[0] + h * A[0]),
+            P[1] + t * (V[1] + h * A[1]),
+            P[2] + t * (V[2] + h * A[2]),
+        )
+    return impl3
 
 
-@njit(cache=True, inline="always")
-def _gd(V, A, t):
-    return (V[0] + t * A[0], V[1] + t * A[1], V[2] + t * A[2])
+@overload(_gd)
+def _ov_gd(V, A, t):
+    if V.count == 2:
+        return lambda V, A, t: (V[0] + t * A[0], V[1] + t * A[1])
+    return lambda V, A, t: (V[0] + t * A[0], V[1] + t * A[1], V[2] + t * A[2])
 
 
-@njit(cache=True, inline="always")
-def _dot(x, y):
-    return x[0] * y[0] + x[1] * y[1] + x[2] * y[2]
+@overload(_dot)
+def _ov_dot(x, y):
+    if x.count == 2:
+        return lambda x, y: x[0] * y[0] + x[1] * y[1]
+    return lambda x, y: x[0] * y[0] + x[1] * y[1] + x[2] * y[2]
+
+
+@overload(_cross2)
+def _ov_cross2(x, y):
+    if x.count == 2:
+        def impl(x, y):
+            cz = x[0] * y[1] - x[1] * y[0]
+            return cz * cz
+        return impl
+
+    def impl3(x, y):
+        cx = x[1] * y[2] - x[2] * y[1]
+        cy = x[2] * y[0] - x[0] * y[2]
+        cz = x[0] * y[1] - x[1] * y[0]
+        return cx * cx + cy * cy + cz * cz
+    return impl3
 
 
 @njit(cache=True, inline="always")
@@ -114,13 +201,55 @@ def _q(P, V, A, t):
 
 
 @njit(cache=True, inline="always")
-def _g_comp_dd(ph, pl, vh, vl, ah, al, t, tth, ttl):
-    # dp + t*dv + t^2*(da/2), every product and sum error-free up to ~u^2.
-    # da/2 is an exact scaling.
-    t1h, t1l = dd_mul_d(vh, vl, t)
-    t2h, t2l = dd_mul(tth, ttl, 0.5 * ah, 0.5 * al)
-    sh, sl = dd_add(ph, pl, t1h, t1l)
-    return dd_add(sh, sl, t2h, t2l)
+def _g_comp_dd(ph, pl, vh, vl, ah, al, t):
+    """One component of g(t) = dp + t (dv + t da/2) as an unevaluated sum
+    hi + lo with absolute error ~u^2 S (compensated Horner, Graillat et al.
+    2005): every Horner operation's rounding error is recovered exactly by
+    TwoProd/TwoSum and, together with the dd low parts of the inputs, summed
+    into a correction whose own rounding is u * O(u S)."""
+    h = 0.5 * ah  # exact scaling
+    p1, e1 = two_prod(h, t)
+    s1, e2 = two_sum(p1, vh)
+    p2, e3 = two_prod(s1, t)
+    r, e4 = two_sum(p2, ph)
+    # exact: g = r + e4 + e3 + t (e1 + e2 + vl + t al/2) + pl
+    corr = e4 + e3 + t * (e1 + e2 + vl + t * (0.5 * al)) + pl
+    return two_sum(r, corr)  # |corr| may exceed |r| after cancellation
+
+
+def _g_dd(Ph, Pl, Vh, Vl, Ah, Al, t):
+    """g(t) as (hi, lo) tuples, double-double per component."""
+    g = [_g_comp_dd(Ph[k], Pl[k], Vh[k], Vl[k], Ah[k], Al[k], t) for k in range(len(Ph))]
+    return tuple(x[0] for x in g), tuple(x[1] for x in g)
+
+
+@overload(_g_dd)
+def _ov_g_dd(Ph, Pl, Vh, Vl, Ah, Al, t):
+    if Ph.count == 2:
+        def impl(Ph, Pl, Vh, Vl, Ah, Al, t):
+            gxh, gxl = _g_comp_dd(Ph[0], Pl[0], Vh[0], Vl[0], Ah[0], Al[0], t)
+            gyh, gyl = _g_comp_dd(Ph[1], Pl[1], Vh[1], Vl[1], Ah[1], Al[1], t)
+            return (gxh, gyh), (gxl, gyl)
+        return impl
+
+    def impl3(Ph, Pl, Vh, Vl, Ah, Al, t):
+        gxh, gxl = _g_comp_dd(Ph[0], Pl[0], Vh[0], Vl[0], Ah[0], Al[0], t)
+        gyh, gyl = _g_comp_dd(Ph[1], Pl[1], Vh[1], Vl[1], Ah[1], Al[1], t)
+        gzh, gzl = _g_comp_dd(Ph[2], Pl[2], Vh[2], Vl[2], Ah[2], Al[2], t)
+        return (gxh, gyh, gzh), (gxl, gyl, gzl)
+    return impl3
+
+
+def _round_dd(Gh, Gl):
+    """Components hi + lo rounded to float64."""
+    return tuple(Gh[k] + Gl[k] for k in range(len(Gh)))
+
+
+@overload(_round_dd)
+def _ov_round_dd(Gh, Gl):
+    if Gh.count == 2:
+        return lambda Gh, Gl: (Gh[0] + Gl[0], Gh[1] + Gl[1])
+    return lambda Gh, Gl: (Gh[0] + Gl[0], Gh[1] + Gl[1], Gh[2] + Gl[2])
 
 
 @njit(cache=True)
@@ -132,53 +261,51 @@ def _f_dd(Ph, Pl, Vh, Vl, Ah, Al, Rh, Rl, t):
     (far inside the documented 1e-9 R^2 grazing slack) and g carries full
     relative precision even when |g| << |dp|.
     """
-    tth, ttl = two_prod(t, t)
-    gxh, gxl = _g_comp_dd(Ph[0], Pl[0], Vh[0], Vl[0], Ah[0], Al[0], t, tth, ttl)
-    gyh, gyl = _g_comp_dd(Ph[1], Pl[1], Vh[1], Vl[1], Ah[1], Al[1], t, tth, ttl)
-    gzh, gzl = _g_comp_dd(Ph[2], Pl[2], Vh[2], Vl[2], Ah[2], Al[2], t, tth, ttl)
-    sh, sl = dd_sqr(Rh, Rl)
-    fh, fl = -sh, -sl
-    a, b = dd_sqr(gxh, gxl)
-    fh, fl = dd_add(fh, fl, a, b)
-    a, b = dd_sqr(gyh, gyl)
-    fh, fl = dd_add(fh, fl, a, b)
-    a, b = dd_sqr(gzh, gzl)
-    fh, fl = dd_add(fh, fl, a, b)
-    return fh + fl, (gxh + gxl, gyh + gyl, gzh + gzl)
+    Gh, Gl = _g_dd(Ph, Pl, Vh, Vl, Ah, Al, t)
+    # sum_k (gh + gl)_k^2 - (Rh + Rl)^2: the large terms gh^2 and -Rh^2 are
+    # split exactly (TwoProd) and summed exactly (TwoSum); all error terms and
+    # the small cross terms 2 gh gl, 2 Rh Rl (each O(u) of the scale) are
+    # accumulated in float64, whose rounding is O(u^2) of the scale.
+    s, lo = two_prod(-Rh, Rh)
+    lo -= 2.0 * Rh * Rl
+    for k in range(len(Gh)):
+        p, e = two_prod(Gh[k], Gh[k])
+        s, e2 = two_sum(s, p)
+        lo += (e + e2) + 2.0 * Gh[k] * Gl[k]
+    return s + lo, _round_dd(Gh, Gl)
 
 
 @njit(cache=True, inline="always")
-def _cross2(x, y):
-    """|x cross y|^2 (3-D; z = 0 for planar inputs)."""
-    cx = x[1] * y[2] - x[2] * y[1]
-    cy = x[2] * y[0] - x[0] * y[2]
-    cz = x[0] * y[1] - x[1] * y[0]
-    return cx * cx + cy * cy + cz * cz
-
-
-@njit(cache=True, inline="always")
-def _entry_step(f, g, gd, A, R):
+def _entry_step(f, g, gd, A, R2):
     """Step from t to the entering root of the local model of f.
 
     Model: f(t+d) ~ f + 2 c d + a2 d^2 with c = g.g', a2 = |g'|^2 + g.da
-    (exact Taylor terms; the neglected d^3, d^4 terms vanish for da = 0, so
-    the step is *exact* for straight-line motion and converges faster than
-    Newton otherwise).  The discriminant c^2 - a2 f is rewritten with the
-    Lagrange identity c^2 - |g'|^2 |g|^2 = -|g x g'|^2 as
-        |g'|^2 (R - d)(R + d) - (g.da) f,   d = |g x g'| / |g'|
-    which has no cancellation at grazing incidence (R ~ d), and the root is
-    taken in the form f / (-c + sqrt(disc)) when c <= 0 (approaching: no
-    cancellation), else (-c - sqrt(disc)) / a2.  Returns NaN when the model
-    has no real root (caller then bisects).
+    (exact Taylor terms; the neglected terms are exactly
+    (g'.da) d^3 + |da|^2 d^4 / 4, which vanish for da = 0, so the step is
+    *exact* for straight-line motion and converges cubically otherwise).
+    The discriminant c^2 - a2 f is rewritten with the Lagrange identity
+    c^2 - |g'|^2 |g|^2 = -|g x g'|^2 as
+        |g'|^2 R^2 - |g x g'|^2 - (g.da) f
+    which avoids the cancellation of c^2 against |g'|^2 |g|^2 for head-on
+    approach (|g| >> R); at grazing incidence (|g x g'| ~ |g'| R) its
+    absolute error is ~u |g'|^2 R^2, the same as that of the earlier
+    (R - d)(R + d) form with d = |g x g'|/|g'|, without that form's sqrt and
+    division.  The root is taken in the form f / (-c + sqrt(disc)) when
+    c <= 0 (approaching: no cancellation), else (-c - sqrt(disc)) / a2.
+
+    Returns (step, sqrt(disc), rel): sqrt(disc) is half the model slope at
+    its root (used by callers for the truncation estimate) and 0.0 when the
+    step is not a model root (vertex / Newton fallback); rel bounds the
+    relative rounding error of the computed step (inf if not a root step).
+    step is NaN when there is no usable step (caller then bisects).
     """
     c = _dot(g, gd)
     gd2 = _dot(gd, gd)
     ga = _dot(g, A)
-    if gd2 > 0.0:
-        d = math.sqrt(_cross2(g, gd) / gd2)
-    else:
-        d = math.sqrt(_dot(g, g))
-    disc = gd2 * (R - d) * (R + d) - ga * f
+    k1 = gd2 * R2
+    k2 = _cross2(g, gd)
+    k3 = ga * f
+    disc = k1 - k2 - k3
     if disc < 0.0:
         # The model just misses zero: a (near-)double root, e.g. point bodies
         # (R = 0, f = |g|^2) or a tangent graze.  Step to the model's vertex
@@ -186,41 +313,64 @@ def _entry_step(f, g, gd, A, R):
         # the distance per step).  The caller's bracket keeps it safe.
         a2 = gd2 + ga
         if a2 > 0.0:
-            return -c / a2
+            return -c / a2, 0.0, _INF
         if c != 0.0:
-            return -0.5 * f / c  # plain Newton
-        return _NAN
+            return -0.5 * f / c, 0.0, _INF  # plain Newton
+        return _NAN, 0.0, _INF
     s = math.sqrt(disc)
+    # relative rounding error of the step: disc carries ~4u of its terms
+    # (large relative error at grazing incidence, where they cancel); sqrt
+    # halves it; the remaining operations add no cancellation (<= 3u).
+    rel = (2.0 * _EPS * (k1 + k2 + abs(k3))) / disc + 2.0 * _EPS if disc > 0.0 else _INF
     if c <= 0.0:
         den = s - c
         if den == 0.0:
-            return 0.0 if f == 0.0 else _NAN
-        return f / den
+            return (0.0 if f == 0.0 else _NAN), 0.0, _INF
+        return f / den, s, rel
     a2 = gd2 + ga
     if a2 <= 0.0:
-        return -0.5 * f / c
-    return -(c + s) / a2
+        return -0.5 * f / c, 0.0, _INF
+    return -(c + s) / a2, s, rel
+
+
+@njit(cache=True, inline="always")
+def _model_err(step, s, gd, A, A2):
+    """Estimated root error left after a model step of size ``step``.
+
+    f(t + d) differs from the quadratic model by (g'.da) d^3 + |da|^2 d^4/4
+    exactly (f is a quartic); divided by the model slope 2 s at the new point
+    this is the distance to the true root, to first order.  inf when the step
+    was not a model root (s == 0).
+    """
+    if not (s > 0.0):
+        return _INF
+    ad = abs(step)
+    return ad * ad * ad * (abs(_dot(gd, A)) + 0.25 * A2 * ad) / (2.0 * s)
 
 
 @njit(cache=True)
-def _solve_entry(Ph, Pl, Vh, Vl, Ah, Al, Rh, Rl, lo, hi):
-    """First root of f in [lo, hi] given f(lo) > 0 >= f(hi) and a unique root.
+def _solve_entry(Ph, Pl, Vh, Vl, Ah, Al, Rh, Rl, lo, hi, t):
+    """First root of f in [lo, hi] given f(lo) > 0 >= f(hi) and that f > 0
+    exactly on [lo, root) and f <= 0 on [root, hi]; iteration starts at t.
 
     Coarse phase in float64 with the model step, safeguarded by the bracket
     (any step leaving (lo, hi) becomes a bisection, so it always converges);
-    then up to three double-double polishing steps, kept inside the original
-    bracket.  The polished residual is accurate to ~u^2 |g|^2, so the result
-    is within ~0.5 ulp + |residual error / f'| of the exact root.
+    it stops once the model truncation estimate says the iterate is within
+    1e-10 relative of the root (cubic convergence: the next step would be
+    exact to ~1e-30), or at the float64 noise floor.  Then double-double
+    polishing steps, kept inside the original bracket: the polished residual
+    is accurate to ~u^2 |g|^2, so a dd step whose own truncation estimate is
+    < 1% of an ulp (or that is <= 64 ulp, as before) ends the polish; the
+    result is within ~0.5 ulp + |residual error / f'| of the exact root.
     """
-    R = Rh
+    R2 = Rh * Rh
+    A2 = _dot(Ah, Ah)
     lo0 = lo
     hi0 = hi
-    t = lo
     prev = _INF
     for _ in range(100):
         g = _g(Ph, Vh, Ah, t)
-        ng = math.sqrt(_dot(g, g))
-        f = (ng - R) * (ng + R)
+        f = _dot(g, g) - R2
         if f > 0.0:
             lo = t
         else:
@@ -228,41 +378,61 @@ def _solve_entry(Ph, Pl, Vh, Vl, Ah, Al, Rh, Rl, lo, hi):
         if f == 0.0:
             break
         gd = _gd(Vh, Ah, t)
-        step = _entry_step(f, g, gd, Ah, R)
+        step, sd, _rel = _entry_step(f, g, gd, Ah, R2)
         tn = t + step
-        if abs(step) <= 32.0 * _EPS * abs(t):
+        ast = abs(step)
+        if ast <= 32.0 * _EPS * abs(t):
             t = tn  # converged (checked before the safeguard, see _root_c)
             break
         if not (tn > lo and tn < hi):
             tn = 0.5 * (lo + hi)
+            ast = abs(tn - t)
+            if hi - lo <= 32.0 * _EPS * hi:
+                t = tn
+                break
+        elif _model_err(step, sd, gd, Ah, A2) <= 1e-7 * abs(tn):
+            t = tn
+            break
         # Stop at the float64 noise floor: either the step is tiny, or it is
         # small and no longer shrinking (the residual is rounding noise, so
         # further float64 steps would wander).  The dd polish takes over.
-        ast = abs(tn - t)
-        if (ast <= 32.0 * _EPS * abs(tn) or hi - lo <= 32.0 * _EPS * hi
-                or (ast <= 1e-9 * abs(tn) and ast >= 0.5 * prev)):
+        if ast <= 32.0 * _EPS * abs(tn) or (ast <= 1e-9 * abs(tn) and ast >= 0.5 * prev):
             t = tn
             break
         prev = ast
         t = tn
     # double-double polish: the float64 residual above is only good to u*S.
-    # One dd step from a float64-converged t leaves an error of (step^2 x
-    # curvature) + 0.5 ulp; a step of <= 64 ulp makes the first term far
-    # below an ulp, so a second dd residual is only spent on larger steps.
     for _ in range(4):
         f, g = _f_dd(Ph, Pl, Vh, Vl, Ah, Al, Rh, Rl, t)
         if f == 0.0:
             break
         gd = _gd(Vh, Ah, t)
-        step = _entry_step(f, g, gd, Ah, R)
+        step, sd, rel = _entry_step(f, g, gd, Ah, R2)
         if step != step:
             break
         tn = t + step
+        clamped = False
         if tn < lo0:
             tn = lo0
+            clamped = True
         elif tn > hi0:
             tn = hi0
-        done = abs(tn - t) <= 64.0 * _EPS * abs(tn)
+            clamped = True
+        at = abs(tn)
+        ast = abs(tn - t)
+        # done if the step's own rounding |step| * rel (large at grazing
+        # incidence) is < 1e-4 ulp and either the step is <= 64 ulp (then the
+        # truncation error, ~step^2 x curvature, is far below an ulp) or the
+        # model truncation estimate is < 1e-4 ulp (so the final rounding of
+        # t + step is the correct rounding unless the root lies within 1e-4
+        # ulp of a rounding boundary).  Clamped and non-root
+        # (vertex) steps: done when <= 64 ulp.
+        small = ast <= 64.0 * _EPS * at
+        if clamped or not (rel < _INF):
+            done = small
+        else:
+            done = ast * rel <= 1e-4 * _EPS * at and (
+                small or _model_err(step, sd, gd, Ah, A2) <= 1e-4 * _EPS * at)
         t = tn
         if done:
             break
@@ -270,69 +440,151 @@ def _solve_entry(Ph, Pl, Vh, Vl, Ah, Al, Rh, Rl, lo, hi):
 
 
 @njit(cache=True)
-def _root_c(P, V, A, lo, hi, clo):
+def _root_c(P, V, A, lo, hi, clo, hitR2, nP, nV, nA, t0, q0, c_t0, which):
     """Root of the cubic c on [lo, hi] where c is monotone and changes sign.
 
     Safeguarded Newton with c' = q (both geometric): a Newton iterate outside
     the current bracket is replaced by bisection, so convergence is
-    guaranteed; the root only needs ~float64 accuracy because it is used as
-    a bracket end and a closest-approach time (both insensitive to it: f is
-    stationary there).
+    guaranteed; the root only needs ~1e-9 relative accuracy because it is
+    used as a bracket end and a closest-approach time (both insensitive to
+    it: f is stationary there).
+
+    Returns (t, hit).  With ``hitR2 >= 0`` (the piece ends a decreasing run
+    of f that starts before lo with f > 0) each iterate also checks
+    f = |g|^2 - hitR2 in float64: if f is negative by more than its error
+    bound (_F_ERR), that iterate is returned with hit=True -- it is a valid
+    right bracket end for the entry root (f decreases to the minimum and
+    increases after it within the piece, so {f <= 0} is an interval ending
+    at or after it), and the minimum itself is not needed.
     """
     neg_lo = clo < 0.0
-    # Start where Newton is monotone: c'' = 3 g'.da changes sign only at the
-    # vertex t0 of q; on a convex piece Newton from the right end never
-    # overshoots, on a concave piece from the left end.  Mixed pieces start
-    # at the midpoint.  The bracket safeguard makes this a speed choice only.
-    t0 = -_dot(A, V) / _dot(A, A)
-    if lo >= t0:
-        t = hi if (clo < 0.0) else lo
-    elif hi <= t0:
-        t = lo if (clo < 0.0) else hi
+    A2 = _dot(A, A)
+    # Starting guess in closed form (a *guess* only: the safeguarded Newton
+    # below decides).  t0 = -(da.dv)/|da|^2 is the inflection point of c
+    # (c'' = 3 g'.da = 0 there) and q0 = c'(t0), so exactly
+    #   c(t0 + x) = c(t0) + q0 x + (|da|^2 / 2) x^3,
+    # a depressed cubic x^3 + p x + r.  One real root (D >= 0): Cardano in
+    # the cancellation-free form x = w - p/(3w), w = cbrt(-r/2 - sgn(r) sqrt(D));
+    # three (D < 0): trigonometric form; ``which`` = 0/1/2 picks the
+    # smallest/middle/largest for the piece left of / between / right of the
+    # turning points t0 -+ sqrt(-p/3).  t0 + x cancels when |t0| >> |t| (tiny
+    # |da|): the guess is then only rough and Newton takes a few more steps.
+    k = 0.5 * A2
+    hp = q0 / (3.0 * k)
+    hr = 0.5 * c_t0 / k
+    D = hr * hr + hp * hp * hp
+    if D >= 0.0:
+        w = np.cbrt(-hr - math.copysign(math.sqrt(D), hr))
+        x = w - hp / w if w != 0.0 else 0.0
     else:
-        t = 0.5 * (lo + hi)
+        m = math.sqrt(-hp)
+        ct = -hr / (m * m * m)
+        ct = min(1.0, max(-1.0, ct))
+        th = math.acos(ct) / 3.0
+        if which == 0:
+            th += 2.0943951023931957  # 2 pi / 3
+        elif which == 1:
+            th -= 2.0943951023931957
+        x = 2.0 * m * math.cos(th)
+    t = t0 + x
+    if not (t > lo and t < hi):
+        # Fallback start where Newton is monotone: c'' changes sign only at
+        # t0; on a convex piece Newton from the right end never overshoots,
+        # on a concave piece from the left end; mixed pieces: the midpoint.
+        if lo >= t0:
+            t = hi if (clo < 0.0) else lo
+        elif hi <= t0:
+            t = lo if (clo < 0.0) else hi
+        else:
+            t = 0.5 * (lo + hi)
     prev = _INF
     for _ in range(200):
-        ct = _c(P, V, A, t)
+        g = _g(P, V, A, t)
+        gd = _gd(V, A, t)
+        ct = _dot(g, gd)
+        if hitR2 >= 0.0:
+            S = nP + t * (nV + 0.5 * t * nA)
+            if _dot(g, g) - hitR2 < -_F_ERR * (S * S + hitR2):
+                return t, True
         if ct == 0.0:
-            return t
+            return t, False
         if (ct < 0.0) == neg_lo:
             lo = t
         else:
             hi = t
-        qt = _q(P, V, A, t)
+        gdA = _dot(gd, A)
+        qt = _dot(gd, gd) + _dot(g, A)
         tn = t - ct / qt if qt != 0.0 else _NAN
+        ast = abs(tn - t)
         # converged: test before the safeguard, since t itself is a bracket
         # end now and a sub-ulp step would otherwise be turned into a bisection
-        if abs(tn - t) <= 32.0 * _EPS * abs(t):
-            return tn
+        if ast <= 32.0 * _EPS * abs(t):
+            return tn, False
         if not (tn > lo and tn < hi):
             tn = 0.5 * (lo + hi)
-        # same noise-floor stop as in _solve_entry; s only needs ~1e-9
-        # relative accuracy (f is stationary there: f(s) is off by O(ds^2))
-        ast = abs(tn - t)
+            ast = abs(tn - t)
+        else:
+            # Newton error after the step: c is a cubic, so exactly
+            # c(t + x) = c + q x + 1.5 (g'.da) x^2 + 0.5 |da|^2 x^3 and the
+            # new error is ~(1.5 |g'.da| + 0.5 |da|^2 |x|) x^2 / |q|.  When
+            # that is both < 1e-3 of the step (asymptotic regime, the
+            # estimate is reliable) and < 1e-11 |t| (100x below the 1e-9
+            # accuracy the callers assume), stop without another evaluation.
+            est = ast * ast * (1.5 * abs(gdA) + 0.5 * A2 * ast) / abs(qt)
+            if est <= 1e-11 * abs(tn) and est <= 1e-3 * ast:
+                return tn, False
+        # same noise-floor stop as in _solve_entry
         if ast <= 32.0 * _EPS * abs(tn) or hi - lo <= 32.0 * _EPS * abs(hi):
-            return tn
+            return tn, False
         if ast <= 1e-9 * abs(tn) and ast >= 0.5 * prev:
-            return tn
+            return tn, False
         prev = ast
         t = tn
-    return t
+    return t, False
 
 
 @njit(cache=True)
-def _at_minimum(Ph, Pl, Vh, Vl, Ah, Al, Rh, Rl, lo, s, S):
+def _at_minimum(Ph, Pl, Vh, Vl, Ah, Al, Rh, Rl, lo, s, nP, nV, nA):
     """Decide contact for the decreasing run [lo, s] ending at a local min s.
 
     Returns the contact time or -1.0 for none.  f(lo) > 0 is known.
     """
+    S = nP + s * (nV + 0.5 * s * nA)
+    R = Rh + Rl
+    # _root_c stops at ~1e-9 relative accuracy; the curvature term for that
+    # ds bounds how far d(s) can be from the exact minimum distance (below).
+    ds = 1e-8 * s
+    dtol = R * (1.0 + 8.0 * _EPS) + 0.5 * nA * ds * ds + 8.0 * _EPS * _EPS * S
+    # float64 screen, decided only when the sign / margin exceeds the
+    # rounding error bound (otherwise the double-double path below decides):
+    # * f(s) < -_F_ERR (S^2 + R^2): certainly f(s) < 0, a contact in [lo, s];
+    # * a lower bound of d(s) = |g x g'|/|g'| above the miss threshold of the
+    #   dd test below: certainly a miss.  Error of d from float g, g': with
+    #   |dg| <= 6u S, |dg'| <= 3u (|dv| + s |da|) (Horner, incl. the dropped
+    #   low parts of the dd relative state), d moves by at most
+    #   |dg| + |g| |dg'| / |g'| + ~4u d; the bound below uses 8 eps (~4x).
+    g = _g(Ph, Vh, Ah, s)
+    R2 = Rh * Rh
+    g2 = _dot(g, g)
+    if g2 - R2 < -_F_ERR * (S * S + R2):
+        if s <= lo:
+            return lo
+        return _solve_entry(Ph, Pl, Vh, Vl, Ah, Al, Rh, Rl, lo, s, s)
+    gd = _gd(Vh, Ah, s)
+    gd2 = _dot(gd, gd)
+    if gd2 > 0.0:
+        ngd = math.sqrt(gd2)
+        d = math.sqrt(_cross2(g, gd)) / ngd
+        derr = 8.0 * _EPS * (S + S * (nV + s * nA) / ngd + d)
+        if d - derr > dtol:
+            return -1.0
     f, g = _f_dd(Ph, Pl, Vh, Vl, Ah, Al, Rh, Rl, s)
     if f == 0.0:
         return s  # exact touch at the minimum (dd residual is exact here)
     if f <= 0.0:
         if s <= lo:
             return lo
-        return _solve_entry(Ph, Pl, Vh, Vl, Ah, Al, Rh, Rl, lo, s)
+        return _solve_entry(Ph, Pl, Vh, Vl, Ah, Al, Rh, Rl, lo, s, s)
     # No float time has f <= 0, yet the exact minimum may still be <= 0
     # (tangent graze; point bodies with R = 0 whose paths cross).  The
     # closest-approach distance of the local model, d = |g x g'| / |g'|, has
@@ -348,13 +600,7 @@ def _at_minimum(Ph, Pl, Vh, Vl, Ah, Al, Rh, Rl, lo, s, S):
         d = math.sqrt(_cross2(g, gd) / gd2)
     else:
         d = math.sqrt(_dot(g, g))
-    nA = math.sqrt(_dot(Ah, Ah))
-    R = Rh + Rl
-    # _root_c stops at ~1e-9 relative accuracy; the curvature term for that
-    # ds bounds how far d(s) can be from the exact minimum distance.  Clear
-    # misses are rejected here without further work.
-    ds = 1e-8 * s
-    if d > R * (1.0 + 8.0 * _EPS) + 0.5 * nA * ds * ds + 8.0 * _EPS * _EPS * S:
+    if d > dtol:
         return -1.0
     # Near-graze: refine s with Newton on c using the dd g (quadratic
     # convergence from 1e-9 reaches the ~ulp level in one or two steps).
@@ -368,7 +614,7 @@ def _at_minimum(Ph, Pl, Vh, Vl, Ah, Al, Rh, Rl, lo, s, S):
         s = sn
         f, g = _f_dd(Ph, Pl, Vh, Vl, Ah, Al, Rh, Rl, s)
         if f <= 0.0:
-            return _solve_entry(Ph, Pl, Vh, Vl, Ah, Al, Rh, Rl, lo, s)
+            return _solve_entry(Ph, Pl, Vh, Vl, Ah, Al, Rh, Rl, lo, s, s)
         gd = _gd(Vh, Ah, s)
         gd2 = _dot(gd, gd)
     if gd2 > 0.0:
@@ -394,14 +640,14 @@ def _at_minimum(Ph, Pl, Vh, Vl, Ah, Al, Rh, Rl, lo, s, S):
 
 
 @njit(cache=True)
-def _straight(Ph, Pl, Vh, Vl, Rh, Rl, f0, H):
+def _straight(Ph, Pl, Vh, Vl, Ah, Al, Rh, Rl, f0, H):
     """da == 0 exactly: f is a quadratic, closed form + one dd polish."""
     V2 = _dot(Vh, Vh)
     if V2 == 0.0:
         return _INF  # static pair, f0 > 0 (overlap handled by caller)
     # c0 = dp.dv in double-double: its sign decides approach vs separation
     ch, cl = 0.0, 0.0
-    for k in range(3):
+    for k in range(len(Ph)):
         a, b = dd_mul(Ph[k], Pl[k], Vh[k], Vl[k])
         ch, cl = dd_add(ch, cl, a, b)
     c0 = ch + cl
@@ -410,9 +656,9 @@ def _straight(Ph, Pl, Vh, Vl, Rh, Rl, f0, H):
     # squared miss distance d^2 = |dp x dv|^2 / |dv|^2, cross product in dd
     # (no cancellation for near-collinear head-on pairs either)
     cr2 = 0.0
-    for k in range(3):
-        i = (k + 1) % 3
-        j = (k + 2) % 3
+    for k in range(3 if len(Ph) == 3 else 1):
+        i = (k + 1) % 3 if len(Ph) == 3 else 0  # 2-D: only the z component
+        j = (k + 2) % 3 if len(Ph) == 3 else 1
         a, b = dd_mul(Ph[i], Pl[i], Vh[j], Vl[j])
         e, f = dd_mul(Ph[j], Pl[j], -Vh[i], -Vl[i])
         xh, xl = dd_add(a, b, e, f)
@@ -425,19 +671,72 @@ def _straight(Ph, Pl, Vh, Vl, Rh, Rl, f0, H):
     s = math.sqrt(V2 * (R - d) * (R + d))
     # f0 / (-c0 + s): both denominator terms are >= 0, no cancellation
     t = f0 / (s - c0)
-    if not (t <= H):
-        return _INF
     tm = -c0 / V2  # closest approach; the entry root lies in [0, tm]
-    fx, g = _f_dd(Ph, Pl, Vh, Vl, (0.0, 0.0, 0.0), (0.0, 0.0, 0.0), Rh, Rl, t)
+    hi = tm
+    if not (t <= H):
+        # The closed form is not yet polished and may sit a few ulp above
+        # the root (more at grazing incidence), so t > H does not prove the
+        # root is beyond H.  If H >= tm the root (<= tm) is within the
+        # horizon; else f decreases on [0, H] and the dd sign of f(H) decides.
+        if H < tm:
+            fH, _g_unused = _f_dd(Ph, Pl, Vh, Vl, Ah, Al, Rh, Rl, H)
+            if fH > 0.0:
+                return _INF
+            hi = H
+        t = min(t, hi)
+    fx, g = _f_dd(Ph, Pl, Vh, Vl, Ah, Al, Rh, Rl, t)  # da == 0 (hi and lo)
     cc = _dot(g, Vh)
     den = s - cc
     if den > 0.0:
         tn = t + fx / den
-        if tn >= 0.0 and tn <= tm:
+        if tn >= 0.0 and tn <= hi:
             t = tn
     if not (t <= H):
         return _INF
     return t
+
+
+@njit(cache=True, inline="always")
+def _axis_reject(Ph, Vh, Ah, Rp, H):
+    """True if some coordinate of g stays beyond +-Rp on all of [0, H].
+
+    Swept-interval test: g_k(t) = dp_k + t dv_k + t^2 da_k / 2 is a quadratic,
+    so its range over [0, H] is spanned by its values at 0, H and the vertex
+    -dv_k/da_k (if inside).  If that range misses [-R, R] for one axis, then
+    |g(t)| >= |g_k(t)| > R throughout and there is no contact (exact-safe):
+    * the float64 Horner values (high parts only) are within 4u S_k of the
+      exact ones, S_k = |dp_k| + H |dv_k| + H^2 |da_k| / 2 (3u Horner + u for
+      the dropped dd low parts), and a vertex time off by a few ulp moves the
+      value by |da_k| (u t)^2 / 2 <= u^2 S_k (the quadratic is flat there);
+      the margin 8 eps S_k = 16u S_k covers both 4x;
+    * Rp = (r_a + r_b)(1 + 4 eps) covers the rounding of R;
+    * overflow gives inf/NaN, whose comparisons are false: no rejection.
+    Rejects ~3/4 of the random benchmark pairs at H = 10 s for ~10 ns.
+    """
+    for k in range(len(Ph)):
+        p = Ph[k]
+        v = Vh[k]
+        a = Ah[k]
+        gH = p + H * (v + 0.5 * H * a)
+        # endpoints first (cheap, decides most pairs); an interior vertex can
+        # only lower the minimum if a > 0, only raise the maximum if a < 0
+        if p > Rp and gH > Rp:
+            m = min(p, gH)
+            if a > 0.0:
+                ts = -v / a
+                if ts > 0.0 and ts < H:
+                    m = min(m, p + ts * (v + 0.5 * ts * a))
+            if m - 8.0 * _EPS * (abs(p) + H * (abs(v) + 0.5 * H * abs(a))) > Rp:
+                return True
+        elif p < -Rp and gH < -Rp:
+            m = max(p, gH)
+            if a < 0.0:
+                ts = -v / a
+                if ts > 0.0 and ts < H:
+                    m = max(m, p + ts * (v + 0.5 * ts * a))
+            if m + 8.0 * _EPS * (abs(p) + H * (abs(v) + 0.5 * H * abs(a))) < -Rp:
+                return True
+    return False
 
 
 @njit(cache=True)
@@ -451,7 +750,7 @@ def _ttc_rel(Ph, Pl, Vh, Vl, Ah, Al, Rh, Rl, H):
     if abs(f0) <= 8.0 * _EPS * (P2 + Rh * Rh):
         f0h, f0l = dd_sqr(Rh, Rl)
         f0h, f0l = -f0h, -f0l
-        for k in range(3):
+        for k in range(len(Ph)):
             a, b = dd_sqr(Ph[k], Pl[k])
             f0h, f0l = dd_add(f0h, f0l, a, b)
         f0 = f0h + f0l
@@ -460,7 +759,7 @@ def _ttc_rel(Ph, Pl, Vh, Vl, Ah, Al, Rh, Rl, H):
     touching = f0 == 0.0
     if touching:
         ch, cl = 0.0, 0.0
-        for k in range(3):
+        for k in range(len(Ph)):
             a, b = dd_mul(Ph[k], Pl[k], Vh[k], Vl[k])
             ch, cl = dd_add(ch, cl, a, b)
         c0 = ch + cl
@@ -468,15 +767,26 @@ def _ttc_rel(Ph, Pl, Vh, Vl, Ah, Al, Rh, Rl, H):
             return 0.0
         if c0 == 0.0 and _q(Ph, Vh, Ah, 0.0) < 0.0:
             return 0.0
+    if H < _INF and not touching and _axis_reject(Ph, Vh, Ah, (Rh + Rl) * (1.0 + 4.0 * _EPS), H):
+        return _INF
     A2 = _dot(Ah, Ah)
+    nP = math.sqrt(P2)
+    nV = math.sqrt(_dot(Vh, Vh))
+    nA = math.sqrt(A2)
+    if H < _INF and not touching:
+        # Cheap exact-safe rejection: for t in [0, H] the triangle inequality
+        # gives |g(t)| >= |dp| - t|dv| - t^2|da|/2 >= nP - reach.  The norms
+        # of the high parts differ from the exact ones by <= ~3u relative
+        # (rounding + dropped low parts), reach and the difference add ~3u;
+        # the 8 eps (nP + reach) margin (>= 16u of every term) and R(1+4eps)
+        # (R = r_a + r_b rounded) keep it from ever rejecting a real contact.
+        reach = H * (nV + 0.5 * H * nA)
+        if nP - reach > (Rh + Rl) * (1.0 + 4.0 * _EPS) + 8.0 * _EPS * (nP + reach):
+            return _INF
     if A2 == 0.0:
         if touching:
             return _INF  # straight line leaving a touch never returns
-        return _straight(Ph, Pl, Vh, Vl, Rh, Rl, f0, H)
-
-    nP = math.sqrt(_dot(Ph, Ph))
-    nV = math.sqrt(_dot(Vh, Vh))
-    nA = math.sqrt(A2)
+        return _straight(Ph, Pl, Vh, Vl, Ah, Al, Rh, Rl, f0, H)
     # Turning points of c: q is a quadratic with known leading coefficient
     # 1.5|da|^2 and vertex t0 = -(da.dv)/|da|^2, so its roots are
     # t0 -+ sqrt(-q(t0) / (1.5|da|^2)).  q(t0) is evaluated geometrically
@@ -484,8 +794,12 @@ def _ttc_rel(Ph, Pl, Vh, Vl, Ah, Al, Rh, Rl, H):
     # which c is monotone; an error in them can only matter if c has a
     # near-double root there, i.e. f has a near-inflection with zero slope,
     # where f is too flat for a sign change to be missed outside the slack.
+    R2 = Rh * Rh
     t0 = -_dot(Ah, Vh) / A2
-    q0 = _q(Ph, Vh, Ah, t0)
+    g_t0 = _g(Ph, Vh, Ah, t0)
+    gd_t0 = _gd(Vh, Ah, t0)
+    q0 = _dot(gd_t0, gd_t0) + _dot(g_t0, Ah)  # = _q(t0)
+    c_t0 = _dot(g_t0, gd_t0)  # = _c(t0), for the closed-form guesses in _root_c
     n_cut = 0
     cut1 = 0.0
     cut2 = 0.0
@@ -506,6 +820,7 @@ def _ttc_rel(Ph, Pl, Vh, Vl, Ah, Al, Rh, Rl, H):
     dec_start = 0.0 if ca < 0.0 else -1.0
     for piece in range(3):
         increasing = True
+        which = piece if n_cut == 2 else 2
         if n_cut == 2:
             if piece == 0:
                 b = cut1
@@ -543,31 +858,42 @@ def _ttc_rel(Ph, Pl, Vh, Vl, Ah, Al, Rh, Rl, H):
                     break
                 b = 2.0 * b
                 cb = _c(Ph, Vh, Ah, b)
-            s = _root_c(Ph, Vh, Ah, a, b, ca)
-            S = nP + s * nV + 0.5 * s * s * nA
-            res = _at_minimum(Ph, Pl, Vh, Vl, Ah, Al, Rh, Rl, dec_start, s, S)
+            s, hit = _root_c(Ph, Vh, Ah, a, b, ca, R2, nP, nV, nA, t0, q0, c_t0, which)
+            if hit:
+                return _solve_entry(Ph, Pl, Vh, Vl, Ah, Al, Rh, Rl, dec_start, s, s)
+            res = _at_minimum(Ph, Pl, Vh, Vl, Ah, Al, Rh, Rl, dec_start, s, nP, nV, nA)
             return res if res >= 0.0 else _INF
         cb = _c(Ph, Vh, Ah, b)
         if increasing:
             if ca < 0.0 and cb >= 0.0:
-                s = _root_c(Ph, Vh, Ah, a, b, ca)
-                S = nP + s * nV + 0.5 * s * s * nA
-                res = _at_minimum(Ph, Pl, Vh, Vl, Ah, Al, Rh, Rl, dec_start, s, S)
+                s, hit = _root_c(Ph, Vh, Ah, a, b, ca, R2, nP, nV, nA, t0, q0, c_t0, which)
+                if hit:
+                    return _solve_entry(Ph, Pl, Vh, Vl, Ah, Al, Rh, Rl, dec_start, s, s)
+                res = _at_minimum(Ph, Pl, Vh, Vl, Ah, Al, Rh, Rl, dec_start, s, nP, nV, nA)
                 if res >= 0.0:
                     return res
                 dec_start = -1.0
         else:
             if ca >= 0.0 and cb < 0.0:
-                dec_start = _root_c(Ph, Vh, Ah, a, b, ca)
+                dec_start, _hit_unused = _root_c(Ph, Vh, Ah, a, b, ca, -1.0, nP, nV, nA, t0, q0, c_t0, which)
         a = b
         ca = cb
         if last:
             break
     # reached the horizon inside a decreasing run: contact iff f(H) <= 0
     if dec_start >= 0.0 and H < _INF:
+        # float64 screen first (error bound _F_ERR), dd only when uncertain
+        gH = _g(Ph, Vh, Ah, H)
+        SH = nP + H * (nV + 0.5 * H * nA)
+        fH = _dot(gH, gH) - R2
+        eH = _F_ERR * (SH * SH + R2)
+        if fH > eH:
+            return _INF
+        if fH < -eH:
+            return _solve_entry(Ph, Pl, Vh, Vl, Ah, Al, Rh, Rl, dec_start, H, H)
         fH, _g_unused = _f_dd(Ph, Pl, Vh, Vl, Ah, Al, Rh, Rl, H)
         if fH <= 0.0:
-            return _solve_entry(Ph, Pl, Vh, Vl, Ah, Al, Rh, Rl, dec_start, H)
+            return _solve_entry(Ph, Pl, Vh, Vl, Ah, Al, Rh, Rl, dec_start, H, H)
     return _INF
 
 
@@ -602,43 +928,166 @@ def _ttc_scalar(pax, pay, paz, vax, vay, vaz, aax, aay, aaz, r_a,
     return t
 
 
+@njit(cache=True)
+def _ttc_scalar2(pax, pay, vax, vay, aax, aay, r_a, pbx, pby, vbx, vby, abx, aby, r_b, horizon):
+    """Planar twin of ``_ttc_scalar`` (2-component tuples throughout; same
+    result as ``_ttc_scalar`` with z = 0, bit for bit)."""
+    chk = (pax + pay + vax + vay + aax + aay + r_a + pbx + pby + vbx + vby + abx + aby + r_b)
+    if not (chk - chk == 0.0) or not (r_a >= 0.0) or not (r_b >= 0.0):
+        return _NAN
+    if not (horizon >= 0.0):
+        return _NAN
+    x0, x1 = two_sum(pax, -pbx)
+    y0, y1 = two_sum(pay, -pby)
+    u0, u1 = two_sum(vax, -vbx)
+    v0, v1 = two_sum(vay, -vby)
+    i0, i1 = two_sum(aax, -abx)
+    j0, j1 = two_sum(aay, -aby)
+    Rh, Rl = two_sum(r_a, r_b)
+    t = _ttc_rel((x0, y0), (x1, y1), (u0, v0), (u1, v1), (i0, j0), (i1, j1), Rh, Rl, horizon)
+    if t != t:
+        return _NAN
+    return t
+
+
 @njit(cache=True, inline="always")
-def _ttc_row(pa, va, aa, ra, pb, vb, ab, rb, H, i):
-    if pa.shape[1] == 3:
-        return _ttc_scalar(pa[i, 0], pa[i, 1], pa[i, 2], va[i, 0], va[i, 1], va[i, 2],
-                           aa[i, 0], aa[i, 1], aa[i, 2], ra[i],
-                           pb[i, 0], pb[i, 1], pb[i, 2], vb[i, 0], vb[i, 1], vb[i, 2],
-                           ab[i, 0], ab[i, 1], ab[i, 2], rb[i], H[i])
-    return _ttc_scalar(pa[i, 0], pa[i, 1], 0.0, va[i, 0], va[i, 1], 0.0,
-                       aa[i, 0], aa[i, 1], 0.0, ra[i],
-                       pb[i, 0], pb[i, 1], 0.0, vb[i, 0], vb[i, 1], 0.0,
-                       ab[i, 0], ab[i, 1], 0.0, rb[i], H[i])
+def _row2(pa, va, aa, ra, pb, vb, ab, rb, H, i):
+    return _ttc_scalar2(pa[i, 0], pa[i, 1], va[i, 0], va[i, 1], aa[i, 0], aa[i, 1], ra[i],
+                        pb[i, 0], pb[i, 1], vb[i, 0], vb[i, 1], ab[i, 0], ab[i, 1], rb[i], H)
+
+
+@njit(cache=True, inline="always")
+def _row3(pa, va, aa, ra, pb, vb, ab, rb, H, i):
+    return _ttc_scalar(pa[i, 0], pa[i, 1], pa[i, 2], va[i, 0], va[i, 1], va[i, 2],
+                       aa[i, 0], aa[i, 1], aa[i, 2], ra[i],
+                       pb[i, 0], pb[i, 1], pb[i, 2], vb[i, 0], vb[i, 1], vb[i, 2],
+                       ab[i, 0], ab[i, 1], ab[i, 2], rb[i], H)
+
+
+# Kernels: vectors (n, D), radii (n,), out (n,); one per dimension (so a
+# planar-only process never compiles or loads the 3-D chain), serial or
+# multi-threaded, horizon per row (array H) or one float H.
+@njit(cache=True)
+def _k2(pa, va, aa, ra, pb, vb, ab, rb, H, out):
+    for i in range(out.shape[0]):
+        out[i] = _row2(pa, va, aa, ra, pb, vb, ab, rb, H[i], i)
 
 
 @njit(cache=True)
-def _ttc_kernel(pa, va, aa, ra, pb, vb, ab, rb, H, out):
-    """Serial loop over rows: vectors (n, D) with D in {2, 3}, scalars (n,)."""
+def _k3(pa, va, aa, ra, pb, vb, ab, rb, H, out):
     for i in range(out.shape[0]):
-        out[i] = _ttc_row(pa, va, aa, ra, pb, vb, ab, rb, H, i)
+        out[i] = _row3(pa, va, aa, ra, pb, vb, ab, rb, H[i], i)
+
+
+@njit(cache=True)
+def _k2h(pa, va, aa, ra, pb, vb, ab, rb, H, out):
+    for i in range(out.shape[0]):
+        out[i] = _row2(pa, va, aa, ra, pb, vb, ab, rb, H, i)
+
+
+@njit(cache=True)
+def _k3h(pa, va, aa, ra, pb, vb, ab, rb, H, out):
+    for i in range(out.shape[0]):
+        out[i] = _row3(pa, va, aa, ra, pb, vb, ab, rb, H, i)
 
 
 @njit(cache=True, parallel=True)
+def _k2p(pa, va, aa, ra, pb, vb, ab, rb, H, out):
+    for i in prange(out.shape[0]):
+        out[i] = _row2(pa, va, aa, ra, pb, vb, ab, rb, H[i], i)
+
+
+@njit(cache=True, parallel=True)
+def _k3p(pa, va, aa, ra, pb, vb, ab, rb, H, out):
+    for i in prange(out.shape[0]):
+        out[i] = _row3(pa, va, aa, ra, pb, vb, ab, rb, H[i], i)
+
+
+@njit(cache=True, parallel=True)
+def _k2ph(pa, va, aa, ra, pb, vb, ab, rb, H, out):
+    for i in prange(out.shape[0]):
+        out[i] = _row2(pa, va, aa, ra, pb, vb, ab, rb, H, i)
+
+
+@njit(cache=True, parallel=True)
+def _k3ph(pa, va, aa, ra, pb, vb, ab, rb, H, out):
+    for i in prange(out.shape[0]):
+        out[i] = _row3(pa, va, aa, ra, pb, vb, ab, rb, H, i)
+
+
+# (D, threaded, scalar horizon) -> kernel
+_KERNELS = {
+    (2, False, False): _k2, (3, False, False): _k3,
+    (2, False, True): _k2h, (3, False, True): _k3h,
+    (2, True, False): _k2p, (3, True, False): _k3p,
+    (2, True, True): _k2ph, (3, True, True): _k3ph,
+}
+
+
+def _ttc_kernel(pa, va, aa, ra, pb, vb, ab, rb, H, out):
+    """Serial loop over rows: vectors (n, D) with D in {2, 3}, radii and
+    horizons H (n,), results into out (n,)."""
+    _KERNELS[(pa.shape[1], False, False)](pa, va, aa, ra, pb, vb, ab, rb, H, out)
+
+
 def _ttc_kernel_par(pa, va, aa, ra, pb, vb, ab, rb, H, out):
     """Multi-threaded twin of ``_ttc_kernel`` (rows are independent)."""
-    for i in prange(out.shape[0]):
-        out[i] = _ttc_row(pa, va, aa, ra, pb, vb, ab, rb, H, i)
+    _KERNELS[(pa.shape[1], True, False)](pa, va, aa, ra, pb, vb, ab, rb, H, out)
 
 
-# Below this many rows thread start-up (~10-50 us) costs more than it saves.
+def _ttc_kernel_h(pa, va, aa, ra, pb, vb, ab, rb, H, out):
+    """``_ttc_kernel`` with one float horizon H for all rows."""
+    _KERNELS[(pa.shape[1], False, True)](pa, va, aa, ra, pb, vb, ab, rb, float(H), out)
+
+
+def _ttc_kernel_par_h(pa, va, aa, ra, pb, vb, ab, rb, H, out):
+    """``_ttc_kernel_par`` with one float horizon H for all rows."""
+    _KERNELS[(pa.shape[1], True, True)](pa, va, aa, ra, pb, vb, ab, rb, float(H), out)
+
+
+# Rows from which the threaded kernels are used.  On an idle 2-core VM with a
+# warm thread pool 2 threads already win from ~64 rows (1.4x) and reach ~1.9x
+# from ~1000; but when other processes keep a core busy a parallel launch
+# waits for a time slice: measured 8x *slower* than serial at 1024 rows and
+# ~1x at 200k rows, while 4096 rows still won 1.9x.  The robot shares its
+# cores with other nodes, so the threshold stays conservative.
 PARALLEL_MIN_ROWS = 4096
+
+_ND = np.ndarray
+_F8 = np.dtype(np.float64)
 
 
 def _as_rows(x: np.ndarray, batch: tuple, n: int, D: int) -> np.ndarray:
+    """C-contiguous (n, D) / (n,) float64 rows of x broadcast to ``batch``."""
     shape = batch + (D,) if D else batch
-    if x.shape != shape:  # broadcast_to costs ~5 us: only when needed
-        x = np.broadcast_to(x, shape)
-    x = np.ascontiguousarray(x)
+    if x.shape != shape:
+        # broadcasting assignment into a fresh array: ~1 us, where
+        # np.broadcast_to + ascontiguousarray costs ~5-10 us
+        y = np.empty(shape)
+        y[...] = x
+        x = y
+    else:
+        x = np.ascontiguousarray(x)
     return x.reshape((n, D) if D else (n,))
+
+
+def _rows_ok(p_a, v_a, a_a, r_a, p_b, v_b, a_b, r_b) -> bool:
+    """True if the inputs are already what the kernels take: C-contiguous
+    float64 ndarrays, vectors (n, D) with D in {2, 3}, radii (n,)."""
+    if not (type(p_a) is _ND and type(v_a) is _ND and type(a_a) is _ND and type(r_a) is _ND
+            and type(p_b) is _ND and type(v_b) is _ND and type(a_b) is _ND and type(r_b) is _ND):
+        return False
+    shp = p_a.shape
+    if len(shp) != 2 or not (shp[1] == 2 or shp[1] == 3):
+        return False
+    n1 = shp[:1]
+    return (v_a.shape == shp and a_a.shape == shp and p_b.shape == shp and v_b.shape == shp
+            and a_b.shape == shp and r_a.shape == n1 and r_b.shape == n1
+            and p_a.dtype is _F8 and v_a.dtype is _F8 and a_a.dtype is _F8 and r_a.dtype is _F8
+            and p_b.dtype is _F8 and v_b.dtype is _F8 and a_b.dtype is _F8 and r_b.dtype is _F8
+            and p_a.flags.c_contiguous and v_a.flags.c_contiguous and a_a.flags.c_contiguous
+            and r_a.flags.c_contiguous and p_b.flags.c_contiguous and v_b.flags.c_contiguous
+            and a_b.flags.c_contiguous and r_b.flags.c_contiguous)
 
 
 def time_to_collision(p_a, v_a, a_a, r_a, p_b, v_b, a_b, r_b, horizon=math.inf) -> np.ndarray:
@@ -674,18 +1123,32 @@ def time_to_collision(p_a, v_a, a_a, r_a, p_b, v_b, a_b, r_b, horizon=math.inf) 
         If the vector shapes disagree in D, D is not 2 or 3, or the shapes
         do not broadcast.
     """
+    # Fast path (Scene / node hot path): inputs already in kernel layout and
+    # a scalar horizon -- no conversions, no temporaries besides the output.
+    th = type(horizon)
+    if (th is float or th is int or th is np.float64) and _rows_ok(
+            p_a, v_a, a_a, r_a, p_b, v_b, a_b, r_b):
+        n = r_a.shape[0]
+        out = np.empty(n)
+        _KERNELS[(p_a.shape[1], n >= PARALLEL_MIN_ROWS, True)](
+            p_a, v_a, a_a, r_a, p_b, v_b, a_b, r_b, float(horizon), out)
+        return out
     vecs = [np.asarray(x, dtype=np.float64) for x in (p_a, v_a, a_a, p_b, v_b, a_b)]
     D = vecs[0].shape[-1] if vecs[0].ndim else 0
     if D not in (2, 3) or any(x.ndim == 0 or x.shape[-1] != D for x in vecs):
         raise ValueError("position/velocity/acceleration must share a last axis of size 2 or 3")
     sc = [np.asarray(x, dtype=np.float64) for x in (r_a, r_b, horizon)]
-    shapes = {x.shape[:-1] for x in vecs} | {x.shape for x in sc}
-    batch = shapes.pop() if len(shapes) == 1 else np.broadcast_shapes(
-        *(x.shape[:-1] for x in vecs), *(x.shape for x in sc))
+    shapes = {x.shape[:-1] for x in vecs} | {x.shape for x in sc[:2]}
+    if sc[2].ndim:
+        shapes.add(sc[2].shape)
+    batch = shapes.pop() if len(shapes) == 1 else np.broadcast_shapes(*shapes)
     n = math.prod(batch)
     out = np.empty(n, dtype=np.float64)
     pa, va, aa, pb, vb, ab = (_as_rows(x, batch, n, D) for x in vecs)
-    ra, rb, hz = (_as_rows(x, batch, n, 0) for x in sc)
-    kernel = _ttc_kernel_par if n >= PARALLEL_MIN_ROWS else _ttc_kernel
-    kernel(pa, va, aa, ra, pb, vb, ab, rb, hz, out)
+    ra, rb = (_as_rows(x, batch, n, 0) for x in sc[:2])
+    if sc[2].ndim == 0:  # one horizon for all rows: passed as a float
+        hz = float(sc[2])
+    else:
+        hz = _as_rows(sc[2], batch, n, 0)
+    _KERNELS[(D, n >= PARALLEL_MIN_ROWS, sc[2].ndim == 0)](pa, va, aa, ra, pb, vb, ab, rb, hz, out)
     return out.reshape(batch)
