@@ -37,7 +37,7 @@ from _common import best_of, fmt_ns, fmt_ulp, md_table, pyplot
 
 from baselines import ttc_companion_eigvals, ttc_ferrari, ttc_lecture, ttc_numpy_roots_loop
 from tests.core.reference import reference
-from tests.core.test_narrow_phase_accuracy import FAMILIES
+from tests.core.test_narrow_phase_accuracy import FAMILIES, case_error, family_cases
 
 ZERO_FLOOR = 0.1  # where 0-ulp results are drawn on the log axis
 INF_CAP = 1e21  # where infinite errors (wrong "already touching") and anything larger are drawn
@@ -87,15 +87,6 @@ def methods() -> list[dict]:
 
 
 # ---------------------------------------------------------------- reference
-
-
-def family_cases(name: str, n: int, seed: int = 0):
-    """Exactly the rows ``tests.core.test_narrow_phase_accuracy.evaluate`` uses."""
-    rng = np.random.default_rng([seed, *name.encode()])
-    fam = FAMILIES[name](rng, n)
-    args, H = fam[:2]
-    known = fam[2] if len(fam) > 2 else np.full(n, np.nan)
-    return tuple(np.asarray(x, dtype=np.float64) for x in args), float(H), np.asarray(known, float)
 
 
 def _ref_job(job):
@@ -151,10 +142,7 @@ def score(got: np.ndarray, ref) -> dict:
         if math.isinf(g):
             continue
         contacts += 1
-        if t == 0.0:
-            errs.append(0.0 if g == 0.0 else math.inf)
-        else:
-            errs.append(abs(g - t) / float(np.spacing(t)) * c)
+        errs.append(case_error(g, t, c))
     errs_a = np.array(errs) if errs else np.array([np.nan])
     return dict(contacts=contacts, missed=missed, spurious=spurious, ambiguous=int(np.sum(amb)),
                 median_ulp=float(np.median(errs_a)) if errs else float("nan"),

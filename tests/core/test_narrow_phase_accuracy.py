@@ -219,11 +219,33 @@ FAMILIES = {
 }
 
 
-def evaluate(name: str, n: int = N, seed: int = 0) -> dict:
-    rng = np.random.default_rng([seed, *name.encode()])  # deterministic per family
+def family_cases(name: str, n: int, seed: int = 0):
+    """(args, horizon, known) of a family: the rows every accuracy figure is computed on.
+
+    Deterministic per (family, seed); `known` holds exact times where a family
+    builds them in closed form (NaN elsewhere: use the mpmath reference).
+    Shared with bench/accuracy_vs_time.py, so tests and benchmarks score the same rows.
+    """
+    rng = np.random.default_rng([seed, *name.encode()])
     fam = FAMILIES[name](rng, n)
     args, H = fam[:2]
     known = fam[2] if len(fam) > 2 else np.full(n, np.nan)
+    return tuple(np.asarray(x, dtype=np.float64) for x in args), float(H), np.asarray(known, float)
+
+
+def case_error(got: float, t_ref: float, cos: float) -> float:
+    """Condition-normalised error in ulps of the exact time, for a contact both agree on.
+
+    A graze's time is inherently sensitive, so the error is scaled by |cos| of the
+    angle between the centre line and the relative velocity at contact.
+    """
+    if t_ref == 0.0:
+        return 0.0 if got == 0.0 else math.inf
+    return abs(got - t_ref) / float(np.spacing(t_ref)) * cos
+
+
+def evaluate(name: str, n: int = N, seed: int = 0) -> dict:
+    args, H, known = family_cases(name, n, seed)
     t = time_to_collision(*args, horizon=H)
     worst = 0.0
     missed = spurious = ambiguous = contacts = agree = 0
@@ -249,10 +271,7 @@ def evaluate(name: str, n: int = N, seed: int = 0) -> dict:
         if math.isinf(got):
             continue
         contacts += 1
-        if ref.t == 0.0:
-            err = 0.0 if got == 0.0 else math.inf
-        else:
-            err = abs(got - ref.t) / np.spacing(ref.t) * ref.cos
+        err = case_error(got, ref.t, ref.cos)
         if err > worst:
             worst = err
         if err > ULP_TOL:
