@@ -5,7 +5,8 @@ the same scene bit for bit:
 
 - a body's state is replaced only by a strictly newer header stamp (an older
   or equal one arriving late is ignored, which also makes duplicates harmless);
-- the reference time is the newest stamp ever accepted (integer ns, monotone);
+- the reference time is the newest stamp accepted since the scene was last
+  empty (integer ns, monotone while any body is held);
 - staleness is judged on the receiving clock passed in by the caller (the node's
   clock live, the recorded receive time in replay), never read here;
 - bodies are ordered by id when exported, independent of arrival order.
@@ -133,6 +134,12 @@ class BodyRegistry:
                 arr[slot] = arr[last]
         self._ids.pop()
         self._order = None
+        if not self._ids:
+            # Nothing left to propagate: forget the reference time. Otherwise, after a
+            # tracker's clock reset (stamps jump back) the new bodies would be propagated
+            # into the old future and their contacts missed for as long as the jump
+            # (tests/reliability/test_faults_clock.py::test_stamps_jump_backwards).
+            self.reference_ns = None
 
     def expire(self, now_ns: int, stale_timeout_s: float) -> list[str]:
         """Drop bodies not received within `stale_timeout_s` of `now_ns`; returns their ids."""

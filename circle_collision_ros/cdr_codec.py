@@ -11,9 +11,12 @@ the ROS 2 wire format (OMG XCDR1, little endian, as Fast DDS writes it):
 - a string is a uint32 length that counts the trailing NUL, then the bytes;
 - a sequence is a uint32 count, then the elements.
 
-Bytes in any other encapsulation (e.g. big endian) are decoded by rclpy
-instead (`decode_states` falls back), so the result never depends on which
-path ran. Tests check both directions against rclpy.serialization.
+Big-endian CDR (00 00) is decoded by the same kernels with the byte order
+swapped; any other encapsulation is refused (CdrError). Untrusted bytes are
+never handed to rclpy's deserializer: on malformed input it can crash the
+process (SIGSEGV, e.g. CircleState b"\\x00\\x00\\x90\\xfa";
+tests/reliability/test_fuzz_cdr.py). Tests check both directions against
+rclpy.serialization on valid bytes.
 
 Why this is safe on garbage: every read is bounds-checked against the buffer
 and a string must end in NUL inside it; a violation returns an error code and
@@ -25,12 +28,12 @@ import struct
 
 import numpy as np
 from numba import njit
-from rclpy.serialization import deserialize_message
 
 from circle_collision_msgs.msg import CircleState, CircleStateArray
 from circle_collision_ros.state_batch import StateBatch
 
 CDR_LE = b"\x00\x01"
+CDR_BE = b"\x00\x00"
 _ORIGIN = 4  # alignment is relative to the end of the encapsulation header
 
 
@@ -44,13 +47,21 @@ def _align(pos, n):
 
 
 @njit(cache=True)
-def _string(buf, pos):
+def _u32(buf, pos, be):
+    if be:
+        return (np.int64(buf[pos]) << 24) | (np.int64(buf[pos + 1]) << 16) \
+            | (np.int64(buf[pos + 2]) << 8) | np.int64(buf[pos + 3])
+    return np.int64(buf[pos]) | (np.int64(buf[pos + 1]) << 8) | (np.int64(buf[pos + 2]) << 16) \
+        | (np.int64(buf[pos + 3]) << 24)
+
+
+@njit(cache=True)
+def _string(buf, pos, be):
     """(offset, length without NUL, next position) or (-1, 0, 0) when malformed."""
     pos = _align(pos, 4)
     if pos + 4 > buf.shape[0]:
         return -1, 0, 0
-    size = np.int64(buf[pos]) | (np.int64(buf[pos + 1]) << 8) | (np.int64(buf[pos + 2]) << 16) \
-        | (np.int64(buf[pos + 3]) << 24)
+    size = _u32(buf, pos, be)
     start = pos + 4
     if size == 0:  # some writers send a bare zero length for ""
         return start, 0, start
@@ -60,33 +71,28 @@ def _string(buf, pos):
 
 
 @njit(cache=True)
-def _u32(buf, pos):
-    return np.int64(buf[pos]) | (np.int64(buf[pos + 1]) << 8) | (np.int64(buf[pos + 2]) << 16) \
-        | (np.int64(buf[pos + 3]) << 24)
-
-
-@njit(cache=True)
-def _decode_states(buf, f64, pos, count, times, strings, numbers, remove):
+def _decode_states(buf, f64, pos, count, times, strings, numbers, remove, be):
     """Decode `count` CircleStates starting at `pos`; returns the end position or -1.
 
-    f64 is the buffer viewed as float64 from _ORIGIN on: a float64 field sits at
-    a position 8-aligned relative to _ORIGIN, i.e. exactly at f64[(pos - _ORIGIN) // 8].
+    f64 is the buffer viewed as float64 from _ORIGIN on (in the message's byte
+    order, converted to native): a float64 field sits at a position 8-aligned
+    relative to _ORIGIN, i.e. exactly at f64[(pos - _ORIGIN) // 8]. be: big endian.
     """
     n = buf.shape[0]
     for k in range(count):
         pos = _align(pos, 4)
         if pos + 8 > n:
             return -1
-        sec = _u32(buf, pos)
+        sec = _u32(buf, pos, be)
         if sec >= 2**31:  # int32
             sec -= 2**32
         times[k, 0] = sec
-        times[k, 1] = _u32(buf, pos + 4)
-        off, ln, pos = _string(buf, pos + 8)
+        times[k, 1] = _u32(buf, pos + 4, be)
+        off, ln, pos = _string(buf, pos + 8, be)
         if off < 0:
             return -1
         strings[k, 0], strings[k, 1] = off, ln
-        off, ln, pos = _string(buf, pos)
+        off, ln, pos = _string(buf, pos, be)
         if off < 0:
             return -1
         strings[k, 2], strings[k, 3] = off, ln
@@ -102,13 +108,15 @@ def _decode_states(buf, f64, pos, count, times, strings, numbers, remove):
     return pos
 
 
-def _batch(data: bytes, buf: np.ndarray, count: int, start: int, array_frame: str) -> StateBatch:
+def _batch(data: bytes, buf: np.ndarray, count: int, start: int, array_frame: str,
+           be: bool) -> StateBatch:
     times = np.empty((count, 2), dtype=np.int64)
     strings = np.empty((count, 4), dtype=np.int64)
     numbers = np.empty((count, 10), dtype=np.float64)
     remove = np.empty(count, dtype=np.bool_)
-    f64 = np.frombuffer(data, dtype="<f8", offset=_ORIGIN, count=(len(data) - _ORIGIN) // 8)
-    if _decode_states(buf, f64, start, count, times, strings, numbers, remove) < 0:
+    f64 = np.frombuffer(data, dtype=">f8" if be else "<f8", offset=_ORIGIN,
+                        count=(len(data) - _ORIGIN) // 8).astype(np.float64, copy=False)
+    if _decode_states(buf, f64, start, count, times, strings, numbers, remove, be) < 0:
         raise CdrError("truncated or malformed CircleState data")
     try:
         ids = [data[o:o + n].decode() for o, n in zip(strings[:, 2].tolist(), strings[:, 3].tolist())]
@@ -129,27 +137,22 @@ def decode_states(data: bytes, msg_type: type) -> StateBatch:
     CdrError
         If the bytes are not a well-formed message of `msg_type`.
     """
-    if data[:2] != CDR_LE:
-        try:  # other encapsulations are rare; rclpy knows them all
-            msg = deserialize_message(data, msg_type)
-        except Exception as exc:
-            raise CdrError(f"undecodable {msg_type.__name__}: {exc}") from exc
-        if msg_type is CircleStateArray:
-            return StateBatch.from_messages(msg.circles, msg.header.frame_id)
-        return StateBatch.from_messages([msg])
+    if msg_type is not CircleState and msg_type is not CircleStateArray:
+        raise TypeError(f"no CDR decoder for {msg_type.__name__}")
+    if len(data) < _ORIGIN or data[:2] not in (CDR_LE, CDR_BE):
+        raise CdrError(f"not plain CDR (encapsulation {bytes(data[:2]).hex() or 'missing'})")
+    be = data[:2] == CDR_BE
     buf = np.frombuffer(data, dtype=np.uint8)
     if msg_type is CircleState:
-        return _batch(data, buf, 1, _ORIGIN, "")
-    if msg_type is not CircleStateArray:
-        raise TypeError(f"no CDR decoder for {msg_type.__name__}")
+        return _batch(data, buf, 1, _ORIGIN, "", be)
     # Array header: stamp (8 bytes), frame_id, then the sequence count.
-    off, ln, pos = _string(buf, _ORIGIN + 8) if len(buf) >= _ORIGIN + 8 else (-1, 0, 0)
+    off, ln, pos = _string(buf, _ORIGIN + 8, be) if len(buf) >= _ORIGIN + 8 else (-1, 0, 0)
     if off < 0:
         raise CdrError("truncated or malformed CircleStateArray header")
     pos = _align(pos, 4)
     if pos + 4 > len(buf):
         raise CdrError("truncated CircleStateArray (no sequence length)")
-    count = int(_u32(buf, pos))
+    count = int(_u32(buf, pos, be))
     # Each state needs at least 97 bytes (empty strings, no padding): a larger
     # count is a lie, not something to allocate for.
     if count * 97 > len(buf) - pos:
@@ -158,7 +161,7 @@ def decode_states(data: bytes, msg_type: type) -> StateBatch:
         array_frame = data[off:off + ln].decode()
     except UnicodeDecodeError as exc:
         raise CdrError(f"frame_id is not UTF-8 ({exc.reason})") from exc
-    return _batch(data, buf, count, pos + 4, array_frame)
+    return _batch(data, buf, count, pos + 4, array_frame, be)
 
 
 class _Writer:

@@ -21,6 +21,8 @@ from dataclasses import asdict, dataclass
 import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rcl_interfaces.msg import SetParametersResult
+from rclpy.clock import ClockChange, JumpThreshold
+from rclpy.duration import Duration
 from rclpy.node import Node
 from rclpy.qos import (DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy,
                        qos_profile_system_default)
@@ -60,6 +62,14 @@ class Qos:
                           reliability=ReliabilityPolicy.RELIABLE)
 
     @staticmethod
+    def services() -> QoSProfile:
+        # The default service queue (depth 10) dropped 177 of 200 concurrent requests
+        # (tests/reliability/test_faults_node.py::test_service_flood): callers waited forever.
+        return QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1000,
+                          reliability=ReliabilityPolicy.RELIABLE,
+                          durability=DurabilityPolicy.VOLATILE)
+
+    @staticmethod
     def markers() -> QoSProfile:
         return QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1,
                           reliability=ReliabilityPolicy.RELIABLE)
@@ -77,12 +87,14 @@ class Counters:
     expired: int = 0
     published: int = 0
     errors: int = 0
+    clock_jumps_back: int = 0
 
 
 class CollisionNode(Node):
     """The ROS face of CollisionPredictor; see the module docstring."""
 
     WARN_THROTTLE_S = 2.0
+    MARKER_BUDGET = 0.1  # fraction of wall time markers may take
     LATENCY_WINDOW = 1000
 
     def __init__(self, **kwargs) -> None:
@@ -105,7 +117,7 @@ class CollisionNode(Node):
         self.latencies_s: deque[float] = deque(maxlen=self.LATENCY_WINDOW)
         self._markers = MarkerBuilder(p("dimensions"))
         self._marker_rate = p("marker_rate")
-        self._last_marker_time = 0.0
+        self._next_marker_time = 0.0
         self._last_warning: dict[str, float] = {}
 
         overrides = QoSOverridingOptions.with_default_policies()
@@ -121,7 +133,15 @@ class CollisionNode(Node):
             self._subscribe(topic, CircleStateArray)
         for topic in p("single_state_topics"):
             self._subscribe(topic, CircleState)
-        self.create_service(PredictCollisions, "predict_collisions", self._on_predict_request)
+        self.create_service(PredictCollisions, "predict_collisions", self._on_predict_request,
+                            qos_profile=Qos.services())
+        # A clock that jumps back (use_sim_time with a looping bag, a restarted simulator)
+        # would leave bodies "received in the future" that never expire and make every
+        # new state look late: the scene is cleared instead (docs/reliability.md).
+        self._clock_jump_handle = self.get_clock().create_jump_callback(
+            JumpThreshold(min_forward=None, min_backward=Duration(nanoseconds=-1),
+                          on_clock_change=True),
+            post_callback=self._on_clock_jump)
         self._recorder: BagRecorder | None = None
         self._recording_error = ""
         if p("record_path"):
@@ -206,9 +226,20 @@ class CollisionNode(Node):
         self._record(self._predictions_pub.topic_name, data, now_ns)
         self.counters.published += 1
         self.latencies_s.append(time.perf_counter() - started)
-        if self._marker_rate > 0 and time.monotonic() - self._last_marker_time >= 1.0 / self._marker_rate:
-            self._last_marker_time = time.monotonic()
-            self._markers_pub.publish(self._markers.build(prediction))
+        if self._marker_rate > 0 and time.monotonic() >= self._next_marker_time:
+            self._publish_markers(prediction)
+
+    def _publish_markers(self, prediction) -> None:
+        """Markers at most every 1/marker_rate s, and within MARKER_BUDGET of the node's time.
+
+        Building and serializing a MarkerArray costs ~0.13 s at 1,000 bodies, more than
+        a whole 30 Hz prediction cycle: markers are for eyes, predictions for robots,
+        so large scenes get fewer marker updates rather than late predictions.
+        """
+        started = time.monotonic()
+        self._markers_pub.publish(self._markers.build(prediction))
+        cost = time.monotonic() - started
+        self._next_marker_time = started + max(1.0 / self._marker_rate, cost / self.MARKER_BUDGET)
 
     def _on_predict_request(self, request: PredictCollisions.Request,
                             response: PredictCollisions.Response) -> PredictCollisions.Response:
@@ -224,6 +255,19 @@ class CollisionNode(Node):
             response.success, response.message = False, f"internal error: {exc!r}"
         return response
 
+    def _on_clock_jump(self, jump) -> None:
+        backwards = jump.delta.nanoseconds < 0 and jump.clock_change == ClockChange.ROS_TIME_NO_CHANGE
+        if not backwards and jump.clock_change not in (ClockChange.ROS_TIME_ACTIVATED,
+                                                       ClockChange.ROS_TIME_DEACTIVATED):
+            return
+        bodies = len(self.predictor.registry)
+        self.predictor.registry.clear()
+        if backwards:
+            self.counters.clock_jumps_back += 1
+            self.get_logger().warning(
+                f"clock jumped back by {-jump.delta.nanoseconds * 1e-9:.3f} s: scene of {bodies} "
+                "bodies cleared, predicting again from the next states")
+
     def _publish_diagnostics(self) -> None:
         c, s = self.counters, self.predictor.stats
         lat = np.array(self.latencies_s) if self.latencies_s else np.zeros(1)
@@ -237,11 +281,24 @@ class CollisionNode(Node):
             "compute_ms_last": f"{s.compute_s * 1e3:.3f}",
             "latency_ms_p50": f"{np.percentile(lat, 50) * 1e3:.3f}",
             "latency_ms_p99": f"{np.percentile(lat, 99) * 1e3:.3f}",
-            "errors": c.errors,
+            "errors": c.errors, "clock_jumps_back": c.clock_jumps_back,
         }
+        # A failed recording must show where operators look, not only once in the log
+        # (tests/reliability/test_faults_recording.py::test_recording_directory_removed).
+        recording_error = self._recording_error or (self._recorder.error if self._recorder else None)
+        if self._recorder is None:
+            values["recording"] = "off"
+        elif recording_error:
+            values["recording"] = f"failed: {recording_error}"
+        else:
+            values["recording"] = f"ok: {self._recorder.path}"
+        problems = [f"{c.errors} prediction errors"] if c.errors else []
+        if recording_error:
+            level = DiagnosticStatus.WARN
+            problems.append("recording failed, predictions continue")
         status = DiagnosticStatus(
             level=level, name=f"{self.get_name()}: collision prediction",
-            message="ok" if level == DiagnosticStatus.OK else f"{c.errors} prediction errors",
+            message="; ".join(problems) or "ok",
             hardware_id=self.get_fully_qualified_name(),
             values=[KeyValue(key=k, value=str(v)) for k, v in values.items()])
         self._diagnostics_pub.publish(DiagnosticArray(header=Header(stamp=self.get_clock().now().to_msg()), status=[status]))

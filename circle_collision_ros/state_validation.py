@@ -27,6 +27,20 @@ class StampLimits:
     MAX_FUTURE_NS = 1_000_000_000
 
 
+class ValueLimits:
+    """Largest magnitude accepted for radius, position, velocity and acceleration (SI units).
+
+    No robot scene comes near 1e12 m (or m/s, m/s^2); the bound keeps every
+    accepted state, even propagated over the largest possible stamp difference
+    (~2.1e9 s: dt^2 ~ 5e18), far inside the core's documented input range
+    (|values| < ~1e150). Beyond that range the core gives no guarantee: a
+    radius of 1e160 overlapping two bodies was predicted as no contact at all
+    (tests/reliability/test_fuzz_messages.py).
+    """
+
+    MAX_MAGNITUDE = 1e12
+
+
 @dataclass(frozen=True)
 class Rejection:
     """One state refused: its index in the message, its id (may be empty), and why."""
@@ -60,10 +74,14 @@ def _reason(batch: StateBatch, k: int, frame_id: str, now_ns: int | None, dup: b
             return f"radius is {r}"
         if r < 0.0:
             return f"radius is negative ({r})"
+        if r > ValueLimits.MAX_MAGNITUDE:
+            return f"radius is {r}, beyond {ValueLimits.MAX_MAGNITUDE:g}"
         for name in _VECTORS:
             for axis, value in zip("xyz", getattr(batch, name)[k].tolist()):
                 if not np.isfinite(value):
                     return f"{name}.{axis} is {value}"
+                if abs(value) > ValueLimits.MAX_MAGNITUDE:
+                    return f"{name}.{axis} is {value}, beyond +-{ValueLimits.MAX_MAGNITUDE:g}"
         if frame_id and batch.frames[k] != frame_id:
             return (f"frame '{batch.frames[k]}' is not the scene frame '{frame_id}'"
                     f" (no tf here: publish in '{frame_id}')")
@@ -90,8 +108,10 @@ def check_batch(batch: StateBatch, *, frame_id: str, now_ns: int | None) -> Batc
     counts = Counter(batch.ids)
     dup = np.fromiter((counts[i] > 1 for i in batch.ids), dtype=bool, count=n)
     empty = np.fromiter((not i for i in batch.ids), dtype=bool, count=n)
-    finite = np.isfinite(batch.radius) & np.isfinite(batch.position).all(axis=1) \
-        & np.isfinite(batch.velocity).all(axis=1) & np.isfinite(batch.acceleration).all(axis=1)
+    limit = ValueLimits.MAX_MAGNITUDE  # also false for NaN and +-inf
+    finite = (np.abs(batch.radius) <= limit) & (np.abs(batch.position) <= limit).all(axis=1) \
+        & (np.abs(batch.velocity) <= limit).all(axis=1) \
+        & (np.abs(batch.acceleration) <= limit).all(axis=1)
     geometry_bad = ~batch.remove & (~finite | (batch.radius < 0.0))
     stamp_bad = batch.stamp_ns <= 0
     if now_ns is not None:
