@@ -34,29 +34,12 @@ sys.path.insert(0, ROOT)
 sys.path.insert(0, HERE)
 
 from baselines import ttc_companion_eigvals, ttc_numpy_roots_loop  # noqa: E402
+from tests.core.test_narrow_phase_accuracy import mixed_pairs  # noqa: E402
 
 
 def make_pairs(n: int, seed: int = 1):
-    rng = np.random.default_rng(seed)
-    h = n // 2
-    D = 2
-    pb = rng.uniform(-20, 20, (n, D))
-    vb = rng.normal(0, 2, (n, D))
-    ab = rng.normal(0, 1, (n, D))
-    ra = rng.uniform(0.1, 2, n)
-    rb = rng.uniform(0.1, 2, n)
-    dv = rng.normal(0, 2, (n, D))
-    da = rng.normal(0, 1, (n, D))
-    pa = rng.uniform(-20, 20, (n, D))
-    # aimed half: put the relative centre at distance R on the approach side at T
-    T = rng.uniform(0.1, 10, h)
-    u = rng.normal(size=(h, D))
-    u /= np.linalg.norm(u, axis=1, keepdims=True)
-    gd = dv[:h] + T[:, None] * da[:h]
-    u[np.sum(u * gd, axis=1) > 0] *= -1
-    dp = (ra[:h] + rb[:h])[:, None] * u - T[:, None] * dv[:h] - 0.5 * T[:, None] ** 2 * da[:h]
-    pa[:h] = pb[:h] + dp
-    return pa, vb + dv, ab + da, ra, pb, vb, ab, rb
+    """The benchmark's 2-D mix: half aimed, half random (tests/core share the generator)."""
+    return mixed_pairs(n, 2, seed)
 
 
 def best_of(fn, repeat: int) -> float:

@@ -59,6 +59,32 @@ def _aimed(rng, n, D=2, acc=1.0, T=(0.1, 10.0), r=(0.1, 2.0), speed=2.0, zero_ac
     return pa, va, aa, ra, pb, vb, ab, rb
 
 
+def mixed_pairs(n: int, D: int = 2, seed: int = 1, straight_fraction: float = 0.0):
+    """Half aimed (contact at a random T in [0.1, 10] s), half random pairs: the speed benchmark's mix.
+
+    The first `straight_fraction` of rows get zero relative acceleration (the closed-form path).
+    Shared by bench/bench_core.py and the solver-path tests.
+    """
+    rng = np.random.default_rng(seed)
+    h = n // 2
+    pb = rng.uniform(-20, 20, (n, D))
+    vb = rng.normal(0, 2, (n, D))
+    ab = rng.normal(0, 1, (n, D))
+    ra = rng.uniform(0.1, 2, n)
+    rb = rng.uniform(0.1, 2, n)
+    dv = rng.normal(0, 2, (n, D))
+    da = rng.normal(0, 1, (n, D))
+    pa = rng.uniform(-20, 20, (n, D))
+    T = rng.uniform(0.1, 10, h)
+    u = rng.normal(size=(h, D))
+    u /= np.linalg.norm(u, axis=1, keepdims=True)
+    gd = dv[:h] + T[:, None] * da[:h]
+    u[np.sum(u * gd, axis=1) > 0] *= -1  # on the approach side at T
+    pa[:h] = pb[:h] + (ra[:h] + rb[:h])[:, None] * u - T[:, None] * dv[:h] - 0.5 * T[:, None] ** 2 * da[:h]
+    da[: int(n * straight_fraction)] = 0.0
+    return pa, vb + dv, ab + da, ra, pb, vb, ab, rb
+
+
 def fam_random(rng, n):
     D = 2
     return (rng.uniform(-20, 20, (n, D)), rng.normal(0, 2, (n, D)), rng.normal(0, 1, (n, D)),

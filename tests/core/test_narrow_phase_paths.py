@@ -14,27 +14,11 @@ import pytest
 
 from circle_collision_ros.core import narrow_phase as npz
 from circle_collision_ros.core.narrow_phase import time_to_collision
+from tests.core.test_narrow_phase_accuracy import mixed_pairs
 
 
 def _pairs(n, D=2, seed=5):
-    rng = np.random.default_rng(seed)
-    h = n // 2
-    pb = rng.uniform(-20, 20, (n, D))
-    vb = rng.normal(0, 2, (n, D))
-    ab = rng.normal(0, 1, (n, D))
-    ra = rng.uniform(0.1, 2, n)
-    rb = rng.uniform(0.1, 2, n)
-    dv = rng.normal(0, 2, (n, D))
-    da = rng.normal(0, 1, (n, D))
-    pa = rng.uniform(-20, 20, (n, D))
-    T = rng.uniform(0.1, 10, h)
-    u = rng.normal(size=(h, D))
-    u /= np.linalg.norm(u, axis=1, keepdims=True)
-    gd = dv[:h] + T[:, None] * da[:h]
-    u[np.sum(u * gd, axis=1) > 0] *= -1
-    pa[:h] = pb[:h] + (ra[:h] + rb[:h])[:, None] * u - T[:, None] * dv[:h] - 0.5 * T[:, None] ** 2 * da[:h]
-    da[: n // 8] = 0.0  # straight-line rows
-    return pa, vb + dv, ab + da, ra, pb, vb, ab, rb
+    return mixed_pairs(n, D, seed, straight_fraction=1 / 8)
 
 
 def _same(x, y):
