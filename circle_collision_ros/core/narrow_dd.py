@@ -43,7 +43,7 @@ else:
         return sig, codegen
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, error_model="numpy", inline="always")
 def two_sum(a: float, b: float):
     """Exact ``a + b = s + e`` (Knuth's branch-free TwoSum)."""
     s = a + b
@@ -52,7 +52,7 @@ def two_sum(a: float, b: float):
     return s, e
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, error_model="numpy", inline="always")
 def fast_two_sum(a: float, b: float):
     """Exact ``a + b = s + e``; requires ``|a| >= |b|`` or ``a == 0``."""
     s = a + b
@@ -60,7 +60,7 @@ def fast_two_sum(a: float, b: float):
     return s, e
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, error_model="numpy", inline="always")
 def two_prod(a: float, b: float):
     """Exact ``a * b = p + e`` via FMA."""
     p = a * b
@@ -68,7 +68,7 @@ def two_prod(a: float, b: float):
     return p, e
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, error_model="numpy", inline="always")
 def dd_add(ah: float, al: float, bh: float, bl: float):
     """Accurate dd + dd (the IEEE-style variant, relative error ~2u^2).
 
@@ -84,7 +84,7 @@ def dd_add(ah: float, al: float, bh: float, bl: float):
     return fast_two_sum(s, e)
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, error_model="numpy", inline="always")
 def dd_mul_d(ah: float, al: float, b: float):
     """dd * float64, relative error ~2u^2."""
     p, e = two_prod(ah, b)
@@ -92,7 +92,7 @@ def dd_mul_d(ah: float, al: float, b: float):
     return fast_two_sum(p, e)
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, error_model="numpy", inline="always")
 def dd_mul(ah: float, al: float, bh: float, bl: float):
     """dd * dd, relative error ~4u^2 (the lo*lo term is below that)."""
     p, e = two_prod(ah, bh)
@@ -100,7 +100,7 @@ def dd_mul(ah: float, al: float, bh: float, bl: float):
     return fast_two_sum(p, e)
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, error_model="numpy", inline="always")
 def dd_sqr(ah: float, al: float):
     """dd squared."""
     p, e = two_prod(ah, ah)

@@ -182,13 +182,13 @@ def _ov_cross2(x, y):
     return impl3
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, error_model="numpy", inline="always")
 def _c(P, V, A, t):
     """f'(t)/2 = g . g' (geometric form, no power-basis coefficients)."""
     return _dot(_g(P, V, A, t), _gd(V, A, t))
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, error_model="numpy", inline="always")
 def _q(P, V, A, t):
     """c'(t) = |g'|^2 + g . da."""
     gd = _gd(V, A, t)
@@ -200,7 +200,7 @@ def _q(P, V, A, t):
 # --------------------------------------------------------------------------
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, error_model="numpy", inline="always")
 def _g_comp_dd(ph, pl, vh, vl, ah, al, t):
     """One component of g(t) = dp + t (dv + t da/2) as an unevaluated sum
     hi + lo with absolute error ~u^2 S (compensated Horner, Graillat et al.
@@ -252,7 +252,7 @@ def _ov_round_dd(Gh, Gl):
     return lambda Gh, Gl: (Gh[0] + Gl[0], Gh[1] + Gl[1], Gh[2] + Gl[2])
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _f_dd(Ph, Pl, Vh, Vl, Ah, Al, Rh, Rl, t):
     """Return (f(t), g(t)) with f = |g|^2 - R^2 and g rounded to float64.
 
@@ -275,7 +275,7 @@ def _f_dd(Ph, Pl, Vh, Vl, Ah, Al, Rh, Rl, t):
     return s + lo, _round_dd(Gh, Gl)
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, error_model="numpy", inline="always")
 def _entry_step(f, g, gd, A, R2):
     """Step from t to the entering root of the local model of f.
 
@@ -333,7 +333,7 @@ def _entry_step(f, g, gd, A, R2):
     return -(c + s) / a2, s, rel
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, error_model="numpy", inline="always")
 def _model_err(step, s, gd, A, A2):
     """Estimated root error left after a model step of size ``step``.
 
@@ -348,7 +348,7 @@ def _model_err(step, s, gd, A, A2):
     return ad * ad * ad * (abs(_dot(gd, A)) + 0.25 * A2 * ad) / (2.0 * s)
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _solve_entry(Ph, Pl, Vh, Vl, Ah, Al, Rh, Rl, lo, hi, t):
     """First root of f in [lo, hi] given f(lo) > 0 >= f(hi) and that f > 0
     exactly on [lo, root) and f <= 0 on [root, hi]; iteration starts at t.
@@ -439,7 +439,7 @@ def _solve_entry(Ph, Pl, Vh, Vl, Ah, Al, Rh, Rl, lo, hi, t):
     return t
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _root_c(P, V, A, lo, hi, clo, hitR2, nP, nV, nA, t0, q0, c_t0, which):
     """Root of the cubic c on [lo, hi] where c is monotone and changes sign.
 
@@ -543,7 +543,7 @@ def _root_c(P, V, A, lo, hi, clo, hitR2, nP, nV, nA, t0, q0, c_t0, which):
     return t, False
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _at_minimum(Ph, Pl, Vh, Vl, Ah, Al, Rh, Rl, lo, s, nP, nV, nA):
     """Decide contact for the decreasing run [lo, s] ending at a local min s.
 
@@ -639,7 +639,7 @@ def _at_minimum(Ph, Pl, Vh, Vl, Ah, Al, Rh, Rl, lo, s, nP, nV, nA):
     return t
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _straight(Ph, Pl, Vh, Vl, Ah, Al, Rh, Rl, f0, H):
     """da == 0 exactly: f is a quadratic, closed form + one dd polish."""
     V2 = _dot(Vh, Vh)
@@ -696,7 +696,7 @@ def _straight(Ph, Pl, Vh, Vl, Ah, Al, Rh, Rl, f0, H):
     return t
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, error_model="numpy", inline="always")
 def _axis_reject(Ph, Vh, Ah, Rp, H):
     """True if some coordinate of g stays beyond +-Rp on all of [0, H].
 
@@ -739,7 +739,7 @@ def _axis_reject(Ph, Vh, Ah, Rp, H):
     return False
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _ttc_rel(Ph, Pl, Vh, Vl, Ah, Al, Rh, Rl, H):
     """Core on exact (double-double) relative quantities; see module doc."""
     # f(0) = |dp|^2 - R^2 in dd: decides overlap robustly (exact touch -> 0)
@@ -897,7 +897,7 @@ def _ttc_rel(Ph, Pl, Vh, Vl, Ah, Al, Rh, Rl, H):
     return _INF
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _ttc_scalar(pax, pay, paz, vax, vay, vaz, aax, aay, aaz, r_a,
                 pbx, pby, pbz, vbx, vby, vbz, abx, aby, abz, r_b, horizon):
     """First-contact time of one pair (numba-callable, same contract as
@@ -928,7 +928,7 @@ def _ttc_scalar(pax, pay, paz, vax, vay, vaz, aax, aay, aaz, r_a,
     return t
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _ttc_scalar2(pax, pay, vax, vay, aax, aay, r_a, pbx, pby, vbx, vby, abx, aby, r_b, horizon):
     """Planar twin of ``_ttc_scalar`` (2-component tuples throughout; same
     result as ``_ttc_scalar`` with z = 0, bit for bit)."""
@@ -950,13 +950,13 @@ def _ttc_scalar2(pax, pay, vax, vay, aax, aay, r_a, pbx, pby, vbx, vby, abx, aby
     return t
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, error_model="numpy", inline="always")
 def _row2(pa, va, aa, ra, pb, vb, ab, rb, H, i):
     return _ttc_scalar2(pa[i, 0], pa[i, 1], va[i, 0], va[i, 1], aa[i, 0], aa[i, 1], ra[i],
                         pb[i, 0], pb[i, 1], vb[i, 0], vb[i, 1], ab[i, 0], ab[i, 1], rb[i], H)
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, error_model="numpy", inline="always")
 def _row3(pa, va, aa, ra, pb, vb, ab, rb, H, i):
     return _ttc_scalar(pa[i, 0], pa[i, 1], pa[i, 2], va[i, 0], va[i, 1], va[i, 2],
                        aa[i, 0], aa[i, 1], aa[i, 2], ra[i],
@@ -967,49 +967,49 @@ def _row3(pa, va, aa, ra, pb, vb, ab, rb, H, i):
 # Kernels: vectors (n, D), radii (n,), out (n,); one per dimension (so a
 # planar-only process never compiles or loads the 3-D chain), serial or
 # multi-threaded, horizon per row (array H) or one float H.
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _k2(pa, va, aa, ra, pb, vb, ab, rb, H, out):
     for i in range(out.shape[0]):
         out[i] = _row2(pa, va, aa, ra, pb, vb, ab, rb, H[i], i)
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _k3(pa, va, aa, ra, pb, vb, ab, rb, H, out):
     for i in range(out.shape[0]):
         out[i] = _row3(pa, va, aa, ra, pb, vb, ab, rb, H[i], i)
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _k2h(pa, va, aa, ra, pb, vb, ab, rb, H, out):
     for i in range(out.shape[0]):
         out[i] = _row2(pa, va, aa, ra, pb, vb, ab, rb, H, i)
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _k3h(pa, va, aa, ra, pb, vb, ab, rb, H, out):
     for i in range(out.shape[0]):
         out[i] = _row3(pa, va, aa, ra, pb, vb, ab, rb, H, i)
 
 
-@njit(cache=True, parallel=True)
+@njit(cache=True, error_model="numpy", parallel=True)
 def _k2p(pa, va, aa, ra, pb, vb, ab, rb, H, out):
     for i in prange(out.shape[0]):
         out[i] = _row2(pa, va, aa, ra, pb, vb, ab, rb, H[i], i)
 
 
-@njit(cache=True, parallel=True)
+@njit(cache=True, error_model="numpy", parallel=True)
 def _k3p(pa, va, aa, ra, pb, vb, ab, rb, H, out):
     for i in prange(out.shape[0]):
         out[i] = _row3(pa, va, aa, ra, pb, vb, ab, rb, H[i], i)
 
 
-@njit(cache=True, parallel=True)
+@njit(cache=True, error_model="numpy", parallel=True)
 def _k2ph(pa, va, aa, ra, pb, vb, ab, rb, H, out):
     for i in prange(out.shape[0]):
         out[i] = _row2(pa, va, aa, ra, pb, vb, ab, rb, H, i)
 
 
-@njit(cache=True, parallel=True)
+@njit(cache=True, error_model="numpy", parallel=True)
 def _k3ph(pa, va, aa, ra, pb, vb, ab, rb, H, out):
     for i in prange(out.shape[0]):
         out[i] = _row3(pa, va, aa, ra, pb, vb, ab, rb, H, i)

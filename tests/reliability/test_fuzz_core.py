@@ -32,7 +32,7 @@ IN_RANGE = 1e150
 # narrow_phase.py: "finite values with magnitudes below ~1e150".
 # Core bugs found by these fuzzers (core/ is others' to fix; regression tests below):
 # - spurious contact at t = 0 with a tiny closing velocity (HEAD 5ceb7cb): fixed by fbe136e;
-# - ZeroDivisionError out of range (fbe136e): strict xfail; the whole-range fuzzers count it;
+# - ZeroDivisionError out of range (fbe136e): fixed (error_model="numpy"); regression test below;
 # - coincident centres with a subnormal R (R^2 underflows) missed (fbe136e): strict xfail;
 #   the mpmath sample counts it.
 ULP_TOL = 4.0
@@ -104,12 +104,7 @@ def _ttc(vecs, ra, rb, horizon) -> float:
        st.one_of(st.just(math.inf), st.floats(0.0, 100.0), any_float, special))
 def test_time_to_collision_whole_float_range(pair, horizon) -> None:
     _, vecs, ra, rb = pair
-    try:
-        t = _ttc(vecs, ra, rb, horizon)
-    except ZeroDivisionError:
-        assert not _in_range(vecs, (ra, rb)), "exception for in-range input"
-        tally("known_core_bug_zero_division")  # see test_out_of_range_example_does_not_raise
-        return
+    t = _ttc(vecs, ra, rb, horizon)  # never an exception, in range or not
     tally("examples")
     if _documented_nan(vecs, ra, rb, horizon):
         tally("documented_nan")
@@ -133,15 +128,10 @@ def test_time_to_collision_batched_equals_scalar(pair, n) -> None:
     """The batched (and, from 4096 rows, multi-threaded) kernel gives the scalar answer per row."""
     d, vecs, ra, rb = pair
     rows = [np.tile(np.asarray(v, dtype=float), (n, 1)) for v in vecs]
-    try:
-        with quiet():
-            warnings.simplefilter("ignore", RuntimeWarning)
-            out = time_to_collision(*rows[:3], np.full(n, ra), *rows[3:], np.full(n, rb), 5.0)
-        one = _ttc(vecs, ra, rb, 5.0)
-    except ZeroDivisionError:
-        assert not _in_range(vecs, (ra, rb)), "exception for in-range input"
-        tally("known_core_bug_zero_division")
-        return
+    with quiet():
+        warnings.simplefilter("ignore", RuntimeWarning)
+        out = time_to_collision(*rows[:3], np.full(n, ra), *rows[3:], np.full(n, rb), 5.0)
+    one = _ttc(vecs, ra, rb, 5.0)
     tally("examples")
     tally("rows", n)
     assert out.shape == (n,)
@@ -161,13 +151,11 @@ def _in_range(vecs, radii) -> bool:
     return all(abs(x) < IN_RANGE for v in vecs for x in v) and all(0 <= r < IN_RANGE for r in radii)
 
 
-@pytest.mark.xfail(strict=True, raises=ZeroDivisionError,
-                   reason="core bug (narrow_phase, fbe136e): ZeroDivisionError for out-of-range input")
 def test_out_of_range_example_does_not_raise() -> None:
-    """Found by test_time_to_collision_whole_float_range in the uncommitted working copy of
-    core/narrow_phase.py (2026-11-22 ~04:30), still in fbe136e: ZeroDivisionError from inside
-    the kernel. Out of range only a finite answer or NaN is allowed, never an exception (the
-    node's input bounds keep it out of its reach). 5ceb7cb returned inf here."""
+    """Found by test_time_to_collision_whole_float_range: the kernels raised
+    ZeroDivisionError (numba's Python error model) for out-of-range input. Fixed by compiling
+    them with error_model="numpy" (IEEE division). Out of range only a finite answer, inf or
+    NaN is allowed, never an exception."""
     t = _ttc([[0.0, 0.0, 0.0], [2.0, 0.0, 0.0], [0.0, 0.0, 1.3407807929942597e+154],
               [8.98846567431158e+307, 0.0, 0.0], [0.0, 0.0, 0.0], [0.0, 0.0, 0.0]], 0.0, 0.0, math.inf)
     assert math.isnan(t) or t == math.inf or t >= 0.0
@@ -260,12 +248,7 @@ def test_predict_all_pairs_whole_float_range(scene, horizon) -> None:
         assert ("horizon" in str(info.value)) if not bad_rows.any() else \
             "non-finite state or negative radius" in str(info.value)
         return
-    try:
-        res = _call(p, v, a, r, horizon)
-    except ZeroDivisionError:
-        assert not _in_range([p.ravel(), v.ravel(), a.ravel()], r.tolist()), "exception in range"
-        tally("known_core_bug_zero_division")
-        return
+    res = _call(p, v, a, r, horizon)
     k = len(res)
     assert res.i.shape == res.j.shape == res.ttc.shape == (k,)
     assert np.all(res.i < res.j) and np.all((res.ttc >= 0.0) & (res.ttc <= horizon))
