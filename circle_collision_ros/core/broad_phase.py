@@ -203,6 +203,19 @@ def _push(I, J, k, i, j):
     return I, J, k + 1
 
 
+@njit(cache=True, inline="always")
+def _consider(I, J, k, n_box, i, j, lo, hi, p, v, a, r, tref, t_start, t_end, use_rel):
+    """Keep pair (i, j) if its boxes overlap (counted) and, with use_rel, the relative test passes."""
+    if not _boxes_overlap(lo, hi, i, j):
+        return I, J, k, n_box
+    a_ = min(i, j)
+    b_ = max(i, j)
+    if use_rel and not _rel_keep(p, v, a, r, tref, a_, b_, t_start, t_end):
+        return I, J, k, n_box + 1
+    I, J, k = _push(I, J, k, a_, b_)
+    return I, J, k, n_box + 1
+
+
 @njit(cache=True)
 def _sweep_kernel(lo, hi, order, ax, p, v, a, r, tref, t_start, t_end, use_rel):
     n = order.shape[0]
@@ -218,14 +231,8 @@ def _sweep_kernel(lo, hi, order, ax, p, v, a, r, tref, t_start, t_end, use_rel):
             j = order[t]
             if lo[j, ax] > hx:
                 break
-            if not _boxes_overlap(lo, hi, i, j):
-                continue
-            a_ = min(i, j)
-            b_ = max(i, j)
-            n_box += 1
-            if use_rel and not _rel_keep(p, v, a, r, tref, a_, b_, t_start, t_end):
-                continue
-            I, J, k = _push(I, J, k, a_, b_)
+            I, J, k, n_box = _consider(I, J, k, n_box, i, j, lo, hi, p, v, a, r, tref,
+                                       t_start, t_end, use_rel)
     return I[:k].copy(), J[:k].copy(), n_box
 
 
@@ -297,8 +304,6 @@ def _grid_kernel(lo, hi, cell, origin, p, v, a, r, tref, t_start, t_end, use_rel
             i = body[order[u]]
             for w in range(u + 1, t):
                 j = body[order[w]]
-                if not _boxes_overlap(lo, hi, i, j):
-                    continue
                 # report the pair only from the cell holding the low corner of the
                 # boxes' intersection, so each pair is produced exactly once
                 mine = True
@@ -306,14 +311,9 @@ def _grid_kernel(lo, hi, cell, origin, p, v, a, r, tref, t_start, t_end, use_rel
                     if max(clo[i, kk], clo[j, kk]) != idx[kk]:
                         mine = False
                         break
-                if not mine:
-                    continue
-                a_ = min(i, j)
-                b_ = max(i, j)
-                n_box += 1
-                if use_rel and not _rel_keep(p, v, a, r, tref, a_, b_, t_start, t_end):
-                    continue
-                I, J, k_out = _push(I, J, k_out, a_, b_)
+                if mine:
+                    I, J, k_out, n_box = _consider(I, J, k_out, n_box, i, j, lo, hi, p, v, a, r,
+                                                   tref, t_start, t_end, use_rel)
         s = t
     # bodies too large for the grid: test against everyone
     for i in range(n):
@@ -322,14 +322,8 @@ def _grid_kernel(lo, hi, cell, origin, p, v, a, r, tref, t_start, t_end, use_rel
         for j in range(n):
             if j == i or (big[j] and j < i):
                 continue
-            if not _boxes_overlap(lo, hi, i, j):
-                continue
-            a_ = min(i, j)
-            b_ = max(i, j)
-            n_box += 1
-            if use_rel and not _rel_keep(p, v, a, r, tref, a_, b_, t_start, t_end):
-                continue
-            I, J, k_out = _push(I, J, k_out, a_, b_)
+            I, J, k_out, n_box = _consider(I, J, k_out, n_box, i, j, lo, hi, p, v, a, r, tref,
+                                           t_start, t_end, use_rel)
     return I[:k_out].copy(), J[:k_out].copy(), n_box
 
 
