@@ -74,3 +74,17 @@ def pyplot():
     import matplotlib.pyplot as plt
 
     return plt
+
+
+def save_log_log_vs_n(fig, axes, path: Path, legend_size: int) -> Path:
+    """Log-log axes against N bodies, grid and legend on each; save at 90 dpi and close."""
+    for ax in axes:
+        ax.set_xscale("log")
+        ax.set_yscale("log")
+        ax.set_xlabel("N bodies")
+        ax.grid(True, which="major", alpha=0.3)
+        ax.legend(fontsize=legend_size)
+    fig.tight_layout()
+    fig.savefig(path, dpi=90)
+    pyplot().close(fig)
+    return path

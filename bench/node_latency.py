@@ -117,17 +117,7 @@ def plot(res: dict, out: Path) -> list[Path]:
     ax2.plot(n, [r["burst_predictions_per_s"] for r in rows], "s-", label="predictions received /s")
     ax2.set_title("sustained rate (inputs as fast as the client can publish)", fontsize=10)
     ax2.set_ylabel("messages / s")
-    for ax in (ax1, ax2):
-        ax.set_xscale("log")
-        ax.set_yscale("log")
-        ax.set_xlabel("N bodies")
-        ax.grid(True, which="major", alpha=0.3)
-        ax.legend(fontsize=7)
-    fig.tight_layout()
-    p = out / "node.png"
-    fig.savefig(p, dpi=90)
-    plt.close(fig)
-    return [p]
+    return [_common.save_log_log_vs_n(fig, (ax1, ax2), out / "node.png", 7)]
 
 
 def main(argv=None) -> int:

@@ -208,17 +208,7 @@ def plot(res: dict, out: Path) -> list[Path]:
     ax_m.set_ylabel("MiB")
     ax_u.set_title("Scene: one-body update + predictions() (dotted: p90)", fontsize=10)
     ax_u.set_ylabel("ms")
-    for ax in axes.flat:
-        ax.set_xscale("log")
-        ax.set_yscale("log")
-        ax.set_xlabel("N bodies")
-        ax.grid(True, which="major", alpha=0.3)
-        ax.legend(fontsize=6)
-    fig.tight_layout()
-    p = out / "scale.png"
-    fig.savefig(p, dpi=90)
-    plt.close(fig)
-    return [p]
+    return [_common.save_log_log_vs_n(fig, axes.flat, out / "scale.png", 6)]
 
 
 def main(argv=None) -> int:
