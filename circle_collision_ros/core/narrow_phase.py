@@ -543,6 +543,29 @@ def _root_c(P, V, A, lo, hi, clo, hitR2, nP, nV, nA, t0, q0, c_t0, which):
     return t, False
 
 
+@njit(cache=True, error_model="numpy", inline="always")
+def _closest_distance(g, gd, gd2, window):
+    """Closest distance of the local straight-line model g + tau g' for |tau| <= window.
+
+    window is how far (s) the located minimum may be from the exact one.  When the
+    line's own closest point lies inside the window, |g x g'| / |g'| has no
+    cancellation (g is perpendicular to g' there) and is used.  Outside it the line
+    model would extrapolate past where it is valid: in a collinear turnaround g' is
+    nearly 0 and parallel to g, so |g x g'| / |g'| is 0 although the bodies stay
+    |g| apart (tests/reliability/test_fuzz_core.py::test_collinear_turnaround_near_miss);
+    the minimum over the window's ends is the right bound there.
+    """
+    g2 = _dot(g, g)
+    if gd2 > 0.0:
+        c = _dot(g, gd)
+        tau = -c / gd2
+        if abs(tau) <= window:
+            return math.sqrt(_cross2(g, gd) / gd2)
+        tau = window if tau > 0.0 else -window
+        return math.sqrt(max(g2 + tau * (2.0 * c + tau * gd2), 0.0))
+    return math.sqrt(g2)
+
+
 @njit(cache=True, error_model="numpy")
 def _at_minimum(Ph, Pl, Vh, Vl, Ah, Al, Rh, Rl, lo, s, nP, nV, nA):
     """Decide contact for the decreasing run [lo, s] ending at a local min s.
@@ -596,10 +619,7 @@ def _at_minimum(Ph, Pl, Vh, Vl, Ah, Al, Rh, Rl, lo, s, nP, nV, nA):
     # 1e-9 R^2 grazing slack.
     gd = _gd(Vh, Ah, s)
     gd2 = _dot(gd, gd)
-    if gd2 > 0.0:
-        d = math.sqrt(_cross2(g, gd) / gd2)
-    else:
-        d = math.sqrt(_dot(g, g))
+    d = _closest_distance(g, gd, gd2, ds)
     if d > dtol:
         return -1.0
     # Near-graze: refine s with Newton on c using the dd g (quadratic
@@ -617,11 +637,8 @@ def _at_minimum(Ph, Pl, Vh, Vl, Ah, Al, Rh, Rl, lo, s, nP, nV, nA):
             return _solve_entry(Ph, Pl, Vh, Vl, Ah, Al, Rh, Rl, lo, s, s)
         gd = _gd(Vh, Ah, s)
         gd2 = _dot(gd, gd)
-    if gd2 > 0.0:
-        d = math.sqrt(_cross2(g, gd) / gd2)
-    else:
-        d = math.sqrt(_dot(g, g))
     ds = 16.0 * _EPS * s
+    d = _closest_distance(g, gd, gd2, ds)
     tol = 0.5 * nA * ds * ds + 8.0 * _EPS * _EPS * S
     if d > R * (1.0 + 8.0 * _EPS) + tol:
         return -1.0

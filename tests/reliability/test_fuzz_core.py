@@ -272,3 +272,16 @@ def test_predict_all_pairs_equals_brute_force_on_dense_scenes(scene, horizon) ->
     tally("contacts", len(res))
     got = _compared(res, v)
     assert got == _brute_force(p, v, a, r, horizon), [x.tolist() for x in scene]
+
+
+def test_collinear_turnaround_near_miss() -> None:
+    """Found by test_mpmath_reference_confirms_a_sample: collinear motion that turns around
+    3% short of contact (minimum gap 1.02/997 m > R = 1/1009 m). The straight-line model at
+    the turnaround has g' ~ 0 parallel to g, so |g x g'|/|g'| was 0 and a contact was
+    reported (0.0 compiled, 0.28 s pure Python); the exact answer is no contact."""
+    t = time_to_collision(np.array([0.0, 0.0]), np.array([0.0, 0.0]), np.array([0.0, -25 / 997.0]), 0.0,
+                          np.array([0.0, 2 / 997.0]), np.array([0.0, -7 / 997.0]), np.array([0.0, 0.0]),
+                          1 / 1009.0)
+    assert float(t) == math.inf
+    assert reference([0.0, 0.0], [0.0, 0.0], [0.0, -25 / 997.0], 0.0, [0.0, 2 / 997.0],
+                     [0.0, -7 / 997.0], [0.0, 0.0], 1 / 1009.0, horizon=math.inf).t == math.inf
