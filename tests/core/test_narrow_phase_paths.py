@@ -100,3 +100,25 @@ def test_horizon_at_the_contact_time():
         below = float(np.nextafter(t[i], 0.0))
         assert time_to_collision(*row, horizon=above)[0] == t[i]
         assert math.isinf(time_to_collision(*row, horizon=below)[0])
+
+
+@pytest.mark.parametrize("n", [0, 1, npz._BLOCK - 1, npz._BLOCK, npz._BLOCK + 1, 5000,
+                               64 * npz._BLOCK, 64 * npz._BLOCK + 1, 200 * npz._BLOCK + 17])
+def test_threaded_blocks_cover_every_row_once(n):
+    """The threaded kernels' bit-reversed blocks cover each row exactly once,
+    whatever n is relative to the block size and the power-of-two block
+    count: every output is written (a -1 sentinel never survives) and equals
+    the serial kernel's."""
+    args = _pairs(max(n, 1))
+    args = tuple(np.ascontiguousarray(x[:n]) for x in args)
+    ser = np.empty(n)
+    npz._KERNELS[(2, False, True)](*args, 10.0, ser)
+    for scal in (True, False):
+        par = np.full(n, -1.0)
+        npz._KERNELS[(2, True, scal)](*args, 10.0 if scal else np.full(n, 10.0), par)
+        assert _same(ser, par), (n, scal)
+    # 3-D chain with z = 0 through the threaded kernels too
+    z = tuple(np.concatenate([x, np.zeros((n, 1))], axis=1) if x.ndim == 2 else x for x in args)
+    par3 = np.full(n, -1.0)
+    npz._KERNELS[(3, True, True)](*z, 10.0, par3)
+    assert _same(ser, par3)
