@@ -1032,9 +1032,12 @@ def _blocks(n):
     return nb, bits, (n + nb - 1) // nb
 
 
-@njit(cache=True, error_model="numpy")  # not inlined: numba's parfor pass
-def _block_rows(k, bits, size, n):         # rejects any reassignment of a prange index
-    """Row range of the block bitrev(k) (bit reversal over `bits` bits)."""
+@njit(cache=True, error_model="numpy")
+def _block_rows(k, bits, size, n):
+    """Row range of the block bitrev(k) (bit reversal over `bits` bits).
+
+    Deliberately not inlined: it shifts its copy of k, and numba's parfor
+    pass rejects any assignment to an (inlined) prange index."""
     b = 0
     for _ in range(bits):
         b = (b << 1) | (k & 1)
