@@ -37,21 +37,9 @@ import numpy as np
 from numba import njit
 from numba.extending import overload
 
-from circle_collision_ros.core.narrow_dd import two_prod, two_sum
+from circle_collision_ros.core.narrow_dd import two_sum
 from circle_collision_ros.core.narrow_phase import (
-    _EPS, _F_ERR, _INF, _cross2, _dot, _g, _g_dd, _gd, _model_err, _round_dd)
-
-
-@njit(error_model="numpy", inline="always")
-def _f_dd_i(Ph, Pl, Vh, Vl, Ah, Al, Rh, Rl, t):
-    Gh, Gl = _g_dd(Ph, Pl, Vh, Vl, Ah, Al, t)
-    s, lo = two_prod(-Rh, Rh)
-    lo -= 2.0 * Rh * Rl
-    for k in range(len(Gh)):
-        p, e = two_prod(Gh[k], Gh[k])
-        s, e2 = two_sum(s, p)
-        lo += (e + e2) + 2.0 * Gh[k] * Gl[k]
-    return s + lo, _round_dd(Gh, Gl)
+    _EPS, _F_ERR, _INF, _cross2, _dot, _f_dd, _g, _gd, _model_err)
 
 
 UNDECIDED = -1.0
@@ -247,7 +235,7 @@ def _fast_rel(Ph, Pl, Vh, Vl, Ah, Al, Rh, Rl, H):
         conv_f = conv_f | now
         t = tn
     # ---- one double-double polish step (as _solve_entry)
-    f, g = _f_dd_i(Ph, Pl, Vh, Vl, Ah, Al, Rh, Rl, t)
+    f, g = _f_dd(Ph, Pl, Vh, Vl, Ah, Al, Rh, Rl, t)
     gd = _gd(Vh, Ah, t)
     step, s, rel, is_root = _model_step(f, g, gd, Ah, R2)
     tn = t + step
