@@ -116,16 +116,25 @@ fi
 
 # 5. Compile the numba kernels once into their on-disk cache (__pycache__), so that the
 # first node start or test does not pay the compile; re-runs when the core changes.
+# Old cache files go first: numba checks only the source file of the function it
+# loads, so a kernel cached before a change in a module it calls would be reused.
 h=$(inputs_hash $(cd "$ROOT" && ls circle_collision_ros/core/*.py) constraints.txt)
 if ! is_current numba "$h"; then
   say "compiling the numba kernels into their cache"
+  find "$ROOT/circle_collision_ros" -name '*.nbi' -o -name '*.nbc' | xargs rm -f
   (cd "$ROOT" && "$PY" -c '
 import numpy as np
 from circle_collision_ros.core import predict_all_pairs, time_to_collision
+from circle_collision_ros.core.narrow_phase import PARALLEL_MIN_ROWS
 for d in (2, 3):
     z = np.zeros((2, d))
     predict_all_pairs(np.eye(2, d), z, z, np.ones(2), 1.0)
     time_to_collision(z[0], z[0], z[0], 1.0, z[1], z[1], z[1], 1.0, 1.0)
+    # the threaded kernels (large batches), one float and per-row horizons
+    zz = np.zeros((PARALLEL_MIN_ROWS, d))
+    r = np.ones(PARALLEL_MIN_ROWS)
+    time_to_collision(zz, zz, zz, r, zz + 3.0, zz, zz, r, 1.0)
+    time_to_collision(zz, zz, zz, r, zz + 3.0, zz, zz, r, r)
 ')
   mark numba "$h"
 fi

@@ -19,8 +19,10 @@ Why these are safe (references: Dekker 1971; Ogita, Rump & Oishi 2005):
 """
 from __future__ import annotations
 
+import struct
 from fractions import Fraction
 
+from llvmlite import ir
 from numba import config, njit, types
 from numba.extending import intrinsic
 
@@ -41,6 +43,57 @@ else:
             return builder.fma(args[0], args[1], args[2])
 
         return sig, codegen
+
+
+_I64 = ir.IntType(64)
+
+if config.DISABLE_JIT:  # pure-Python debugging mode
+
+    def _exponent(x):
+        """Biased exponent field (0..2047) of a float64."""
+        return (struct.unpack("<q", struct.pack("<d", x))[0] >> 52) & 0x7FF
+
+    def _pow2(e):
+        """The float64 with exponent field e (1..2046) and zero mantissa: 2^(e - 1023)."""
+        return struct.unpack("<d", struct.pack("<q", e << 52))[0]
+
+else:
+
+    @intrinsic
+    def _exponent(typingctx, x):  # pragma: no cover - compiled
+        """Biased exponent field (0..2047) of a float64 (bit operations only,
+        so a loop using it still vectorises)."""
+        sig = types.int64(types.float64)
+
+        def codegen(context, builder, signature, args):
+            bits = builder.bitcast(args[0], _I64)
+            return builder.and_(builder.lshr(bits, ir.Constant(_I64, 52)), ir.Constant(_I64, 0x7FF))
+
+        return sig, codegen
+
+    @intrinsic
+    def _pow2(typingctx, e):  # pragma: no cover - compiled
+        """The float64 with exponent field e (1..2046) and zero mantissa: 2^(e - 1023)."""
+        sig = types.float64(types.int64)
+
+        def codegen(context, builder, signature, args):
+            return builder.bitcast(builder.shl(args[0], ir.Constant(_I64, 52)), ir.DoubleType())
+
+        return sig, codegen
+
+
+@njit(cache=True, error_model="numpy", inline="always")
+def pow2_scales(m: float):
+    """Powers of two (s1, s2) with ``m * s1 * s2`` in [2, 4) for a finite
+    m > 0; (1.0, 1.0) for m = 0 (and for NaN).
+
+    Multiplying by them (s1 first) is exact for every value <= m that does
+    not underflow: s1 = 2^600 lifts a tiny m (< 2^-300, subnormal included)
+    into the normal range, s2 = 2^(1024 - e) for the exponent e of m * s1.
+    Branch-free (selects and bit operations)."""
+    s1 = 4.149515568880993e+180 if m < 4.909093465297727e-91 else 1.0  # 2^600, 2^-300
+    s2 = _pow2(2047 - _exponent(m * s1))
+    return s1, (s2 if m > 0.0 else 1.0)
 
 
 @njit(cache=True, error_model="numpy", inline="always")
