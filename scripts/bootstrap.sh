@@ -121,7 +121,7 @@ fi
 h=$(inputs_hash $(cd "$ROOT" && ls circle_collision_ros/core/*.py) constraints.txt)
 if ! is_current numba "$h"; then
   say "compiling the numba kernels into their cache"
-  find "$ROOT/circle_collision_ros" -name '*.nbi' -o -name '*.nbc' | xargs rm -f
+  find "$ROOT/circle_collision_ros" \( -name '*.nbi' -o -name '*.nbc' \) -delete
   (cd "$ROOT" && "$PY" -c '
 import numpy as np
 from circle_collision_ros.core import predict_all_pairs, time_to_collision

@@ -19,6 +19,7 @@ Why these are safe (references: Dekker 1971; Ogita, Rump & Oishi 2005):
 """
 from __future__ import annotations
 
+import math
 import struct
 from fractions import Fraction
 
@@ -85,7 +86,9 @@ else:
 @njit(cache=True, error_model="numpy", inline="always")
 def pow2_scales(m: float):
     """Powers of two (s1, s2) with ``m * s1 * s2`` in [2, 4) for a finite
-    m > 0; (1.0, 1.0) for m = 0 (and for NaN).
+    m > 0.  For m = 0, s2 = 1.0 (everything is 0 anyway); for m = inf (a
+    relative state that overflowed: inputs out of range) and NaN, s2 = NaN, so
+    the scaled state is NaN and no answer is made up from it.
 
     Multiplying by them (s1 first) is exact for every value <= m that does
     not underflow: s1 = 2^600 lifts a tiny m (< 2^-300, subnormal included)
@@ -93,7 +96,8 @@ def pow2_scales(m: float):
     Branch-free (selects and bit operations)."""
     s1 = 4.149515568880993e+180 if m < 4.909093465297727e-91 else 1.0  # 2^600, 2^-300
     s2 = _pow2(2047 - _exponent(m * s1))
-    return s1, (s2 if m > 0.0 else 1.0)
+    s2 = s2 if m > 0.0 else 1.0
+    return s1, (s2 if m < math.inf else math.nan)
 
 
 @njit(cache=True, error_model="numpy", inline="always")

@@ -11,10 +11,10 @@ evaluations and the same error bounds.
 Also here: the exact relative state (``_rel2``, ``_rel3``) and the validity
 test of a row's input (``_valid``), shared by both solvers' entry points.
 
-Every helper is inlined into its caller (numba IR inlining, or a small
-``register_jitable`` function that LLVM inlines): the fast path runs them
-inside one SIMD-vectorised loop, and LLVM vectorises no loop that calls a
-function.
+The helpers the fast path uses are inlined into it (numba IR inlining, or
+small ``register_jitable`` functions that LLVM inlines; ``_f_dd`` through its
+``_f_dd_inline`` twin): it runs them inside one SIMD-vectorised loop, and
+LLVM vectorises no loop that calls a function.
 """
 from __future__ import annotations
 
@@ -59,8 +59,9 @@ def _max(a, b):
 # model root) then stays far from underflow and overflow for any inputs with
 # magnitudes below ~1e150 (unscaled, a state ~1e-80 m or ~1e78 m was solved
 # wrongly).  The solver is homogeneous in length (every sum adds terms of the
-# same length degree, every bound is relative), so for states that needed no
-# scaling the results are bitwise the same as without it.
+# same length degree, every bound is relative), so wherever the unscaled
+# state did not under- or overflow the results are bitwise those of the
+# unscaled solver (checked on 1.8 million rows).
 @njit(cache=True, error_model="numpy", inline="always")
 def _rel3(pax, pay, paz, vax, vay, vaz, aax, aay, aaz, r_a,
           pbx, pby, pbz, vbx, vby, vbz, abx, aby, abz, r_b):

@@ -85,7 +85,7 @@ from circle_collision_ros.core.narrow_eval import (
 UNDECIDED = -1.0  # never a result of the robust solver (>= 0, inf or NaN)
 
 # Newton steps on c and float64 model steps for the entry root (written out
-# in _fast_rel).  Measured on the benchmark mix (2-D, H = 10 s): 3 / 4 / 5 / 7
+# in _fast_rel; tests/core/test_narrow_fast.py checks the counts).  Measured on the benchmark mix (2-D, H = 10 s): 3 / 4 / 5 / 7
 # Newton steps from the closed-form start leave 2.1 / 1.10 / 1.07 / 1.07 %
 # of rows undecided (from H instead: 7 steps 1.09 %, 6 steps 1.32 %); each
 # step costs ~0.6-1 ns/row in the SIMD loop, a robust fallback ~240 ns.  3
@@ -134,8 +134,10 @@ def _box_gap2(P, V, A, ta, tb):
 
 @register_jitable(error_model="numpy")
 def _cbrt_up(y):
-    """A power of two in [cbrt(y), 2 cbrt(y)) for y >= 0 (0 for y = 0), from
-    the exponent bits: no libm call, so the SIMD loop keeps vectorising."""
+    """A power of two in (cbrt(y), 2 cbrt(y)] for a normal y > 0 (0 for
+    y = 0; for a subnormal y only an upper bound), from the exponent bits:
+    no libm call, so the SIMD loop keeps vectorising.  Only a starting guess
+    is made from it."""
     k = (_exponent(y) - 1023) // 3 + 1
     return _pow2(k + 1023) if y > 0.0 else 0.0
 
@@ -240,11 +242,15 @@ def _fast_rel(Ph, Pl, Vh, Vl, Ah, Al, Rh, Rl, H):
     # ---- 2. structure of c (cubic, leading coefficient A2/2 > 0): c'' =
     # 3 A2 (t - t0) with t0 = -(da.dv)/A2 (c concave left of t0, convex right
     # of it), q = c' = q(t0) + 1.5 A2 (t - t0)^2.  q0 = q(t0) is evaluated
-    # geometrically; t0 carries a relative error <= 8 eps (dt0), which raises
-    # the computed q0 by at most 1.5 A2 dt0^2 (q is stationary at t0).  With
-    # eq0 bounding the error of q0, "cuts" (q0 < -eq0) means two turning points
-    # cut1,2 = t0 -+ r, r = sqrt(-q0 / (1.5 A2)), each within dl of exact;
-    # q0 > eq0 means none (c increasing everywhere); in between: undecided.
+    # geometrically.  t0 is within dt0 of exact: the dot product da.dv (its
+    # rounding and the dropped dd low parts) is good to 4u |da||dv|
+    # absolutely -- it may cancel, so no relative bound -- i.e. t0 to
+    # 4u |dv|/|da|, and A2 and the division add 5u |t0|; dt0 takes 4x that.
+    # Evaluating q at t0 + dt0 instead raises q0 by at most 1.5 A2 dt0^2 (q is
+    # stationary at t0).  With eq0 bounding the error of q0, "cuts"
+    # (q0 < -eq0) means two turning points cut1,2 = t0 -+ r,
+    # r = sqrt(-q0 / (1.5 A2)), each within dl of exact; q0 > eq0 means none
+    # (c increasing everywhere); in between: undecided.
     c0 = _dot(Ph, Vh)
     ec0 = 16.0 * _EPS * nP * nV
     t0 = -_dot(Ah, Vh) / A2
@@ -255,16 +261,18 @@ def _fast_rel(Ph, Pl, Vh, Vl, Ah, Al, Rh, Rl, H):
     ct0 = _dot(g, gd)  # c(t0), for Newton's start below
     S0 = _scale(nP, nV, nA, t0)
     Sd0 = nV + at0 * nA
-    dt0 = 8.0 * _EPS * at0
+    dt0 = 8.0 * _EPS * (at0 + nV / nA)
     eq0 = 16.0 * _EPS * (Sd0 * Sd0 + S0 * nA) + 1.5 * A2 * dt0 * dt0
     cuts = q0 < -eq0
     ok = ok & ((q0 > eq0) | cuts)
     r = math.sqrt(_max(-q0, 0.0) / (1.5 * A2))
     cut1 = t0 - r
     cut2 = t0 + r
-    # location error: dt0 + rounding of t0 -+ r, plus the effect of eq0 on r
-    # (dr <= eq0 / (3 A2 r) from r^2 = -q0 / (1.5 A2)); 8 eps covers the rest
-    dl = (8.0 * _EPS * (at0 + r) + eq0 / (3.0 * A2 * r)) if cuts else 0.0
+    # location error: dt0, the effect of eq0 on r -- r'^2 - r^2 = d / (1.5 A2)
+    # with |d| <= eq0 < -q0, so |r' - r| = |d| / (1.5 A2 (r + r')) <=
+    # eq0 / (1.5 A2 r) -- and the rounding of sqrt, the division and
+    # t0 -+ r (8 eps (|t0| + r) covers them twice over)
+    dl = (dt0 + 8.0 * _EPS * (at0 + r) + eq0 / (1.5 * A2 * r)) if cuts else 0.0
     # c is stationary at a turning point: moving it by dl changes c by at
     # most |c''| dl^2 / 2 + A2 |dl|^3 / 2 = 1.5 A2 r dl^2 + A2 dl^3 / 2 <= Dl
     Dl = 1.5 * A2 * dl * dl * (2.0 * r + dl)
@@ -300,7 +308,8 @@ def _fast_rel(Ph, Pl, Vh, Vl, Ah, Al, Rh, Rl, H):
     fH = _dot(gH, gH) - R2
     efH = _F_ERR * (SH * SH + R2)
     no_min = (piece2 | (piece0 & (cut1 >= H))) & (cH < -ecH)
-    has_min = (not no_min) & (piece0 | (cH > ecH)) & (ea < eb)
+    # (only on a known piece: the one-sign-change argument of step 3 needs it)
+    has_min = (not no_min) & (piece0 | (piece2 & (cH > ecH))) & (ea < eb)
 
     # ---- 3. Newton on c from the end of the piece where it is monotone:
     # c increasing and concave on piece 0 -> from the left end (iterates stay

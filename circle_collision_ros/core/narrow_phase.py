@@ -117,8 +117,8 @@ def _solve_entry(Ph, Pl, Vh, Vl, Ah, Al, Rh, Rl, lo, hi, t):
     Coarse phase in float64 with the model step, safeguarded by the bracket
     (any step leaving (lo, hi) becomes a bisection, so it always converges);
     it stops once the model truncation estimate says the iterate is within
-    1e-10 relative of the root (cubic convergence: the next step would be
-    exact to ~1e-30), or at the float64 noise floor.  Then double-double
+    1e-7 relative of the root (cubic convergence: the next step would be
+    exact to ~1e-21), or at the float64 noise floor.  Then double-double
     polishing steps, kept inside the original bracket: the polished residual
     is accurate to ~u^2 |g|^2, so a dd step whose own truncation estimate is
     < 1% of an ulp (or that is <= 64 ulp, as before) ends the polish; the
@@ -686,6 +686,8 @@ def _robust_pair3(pax, pay, paz, vax, vay, vaz, aax, aay, aaz, r_a,
         return _NAN
     Ph, Pl, Vh, Vl, Ah, Al, Rh, Rl = _rel3(pax, pay, paz, vax, vay, vaz, aax, aay, aaz, r_a,
                                            pbx, pby, pbz, vbx, vby, vbz, abx, aby, abz, r_b)
+    if Rh != Rh:  # the relative state overflowed (out of range): NaN, see pow2_scales
+        return _NAN
     t = _ttc_rel(Ph, Pl, Vh, Vl, Ah, Al, Rh, Rl, horizon)
     return _NAN if t != t else t
 
@@ -699,6 +701,8 @@ def _robust_pair2(pax, pay, vax, vay, aax, aay, r_a, pbx, pby, vbx, vby, abx, ab
         return _NAN
     Ph, Pl, Vh, Vl, Ah, Al, Rh, Rl = _rel2(pax, pay, vax, vay, aax, aay, r_a,
                                            pbx, pby, vbx, vby, abx, aby, r_b)
+    if Rh != Rh:  # the relative state overflowed (out of range): NaN, see pow2_scales
+        return _NAN
     t = _ttc_rel(Ph, Pl, Vh, Vl, Ah, Al, Rh, Rl, horizon)
     return _NAN if t != t else t
 
@@ -915,7 +919,7 @@ def _ttc_scalar2(pax, pay, vax, vay, aax, aay, r_a, pbx, pby, vbx, vby, abx, aby
 
 
 # (D, threaded, scalar horizon) -> kernel (the same dispatcher compiles once
-# per horizon type)
+# per horizon type); inputs C-contiguous (see _contiguous)
 _KERNELS = {
     (2, False, False): _k2, (3, False, False): _k3,
     (2, False, True): _k2, (3, False, True): _k3,
@@ -924,25 +928,30 @@ _KERNELS = {
 }
 
 
+def _contiguous(*arrays):
+    """The kernels read rows through flat views: C-contiguous copies where needed."""
+    return tuple(np.ascontiguousarray(x) for x in arrays)
+
+
 def _ttc_kernel(pa, va, aa, ra, pb, vb, ab, rb, H, out):
     """Serial loop over rows: vectors (n, D) with D in {2, 3}, radii and
     horizons H (n,), results into out (n,)."""
-    _KERNELS[(pa.shape[1], False, False)](pa, va, aa, ra, pb, vb, ab, rb, H, out)
+    _KERNELS[(pa.shape[1], False, False)](*_contiguous(pa, va, aa, ra, pb, vb, ab, rb, H), out)
 
 
 def _ttc_kernel_par(pa, va, aa, ra, pb, vb, ab, rb, H, out):
     """Multi-threaded twin of ``_ttc_kernel`` (rows are independent)."""
-    _KERNELS[(pa.shape[1], True, False)](pa, va, aa, ra, pb, vb, ab, rb, H, out)
+    _KERNELS[(pa.shape[1], True, False)](*_contiguous(pa, va, aa, ra, pb, vb, ab, rb, H), out)
 
 
 def _ttc_kernel_h(pa, va, aa, ra, pb, vb, ab, rb, H, out):
     """``_ttc_kernel`` with one float horizon H for all rows."""
-    _KERNELS[(pa.shape[1], False, True)](pa, va, aa, ra, pb, vb, ab, rb, float(H), out)
+    _KERNELS[(pa.shape[1], False, True)](*_contiguous(pa, va, aa, ra, pb, vb, ab, rb), float(H), out)
 
 
 def _ttc_kernel_par_h(pa, va, aa, ra, pb, vb, ab, rb, H, out):
     """``_ttc_kernel_par`` with one float horizon H for all rows."""
-    _KERNELS[(pa.shape[1], True, True)](pa, va, aa, ra, pb, vb, ab, rb, float(H), out)
+    _KERNELS[(pa.shape[1], True, True)](*_contiguous(pa, va, aa, ra, pb, vb, ab, rb), float(H), out)
 
 
 # Rows from which the threaded kernels are used.  On an idle 2-core VM with a
@@ -1010,7 +1019,9 @@ def time_to_collision(p_a, v_a, a_a, r_a, p_b, v_b, a_b, r_b, horizon=math.inf) 
         to r_a + r_b (tangent grazes count); inf if none.  A pair touching at
         t = 0 while separating reports its next contact, if any.
         NaN for an element with a non-finite input, a negative radius or a
-        negative/NaN horizon (other elements are unaffected).
+        negative/NaN horizon (other elements are unaffected); out of the
+        input range, also where a relative quantity (p_a - p_b, ...)
+        overflows.
 
     Guarantees (proved in tests/core/test_narrow_phase*.py): error <= 4 ulp of
     the exact time for the inputs as given, scaled by |cos| of the contact

@@ -15,12 +15,16 @@ Guarantees proved here:
 """
 from __future__ import annotations
 
+import inspect
 import math
 
 import numpy as np
 import pytest
+from numba import njit
 
+from circle_collision_ros.core import narrow_fast as nf
 from circle_collision_ros.core import narrow_phase as npz
+from circle_collision_ros.core.narrow_dd import pow2_scales
 from circle_collision_ros.core.narrow_fast import UNDECIDED, fast_rows
 from tests.core.test_narrow_phase_accuracy import mixed_pairs
 
@@ -75,26 +79,35 @@ def test_horizon_per_row_and_offset():
     fast_rows(*args, H, 300, part, 300, 400, (0.0, 0.0))
     assert np.array_equal(part[300:700], whole[300:700])
     assert np.isnan(part[:300]).all() and np.isnan(part[700:]).all()  # nothing else written
+    # a horizon window that starts elsewhere than the rows (hofs != i0)
+    part[:] = np.nan
+    fast_rows(*args, H[300:700].copy(), 0, part, 300, 400, (0.0, 0.0))
+    assert np.array_equal(part[300:700], whole[300:700])
 
 
-def test_invalid_rows_are_left_to_the_robust_solver():
-    args = [x.copy() for x in mixed_pairs(64, 2, seed=9)]
-    H = np.full(64, 10.0)
-    bad = {1: ("pa", np.nan), 2: ("va", np.inf), 3: ("aa", -np.inf), 4: ("ra", -1.0),
-           5: ("rb", np.nan), 6: ("pb", np.nan), 7: ("H", -1.0), 8: ("H", np.nan)}
+@pytest.mark.parametrize("D", [2, 3])
+def test_invalid_rows_are_left_to_the_robust_solver(D):
+    """Every input of a row (and its horizon) made non-finite, or a radius or
+    the horizon negative: the fast path leaves the row undecided, the batch
+    answer is NaN there and untouched elsewhere."""
     names = ["pa", "va", "aa", "ra", "pb", "vb", "ab", "rb"]
-    for i, (what, v) in bad.items():
+    bad = [(w, v) for w in names for v in (np.nan, np.inf, -np.inf)]
+    bad += [("ra", -1.0), ("rb", -0.5), ("H", -1.0), ("H", np.nan)]
+    n = len(bad) + 40
+    args = [x.copy() for x in mixed_pairs(n, D, seed=9)]
+    H = np.full(n, 10.0)
+    for i, (what, v) in enumerate(bad):
         if what == "H":
             H[i] = v
         else:
             x = args[names.index(what)]
-            x[i] = v
-    out = np.empty(64)
-    fast_rows(*args, H, 0, out, 0, 64, (0.0, 0.0))
-    assert (out[list(bad)] == UNDECIDED).all()
-    good = np.setdiff1d(np.arange(64), list(bad))
+            x[i] = v  # a whole vector or a radius
+    out = np.empty(n)
+    fast_rows(*args, H, 0, out, 0, n, (0.0,) * D)
+    k = len(bad)
+    assert (out[:k] == UNDECIDED).all()
     full = npz.time_to_collision(*args, horizon=H)
-    assert np.isnan(full[list(bad)]).all() and not np.isnan(full[good]).any()
+    assert np.isnan(full[:k]).all() and not np.isnan(full[k:]).any()
 
 
 def test_infinite_horizon_and_overlap():
@@ -123,3 +136,38 @@ def test_scalar_entries_run_the_batch_code():
             assert s2 == t[i] and s3 == t[i]
     assert math.isnan(npz._ttc_scalar2(0.0, 0.0, 0.0, 0.0, 0.0, 0.0, -1.0,
                                        1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0, 1.0))
+
+
+def test_step_counts_match_the_constants():
+    """K_C / K_F document the written-out Newton and model steps of _fast_rel."""
+    src = inspect.getsource(nf._fast_rel.py_func)
+    assert src.count("_newton_c(") == nf.K_C
+    assert src.count("_model_step(") == nf.K_F
+
+
+@pytest.mark.parametrize("m", [0.0, 5e-324, 1e-310, 2.0 ** -300, np.nextafter(2.0 ** -300, 0.0), 0.1,
+                               1.0, 3.999, 4.0, 1e150, 1.7976931348623157e308])
+def test_pow2_scales(m):
+    """m * s1 * s2 lands in [2, 4) exactly (powers of two), 0 stays 0."""
+    s1, s2 = pow2_scales(m)
+    for s in (s1, s2):
+        assert s > 0 and math.frexp(s)[0] == 0.5  # a power of two
+    if m == 0.0:
+        assert s2 == 1.0
+    else:
+        y = (m * s1) * s2
+        assert 2.0 <= y < 4.0 and y / s2 / s1 == m
+
+
+def test_pow2_scales_overflowed_state_is_nan():
+    assert math.isnan(pow2_scales(math.inf)[1]) and math.isnan(pow2_scales(math.nan)[1])
+    # relative state overflows (out of the documented range): no made-up answer
+    t = npz.time_to_collision([1e308, 0.0], [0.0, 0.0], [0.0, 0.0], 1.0,
+                              [-1e308, 0.0], [0.0, 0.0], [0.0, 0.0], 1.0, 5.0)
+    assert math.isnan(t)
+
+
+@pytest.mark.parametrize("y", [1e-300, 1e-30, 0.3, 1.0, 7.9, 8.0, 1e30, 1e300])
+def test_cbrt_up(y):
+    b = njit(lambda v: nf._cbrt_up(v))(y)  # (compiled: it uses bit-level intrinsics)
+    assert math.frexp(b)[0] == 0.5 and y ** (1 / 3) * (1 - 1e-12) < b <= 2 * y ** (1 / 3) * (1 + 1e-12)

@@ -12,6 +12,8 @@ from hypothesis import strategies as st
 
 from circle_collision_ros.core import contact_details, time_to_collision
 from circle_collision_ros.core.narrow_phase import _ttc_scalar
+from tests.core.reference import reference
+from tests.core.test_narrow_phase_accuracy import case_error, mixed_pairs
 
 Z2 = [0.0, 0.0]
 
@@ -165,6 +167,27 @@ def test_power_of_two_scaling_keeps_the_time(s, k, H):
     t1 = time_to_collision(*vals, H)
     t2 = time_to_collision(*scaled, H)
     assert t1 == t2 or (np.isnan(t1) and np.isnan(t2)), (t1, t2)
+
+
+@pytest.mark.parametrize("k", [-830, -260, 260, 400])
+def test_tiny_and_huge_states_against_mpmath(k):
+    """Whole scenes at ~1e-250 m or ~1e120 m are solved right, not only
+    consistently: contact times against the mpmath reference on the exactly
+    scaled inputs (<= 4 ulp, cos-scaled), misses agree."""
+    args = mixed_pairs(24, 2, seed=17)
+    f = 2.0 ** k
+    scaled = [x * f for x in args]
+    assert all(np.array_equal(y / f, x) for x, y in zip(args, scaled))
+    for H in (math.inf, 6.0):
+        t = time_to_collision(*scaled, horizon=H)
+        assert np.isfinite(t).sum() >= 8
+        for i in range(24):
+            ref = reference(*(x[i] for x in scaled), horizon=H)
+            if ref.ambiguous:
+                continue
+            assert math.isinf(ref.t) == math.isinf(t[i]), (i, t[i], ref.t)
+            if math.isfinite(ref.t):
+                assert case_error(float(t[i]), ref.t, ref.cos) <= 4.0, (i, t[i], ref.t)
 
 
 @settings(max_examples=200, deadline=None)
