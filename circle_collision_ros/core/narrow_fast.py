@@ -69,6 +69,7 @@ from circle_collision_ros.core.narrow_eval import (
     _F_ERR,
     _INF,
     _NAN,
+    _c,
     _dot,
     _f_dd_inline,
     _g,
@@ -160,7 +161,7 @@ def _c_err(nP, nV, nA, t):
 @register_jitable(error_model="numpy")
 def _c_bound(Ph, Vh, Ah, nP, nV, nA, t):
     """(c(t), a bound of its float64 error): see _c_err."""
-    return _dot(_g(Ph, Vh, Ah, t), _gd(Vh, Ah, t)), _c_err(nP, nV, nA, t)
+    return _c(Ph, Vh, Ah, t), _c_err(nP, nV, nA, t)
 
 
 @register_jitable(error_model="numpy")

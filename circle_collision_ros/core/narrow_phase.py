@@ -773,48 +773,41 @@ def _ov_any_finite(H, i0, i1):
     return lambda H, i0, i1: H < _INF
 
 
-@njit(cache=True, error_model="numpy", inline="always")
-def _robust2(pa, va, aa, ra, pb, vb, ab, rb, H, i):
-    """Row i of a planar batch through the robust solver."""
-    return _robust_pair2(pa[i, 0], pa[i, 1], va[i, 0], va[i, 1], aa[i, 0], aa[i, 1], ra[i],
-                         pb[i, 0], pb[i, 1], vb[i, 0], vb[i, 1], ab[i, 0], ab[i, 1], rb[i], H)
+def _robust_row(pa, va, aa, ra, pb, vb, ab, rb, H, i, Z):
+    """Row i of a batch through the robust solver (vectors (n, D), D = len(Z))."""
+
+
+@overload(_robust_row, inline="always")
+def _ov_robust_row(pa, va, aa, ra, pb, vb, ab, rb, H, i, Z):
+    if Z.count == 2:
+        return lambda pa, va, aa, ra, pb, vb, ab, rb, H, i, Z: _robust_pair2(
+            pa[i, 0], pa[i, 1], va[i, 0], va[i, 1], aa[i, 0], aa[i, 1], ra[i],
+            pb[i, 0], pb[i, 1], vb[i, 0], vb[i, 1], ab[i, 0], ab[i, 1], rb[i], H)
+    return lambda pa, va, aa, ra, pb, vb, ab, rb, H, i, Z: _robust_pair3(
+        pa[i, 0], pa[i, 1], pa[i, 2], va[i, 0], va[i, 1], va[i, 2],
+        aa[i, 0], aa[i, 1], aa[i, 2], ra[i],
+        pb[i, 0], pb[i, 1], pb[i, 2], vb[i, 0], vb[i, 1], vb[i, 2],
+        ab[i, 0], ab[i, 1], ab[i, 2], rb[i], H)
 
 
 @njit(cache=True, error_model="numpy", inline="always")
-def _robust3(pa, va, aa, ra, pb, vb, ab, rb, H, i):
-    """Row i of a 3-D batch through the robust solver."""
-    return _robust_pair3(pa[i, 0], pa[i, 1], pa[i, 2], va[i, 0], va[i, 1], va[i, 2],
-                         aa[i, 0], aa[i, 1], aa[i, 2], ra[i],
-                         pb[i, 0], pb[i, 1], pb[i, 2], vb[i, 0], vb[i, 1], vb[i, 2],
-                         ab[i, 0], ab[i, 1], ab[i, 2], rb[i], H)
-
-
-@njit(cache=True, error_model="numpy", inline="always")
-def _block2(pa, va, aa, ra, pb, vb, ab, rb, H, out, i0, i1, hb):
-    """Rows [i0, i1) of a planar batch; hb: scratch of >= i1 - i0 floats."""
+def _block(pa, va, aa, ra, pb, vb, ab, rb, H, out, i0, i1, hb, Z):
+    """Rows [i0, i1) of a batch with vectors (n, D), D = len(Z) (a tuple of D
+    zeros, so each dimension compiles its own chain); hb: scratch of
+    >= i1 - i0 floats."""
     if _any_finite(H, i0, i1):
         Hs, hofs = _h_rows(H, hb, i0, i1 - i0)
-        fast_rows(pa, va, aa, ra, pb, vb, ab, rb, Hs, hofs, out, i0, i1 - i0, (0.0, 0.0))
+        fast_rows(pa, va, aa, ra, pb, vb, ab, rb, Hs, hofs, out, i0, i1 - i0, Z)
         for i in range(i0, i1):
             if out[i] == UNDECIDED:
-                out[i] = _robust2(pa, va, aa, ra, pb, vb, ab, rb, _h_at(H, i), i)
+                out[i] = _robust_row(pa, va, aa, ra, pb, vb, ab, rb, _h_at(H, i), i, Z)
     else:
         for i in range(i0, i1):
-            out[i] = _robust2(pa, va, aa, ra, pb, vb, ab, rb, _h_at(H, i), i)
+            out[i] = _robust_row(pa, va, aa, ra, pb, vb, ab, rb, _h_at(H, i), i, Z)
 
 
-@njit(cache=True, error_model="numpy", inline="always")
-def _block3(pa, va, aa, ra, pb, vb, ab, rb, H, out, i0, i1, hb):
-    """Rows [i0, i1) of a 3-D batch; hb: scratch of >= i1 - i0 floats."""
-    if _any_finite(H, i0, i1):
-        Hs, hofs = _h_rows(H, hb, i0, i1 - i0)
-        fast_rows(pa, va, aa, ra, pb, vb, ab, rb, Hs, hofs, out, i0, i1 - i0, (0.0, 0.0, 0.0))
-        for i in range(i0, i1):
-            if out[i] == UNDECIDED:
-                out[i] = _robust3(pa, va, aa, ra, pb, vb, ab, rb, _h_at(H, i), i)
-    else:
-        for i in range(i0, i1):
-            out[i] = _robust3(pa, va, aa, ra, pb, vb, ab, rb, _h_at(H, i), i)
+_Z2 = (0.0, 0.0)
+_Z3 = (0.0, 0.0, 0.0)
 
 
 @njit(cache=True, error_model="numpy")
@@ -822,7 +815,7 @@ def _k2(pa, va, aa, ra, pb, vb, ab, rb, H, out):
     n = out.shape[0]
     hb = np.empty(_BLOCK)
     for i0 in range(0, n, _BLOCK):
-        _block2(pa, va, aa, ra, pb, vb, ab, rb, H, out, i0, min(n, i0 + _BLOCK), hb)
+        _block(pa, va, aa, ra, pb, vb, ab, rb, H, out, i0, min(n, i0 + _BLOCK), hb, _Z2)
 
 
 @njit(cache=True, error_model="numpy")
@@ -830,7 +823,7 @@ def _k3(pa, va, aa, ra, pb, vb, ab, rb, H, out):
     n = out.shape[0]
     hb = np.empty(_BLOCK)
     for i0 in range(0, n, _BLOCK):
-        _block3(pa, va, aa, ra, pb, vb, ab, rb, H, out, i0, min(n, i0 + _BLOCK), hb)
+        _block(pa, va, aa, ra, pb, vb, ab, rb, H, out, i0, min(n, i0 + _BLOCK), hb, _Z3)
 
 
 # Threaded kernels spread every thread's rows over the whole batch.  A plain
@@ -875,7 +868,7 @@ def _k2p(pa, va, aa, ra, pb, vb, ab, rb, H, out):
     nb, bits, size = _blocks(n)
     for k in prange(nb):
         i0, i1 = _block_rows(k, bits, size, n)
-        _block2(pa, va, aa, ra, pb, vb, ab, rb, H, out, i0, i1, np.empty(_BLOCK))
+        _block(pa, va, aa, ra, pb, vb, ab, rb, H, out, i0, i1, np.empty(_BLOCK), _Z2)
 
 
 @njit(cache=True, error_model="numpy", parallel=True)
@@ -884,7 +877,7 @@ def _k3p(pa, va, aa, ra, pb, vb, ab, rb, H, out):
     nb, bits, size = _blocks(n)
     for k in prange(nb):
         i0, i1 = _block_rows(k, bits, size, n)
-        _block3(pa, va, aa, ra, pb, vb, ab, rb, H, out, i0, i1, np.empty(_BLOCK))
+        _block(pa, va, aa, ra, pb, vb, ab, rb, H, out, i0, i1, np.empty(_BLOCK), _Z3)
 
 
 @njit(cache=True, error_model="numpy")
@@ -900,8 +893,8 @@ def _ttc_scalar(pax, pay, paz, vax, vay, vaz, aax, aay, aaz, r_a,
     r[12], r[13], r[14], r[15], r[16], r[17] = vbx, vby, vbz, abx, aby, abz
     r[18], r[19] = r_a, r_b
     v = r[:18].reshape((6, 1, 3))
-    _block3(v[0], v[1], v[2], r[18:19], v[3], v[4], v[5], r[19:20], float(horizon),
-            r[20:21], 0, 1, r[21:])
+    _block(v[0], v[1], v[2], r[18:19], v[3], v[4], v[5], r[19:20], float(horizon),
+           r[20:21], 0, 1, r[21:], _Z3)
     return r[20]
 
 
@@ -913,8 +906,8 @@ def _ttc_scalar2(pax, pay, vax, vay, aax, aay, r_a, pbx, pby, vbx, vby, abx, aby
     r[6], r[7], r[8], r[9], r[10], r[11] = pbx, pby, vbx, vby, abx, aby
     r[12], r[13] = r_a, r_b
     v = r[:12].reshape((6, 1, 2))
-    _block2(v[0], v[1], v[2], r[12:13], v[3], v[4], v[5], r[13:14], float(horizon),
-            r[14:15], 0, 1, r[15:])
+    _block(v[0], v[1], v[2], r[12:13], v[3], v[4], v[5], r[13:14], float(horizon),
+           r[14:15], 0, 1, r[15:], _Z2)
     return r[14]
 
 

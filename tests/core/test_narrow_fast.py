@@ -38,9 +38,11 @@ def _fast(args, H):
 
 
 def _robust(args, H):
-    robust = npz._robust2 if args[0].shape[1] == 2 else npz._robust3
+    robust = npz._robust_pair2 if args[0].shape[1] == 2 else npz._robust_pair3
     Hs = np.broadcast_to(np.asarray(H, float), (args[3].shape[0],))
-    return np.array([robust(*args, float(Hs[i]), i) for i in range(args[3].shape[0])])
+    pa, va, aa, ra, pb, vb, ab, rb = args
+    return np.array([robust(*pa[i], *va[i], *aa[i], ra[i], *pb[i], *vb[i], *ab[i], rb[i], float(Hs[i]))
+                     for i in range(ra.shape[0])])
 
 
 @pytest.mark.parametrize("D", [2, 3])
