@@ -8,10 +8,10 @@ PACKAGE = "circle_collision_ros"
 # Console scripts; each is also linked into <prefix>/lib/circle_collision_ros/
 # (setup.cfg for colcon, scripts/bootstrap.sh for the venv) so `ros2 run` finds it.
 CONSOLE_SCRIPTS = [
-    "collision_node = circle_collision_ros.collision_node:main",
-    "demo_scene = circle_collision_ros.demo_scene:main",
-    "demo = circle_collision_ros.demo:main",
-    "replay = circle_collision_ros.replay:main",
+    "collision_node = circle_collision_ros.node.collision_node:main",
+    "demo_scene = circle_collision_ros.demo.demo_scene:main",
+    "demo = circle_collision_ros.demo.run:main",
+    "replay = circle_collision_ros.recording.replay:main",
 ]
 
 setup(

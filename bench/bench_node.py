@@ -39,9 +39,9 @@ from diagnostic_msgs.msg import DiagnosticArray  # noqa: E402
 from rclpy.qos import QoSProfile, ReliabilityPolicy  # noqa: E402
 
 from circle_collision_msgs.msg import CircleStateArray, CollisionPredictionArray  # noqa: E402
-from circle_collision_ros.cdr_codec import encode_state_array  # noqa: E402
-from circle_collision_ros.demo_scene import SyntheticScene  # noqa: E402
-from circle_collision_ros.state_batch import StateBatch  # noqa: E402
+from circle_collision_ros.pipeline.cdr_codec import encode_state_array  # noqa: E402
+from circle_collision_ros.demo.demo_scene import SyntheticScene  # noqa: E402
+from circle_collision_ros.pipeline.state_batch import StateBatch  # noqa: E402
 
 
 def scene_bytes(scene: SyntheticScene, stamp_ns: int) -> bytes:

@@ -7,4 +7,4 @@ ROOT=$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)
 "$ROOT/scripts/bootstrap.sh"
 export ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST  # DDS stays on this machine
 cd "$ROOT"
-exec "$ROOT/.venv/bin/python" -m circle_collision_ros.demo "$@"
+exec "$ROOT/.venv/bin/python" -m circle_collision_ros.demo.run "$@"

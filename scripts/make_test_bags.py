@@ -29,7 +29,7 @@ def main() -> int:
     for name, args in BAGS.items():
         bag = DATA / name
         shutil.rmtree(bag, ignore_errors=True)
-        run = subprocess.run([sys.executable, "-m", "circle_collision_ros.demo", "--duration", "3",
+        run = subprocess.run([sys.executable, "-m", "circle_collision_ros.demo.run", "--duration", "3",
                               "--runs-dir", str(DATA / "_runs"), "--bag", str(bag), *args],
                              capture_output=True, text=True)
         if run.returncode != 0:

@@ -16,7 +16,7 @@ import math
 import pytest
 
 from circle_collision_msgs.msg import CollisionPrediction
-from circle_collision_ros.prediction_pipeline import CollisionPredictor, PredictorConfig, predict_once
+from circle_collision_ros.pipeline.predictor import CollisionPredictor, PredictorConfig, predict_once
 from tests.ros.node_helpers import (BASE_NS, assert_no_nan, contacts_of, expected_contacts,
                                     random_states, state)
 

@@ -28,13 +28,13 @@ import pytest
 from rclpy.serialization import deserialize_message, serialize_message
 
 from circle_collision_msgs.msg import CircleStateArray, CollisionPredictionArray
-from circle_collision_ros.bag_reader import RECORDED_TYPES, open_bag
-from circle_collision_ros.bag_recorder import BagRecorder
-from circle_collision_ros.replay import RecordedTypes, replay_offline
+from circle_collision_ros.recording.bag_reader import RECORDED_TYPES, open_bag
+from circle_collision_ros.recording.bag_recorder import BagRecorder
+from circle_collision_ros.recording.replay import RecordedTypes, replay_offline
 
 DATA = Path(__file__).resolve().parent / "data"
 BAGS = sorted(p for p in DATA.iterdir() if (p / "metadata.yaml").is_file())
-REPLAY = [sys.executable, "-m", "circle_collision_ros.replay"]
+REPLAY = [sys.executable, "-m", "circle_collision_ros.recording.replay"]
 ALL_TYPES = RECORDED_TYPES | {RecordedTypes.CONFIG}
 
 

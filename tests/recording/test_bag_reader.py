@@ -16,9 +16,9 @@ from mcap.writer import CompressionType, Writer
 from rclpy.serialization import deserialize_message, serialize_message
 
 from circle_collision_msgs.msg import CircleStateArray
-from circle_collision_ros.bag_reader import BagError, BagRecord, Limits, open_bag
-from circle_collision_ros.bag_recorder import BagFormat, BagRecorder
-from circle_collision_ros.ros_type_definitions import full_msg_definition
+from circle_collision_ros.recording.bag_reader import BagError, BagRecord, Limits, open_bag
+from circle_collision_ros.recording.bag_recorder import BagFormat, BagRecorder
+from circle_collision_ros.recording.ros_type_definitions import full_msg_definition
 
 from .test_bag_recorder import (
     CONFIG,

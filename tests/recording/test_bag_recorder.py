@@ -26,14 +26,14 @@ from mcap.reader import make_reader
 from mcap_ros2.decoder import DecoderFactory
 from rclpy.serialization import deserialize_message, serialize_message
 
-from circle_collision_ros.bag_reader import open_bag
-from circle_collision_ros.bag_recorder import (
+from circle_collision_ros.recording.bag_reader import open_bag
+from circle_collision_ros.recording.bag_recorder import (
     BagFormat,
     BagRecorder,
     RecordingError,
     qos_profiles_yaml,
 )
-from circle_collision_ros.ros_type_definitions import (
+from circle_collision_ros.recording.ros_type_definitions import (
     DefinitionFormat,
     TypeDefinitionError,
     full_msg_definition,
@@ -326,7 +326,7 @@ def test_idle_chunk_reaches_disk_within_max_age(tmp_path: Path) -> None:
 _KILL_CHILD = textwrap.dedent("""
     import sys, time
     from rclpy.serialization import serialize_message
-    from circle_collision_ros.bag_recorder import BagRecorder
+    from circle_collision_ros.recording.bag_recorder import BagRecorder
     from tests.recording.test_bag_recorder import make_states, make_predictions, CONFIG
 
     bag = BagRecorder(sys.argv[1])

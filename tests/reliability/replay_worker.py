@@ -20,8 +20,8 @@ import numpy as np
 
 os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
 
-from circle_collision_ros import replay  # noqa: E402
-from circle_collision_ros.bag_recorder import BagRecorder  # noqa: E402
+from circle_collision_ros.recording import replay  # noqa: E402
+from circle_collision_ros.recording.bag_recorder import BagRecorder  # noqa: E402
 
 DATA = Path(__file__).resolve().parents[1] / "data"
 SOURCES = sorted(DATA.glob("*/*.mcap"))

@@ -23,7 +23,7 @@ import rclpy  # noqa: E402
 from rclpy.qos import QoSProfile, ReliabilityPolicy  # noqa: E402
 
 from circle_collision_msgs.msg import CircleStateArray  # noqa: E402
-from circle_collision_ros.demo_scene import SyntheticScene  # noqa: E402
+from circle_collision_ros.demo.demo_scene import SyntheticScene  # noqa: E402
 from tests.reliability.wire import encode_scene  # noqa: E402
 
 

@@ -16,7 +16,7 @@ import time
 
 from rosgraph_msgs.msg import Clock
 
-from circle_collision_ros.prediction_messages import ns_to_time
+from circle_collision_ros.pipeline.prediction_messages import ns_to_time
 from tests.reliability.conftest import fact
 from tests.reliability.node_process import Client, NodeProcess, stamp_of
 from tests.reliability.test_faults_node import _pair, _ttcs

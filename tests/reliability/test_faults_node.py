@@ -22,8 +22,8 @@ from rclpy.qos import QoSProfile, ReliabilityPolicy
 
 from circle_collision_msgs.msg import CircleStateArray
 from circle_collision_msgs.srv import PredictCollisions
-from circle_collision_ros.cdr_codec import decode_states
-from circle_collision_ros.prediction_pipeline import CollisionPredictor, PredictorConfig
+from circle_collision_ros.pipeline.cdr_codec import decode_states
+from circle_collision_ros.pipeline.predictor import CollisionPredictor, PredictorConfig
 from tests.reliability.conftest import fact, tally
 from tests.reliability.node_process import Client, NodeProcess, stamp_of
 from tests.reliability.wire import Body, encode_array

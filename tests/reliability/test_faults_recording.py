@@ -18,14 +18,14 @@ from pathlib import Path
 
 import pytest
 
-from circle_collision_ros.bag_reader import BagError, open_bag
-from circle_collision_ros.bag_recorder import ChunkLimits
+from circle_collision_ros.recording.bag_reader import BagError, open_bag
+from circle_collision_ros.recording.bag_recorder import ChunkLimits
 from tests.reliability.conftest import fact, tally
 from tests.reliability.node_process import Client, NodeProcess
 from tests.reliability.test_faults_node import _pair
 from tests.reliability.wire import encode_array
 
-REPLAY = [sys.executable, "-m", "circle_collision_ros.replay"]
+REPLAY = [sys.executable, "-m", "circle_collision_ros.recording.replay"]
 
 
 def _stream(client: Client, seconds: float, prefix: str) -> int:

@@ -24,8 +24,8 @@ from rclpy.serialization import deserialize_message, serialize_message
 from std_msgs.msg import Header
 
 from circle_collision_msgs.msg import CircleState, CircleStateArray
-from circle_collision_ros.cdr_codec import CdrError, decode_states
-from circle_collision_ros.state_batch import StateBatch
+from circle_collision_ros.pipeline.cdr_codec import CdrError, decode_states
+from circle_collision_ros.pipeline.state_batch import StateBatch
 from tests.reliability.conftest import tally
 from tests.reliability.wire import Body, encode_array, encode_state
 from tests.ros.node_helpers import random_states, state_array

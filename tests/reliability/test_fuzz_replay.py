@@ -24,7 +24,7 @@ from hypothesis import strategies as st
 from tests.reliability.conftest import tally
 
 ROOT = Path(__file__).resolve().parents[2]
-REPLAY = [sys.executable, "-m", "circle_collision_ros.replay"]
+REPLAY = [sys.executable, "-m", "circle_collision_ros.recording.replay"]
 SOURCE = next((ROOT / "tests" / "data" / "plain_2d").glob("*.mcap")).read_bytes()
 WORKER_CASES = 400
 

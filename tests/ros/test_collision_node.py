@@ -29,7 +29,7 @@ from visualization_msgs.msg import MarkerArray
 
 from circle_collision_msgs.msg import CircleState, CircleStateArray, CollisionPredictionArray
 from circle_collision_msgs.srv import PredictCollisions
-from circle_collision_ros.collision_node import CollisionNode
+from circle_collision_ros.node.collision_node import CollisionNode
 from tests.ros.conftest import spin_until
 from tests.ros.node_helpers import (BASE_NS, assert_no_nan, contacts_of, expected_contacts,
                                     random_states, state, state_array)

@@ -13,11 +13,11 @@ import sys
 
 import numpy as np
 
-from circle_collision_ros.demo_scene import SyntheticScene
+from circle_collision_ros.demo.demo_scene import SyntheticScene
 
 
 def test_demo_runs_and_draws_the_scene(tmp_path) -> None:
-    run = subprocess.run([sys.executable, "-m", "circle_collision_ros.demo", "--duration", "6",
+    run = subprocess.run([sys.executable, "-m", "circle_collision_ros.demo.run", "--duration", "6",
                           "--count", "60", "--runs-dir", str(tmp_path)],
                          capture_output=True, text=True, timeout=180)
     assert run.returncode == 0, run.stdout + run.stderr

@@ -13,7 +13,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from circle_collision_ros.state_batch import StateBatch
+from circle_collision_ros.pipeline.state_batch import StateBatch
 
 
 class StampLimits:

@@ -13,7 +13,7 @@ Messages are buffered in an MCAP chunk that is closed and handed to the OS
 oldest message is :attr:`ChunkLimits.MAX_AGE_S` old (a background thread covers
 idle periods). A SIGKILL therefore loses at most the open chunk -- about 1 s
 or 1 MiB of messages -- plus the MCAP summary/footer; the rest reads back with
-``circle_collision_ros.bag_reader.open_bag(path, tolerant=True)``. An OS crash
+``circle_collision_ros.recording.bag_reader.open_bag(path, tolerant=True)``. An OS crash
 or power loss can lose more (page cache); only :meth:`BagRecorder.close` fsyncs.
 
 ``metadata.yaml`` is written at start, rewritten (atomically, via rename) at

@@ -144,8 +144,8 @@ def main(args: list[str] | None = None) -> int:
     if not opts.no_record:
         node_args[:0] = ["-p", f"record_path:={bag}"]
     children = [
-        _start("circle_collision_ros.collision_node", node_args),
-        _start("circle_collision_ros.demo_scene",
+        _start("circle_collision_ros.node.collision_node", node_args),
+        _start("circle_collision_ros.demo.demo_scene",
                ["-p", f"count:={opts.count}", "-p", f"seed:={opts.seed}", "-p", f"rate:={opts.rate}",
                 "-p", f"area_size:={opts.area}",
                 "-p", f"dimensions:={opts.dimensions}", "-p", f"bad_fraction:={opts.bad_fraction}"]),

@@ -14,7 +14,7 @@ from std_msgs.msg import ColorRGBA, Header
 from visualization_msgs.msg import Marker, MarkerArray
 
 from circle_collision_msgs.msg import CollisionPrediction
-from circle_collision_ros.prediction_messages import ScenePrediction
+from circle_collision_ros.pipeline.prediction_messages import ScenePrediction
 
 
 class Urgency:

@@ -19,11 +19,11 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from circle_collision_msgs.msg import CircleState
-from circle_collision_ros.body_registry import BodyRegistry
+from circle_collision_ros.pipeline.body_registry import BodyRegistry
 from circle_collision_ros.core import predict_all_pairs
-from circle_collision_ros.prediction_messages import ScenePrediction
-from circle_collision_ros.state_batch import StateBatch
-from circle_collision_ros.state_validation import Rejection, check_batch
+from circle_collision_ros.pipeline.prediction_messages import ScenePrediction
+from circle_collision_ros.pipeline.state_batch import StateBatch
+from circle_collision_ros.pipeline.state_validation import Rejection, check_batch
 
 
 @dataclass(frozen=True)

@@ -33,12 +33,12 @@ from visualization_msgs.msg import MarkerArray
 
 from circle_collision_msgs.msg import CircleState, CircleStateArray, CollisionPredictionArray
 from circle_collision_msgs.srv import PredictCollisions
-from circle_collision_ros import node_parameters
-from circle_collision_ros.bag_recorder import BagRecorder, RecordingError
-from circle_collision_ros.cdr_codec import CdrError, decode_states
+from circle_collision_ros.node import parameters as node_parameters
+from circle_collision_ros.recording.bag_recorder import BagRecorder, RecordingError
+from circle_collision_ros.pipeline.cdr_codec import CdrError, decode_states
 from circle_collision_ros.cli import parse_args, spin_node
-from circle_collision_ros.markers import MarkerBuilder
-from circle_collision_ros.prediction_pipeline import (CollisionPredictor, IntakeReport,
+from circle_collision_ros.node.markers import MarkerBuilder
+from circle_collision_ros.pipeline.predictor import (CollisionPredictor, IntakeReport,
                                                       PredictorConfig, predict_once)
 
 

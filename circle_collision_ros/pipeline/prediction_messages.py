@@ -19,8 +19,8 @@ from geometry_msgs.msg import Point, Vector3
 from std_msgs.msg import Header
 
 from circle_collision_msgs.msg import CollisionPrediction, CollisionPredictionArray
-from circle_collision_ros.body_registry import SceneSnapshot
-from circle_collision_ros.cdr_codec import encode_prediction_array
+from circle_collision_ros.pipeline.body_registry import SceneSnapshot
+from circle_collision_ros.pipeline.cdr_codec import encode_prediction_array
 
 
 class ReportAll:

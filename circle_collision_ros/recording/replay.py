@@ -23,9 +23,9 @@ from rclpy.serialization import deserialize_message
 from std_msgs.msg import String
 
 from circle_collision_msgs.msg import CircleState, CircleStateArray, CollisionPredictionArray
-from circle_collision_ros.bag_reader import RECORDED_TYPES, BagError, BagRecord, open_bag
-from circle_collision_ros.cdr_codec import CdrError, decode_states
-from circle_collision_ros.prediction_pipeline import CollisionPredictor, PredictorConfig
+from circle_collision_ros.recording.bag_reader import RECORDED_TYPES, BagError, BagRecord, open_bag
+from circle_collision_ros.pipeline.cdr_codec import CdrError, decode_states
+from circle_collision_ros.pipeline.predictor import CollisionPredictor, PredictorConfig
 
 
 class RecordedTypes:

@@ -30,7 +30,7 @@ import numpy as np
 from numba import njit
 
 from circle_collision_msgs.msg import CircleState, CircleStateArray
-from circle_collision_ros.state_batch import StateBatch
+from circle_collision_ros.pipeline.state_batch import StateBatch
 
 CDR_LE = b"\x00\x01"
 CDR_BE = b"\x00\x00"

@@ -1,0 +1,1 @@
+"""The rclpy collision_node: subscriptions, publishers, service, parameters, markers, diagnostics."""

@@ -1,0 +1,1 @@
+"""Received circle states to predictions, without a ROS graph (shared by node, service and replay)."""
