@@ -1,10 +1,11 @@
-"""Shared start-up of the package's executables: --help, local DDS, clean shutdown."""
+"""Shared start-up of the package's executables: --help, DDS defaults, clean shutdown."""
 from __future__ import annotations
 
 import argparse
 import os
 import sys
 from collections.abc import Callable
+from pathlib import Path
 
 import rclpy
 from rclpy.exceptions import NameValidationException, ParameterException
@@ -25,6 +26,32 @@ def parse_args(argv: list[str], description: str,
     return parser.parse_args(rclpy.utilities.remove_ros_args(argv)[1:])
 
 
+class TransportProfile:
+    """The shipped Fast DDS profile for large scenes (config/fastdds_large_scenes.xml)."""
+
+    ENV = "FASTDDS_DEFAULT_PROFILES_FILE"
+    # Fast DDS 2.x name, deprecated in 3.x (it logs a warning); a user who set it chose a profile.
+    DEPRECATED_ENV = "FASTRTPS_DEFAULT_PROFILES_FILE"
+    FILE_NAME = "fastdds_large_scenes.xml"
+    PACKAGE = "circle_collision_ros"
+
+    @classmethod
+    def path(cls) -> Path | None:
+        """The installed profile: the package's share/ (colcon or venv), else the source tree's config/."""
+        candidates = []
+        try:
+            from ament_index_python.packages import get_package_share_directory
+            candidates.append(Path(get_package_share_directory(cls.PACKAGE)) / "config")
+        except (ImportError, LookupError, KeyError, ValueError, OSError):
+            pass  # no ament index in this environment (e.g. AMENT_PREFIX_PATH unset)
+        candidates.append(Path(sys.prefix) / "share" / cls.PACKAGE / "config")
+        candidates.append(Path(__file__).resolve().parent.parent / "config")  # editable/source tree
+        for folder in candidates:
+            if (folder / cls.FILE_NAME).is_file():
+                return folder / cls.FILE_NAME
+        return None
+
+
 def keep_ros_traffic_local() -> None:
     """Default DDS discovery to this machine unless the user chose otherwise.
 
@@ -34,13 +61,36 @@ def keep_ros_traffic_local() -> None:
     os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
 
 
+def use_large_scene_transport() -> str | None:
+    """Load the shipped large-scene Fast DDS profile unless the user chose a profile.
+
+    Must run before rclpy.init (Fast DDS reads the file when the participant is
+    created). Returns the profile file in force, or None if there is none. The
+    user's FASTDDS_DEFAULT_PROFILES_FILE (or the deprecated FASTRTPS_ name) always wins.
+    """
+    for name in (TransportProfile.ENV, TransportProfile.DEPRECATED_ENV):
+        if os.environ.get(name):
+            return os.environ[name]
+    path = TransportProfile.path()
+    if path is None:
+        return None
+    os.environ[TransportProfile.ENV] = str(path)
+    return str(path)
+
+
+def apply_ros_environment_defaults() -> None:
+    """What every executable of this package sets before rclpy.init: local discovery, large-scene transport."""
+    keep_ros_traffic_local()
+    use_large_scene_transport()
+
+
 def spin_node(make_node: Callable[[], Node], argv: list[str], name: str) -> int:
     """rclpy.init, build the node, spin until Ctrl-C/SIGTERM, shut down cleanly.
 
     Start-up errors (invalid parameters, bad topic names, unusable paths) print
     one line naming the problem and return exit code 2, without a traceback.
     """
-    keep_ros_traffic_local()
+    apply_ros_environment_defaults()
     rclpy.init(args=argv)
     node = None
     try:

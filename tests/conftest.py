@@ -40,6 +40,12 @@ if "CIRCLE_COLLISION_TEST_DOMAIN_ID" not in os.environ:
     os.environ["CIRCLE_COLLISION_TEST_DOMAIN_ID"] = str(_claim_domain_id())
 os.environ["ROS_DOMAIN_ID"] = os.environ["CIRCLE_COLLISION_TEST_DOMAIN_ID"]
 
+# As the package's executables do (cli.apply_ros_environment_defaults): the shipped
+# large-scene Fast DDS profile, unless the environment names one already.
+from circle_collision_ros.cli import use_large_scene_transport  # noqa: E402
+
+use_large_scene_transport()
+
 
 @pytest.fixture(scope="session")
 def ros_domain_id() -> int:

@@ -23,7 +23,7 @@ from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 
 from circle_collision_msgs.msg import CircleStateArray, CollisionPrediction, CollisionPredictionArray
-from circle_collision_ros.cli import keep_ros_traffic_local, parse_args
+from circle_collision_ros.cli import apply_ros_environment_defaults, parse_args
 
 STARTUP_TIMEOUT_S = 120.0
 STATUS_NAMES = {CollisionPrediction.NO_CONTACT: "none", CollisionPrediction.CONTACT: "contact",
@@ -135,7 +135,7 @@ def _all_running(children: list[subprocess.Popen]) -> bool:
 def main(args: list[str] | None = None) -> int:
     argv = sys.argv if args is None else args
     opts = parse_args(argv, __doc__.splitlines()[0], _add_arguments)
-    keep_ros_traffic_local()
+    apply_ros_environment_defaults()
     run_dir = Path(opts.runs_dir) / datetime.now(timezone.utc).strftime("%Y%m%d-%H%M%S")
     run_dir.mkdir(parents=True, exist_ok=True)
     bag = Path(opts.bag) if opts.bag else run_dir / "bag"

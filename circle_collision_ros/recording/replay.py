@@ -132,9 +132,9 @@ def republish(records: list[BagRecord], rate: float) -> int:
     import rclpy
     from rclpy.qos import QoSProfile, ReliabilityPolicy
 
-    from circle_collision_ros.cli import keep_ros_traffic_local
+    from circle_collision_ros.cli import apply_ros_environment_defaults
 
-    keep_ros_traffic_local()
+    apply_ros_environment_defaults()
     rclpy.init()
     node = rclpy.create_node("replay")
     qos = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE)
