@@ -17,7 +17,9 @@ import signal
 import sys
 import time
 
-os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
+from circle_collision_ros.cli import apply_ros_environment_defaults  # noqa: E402
+
+apply_ros_environment_defaults()  # local discovery; large-scene transport profile, as our executables
 
 import rclpy  # noqa: E402
 from rclpy.qos import QoSProfile, ReliabilityPolicy  # noqa: E402
