@@ -25,6 +25,7 @@ import subprocess
 import sys
 import time
 from pathlib import Path
+from typing import NamedTuple
 
 os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
 
@@ -90,13 +91,18 @@ def publish(bodies: int, count: int, rate: float, wait_s: float) -> None:
 
 
 def subscribe(reliable: bool, seconds: float) -> None:
-    """Subscriber role: count distinct frames (by header stamp) until SIGINT or `seconds`, print JSON."""
+    """Subscriber role: count distinct frames (by header stamp) until SIGINT or `seconds`, print JSON.
+
+    Also feeds the node's InputLossMonitor, so each row shows whether the node's
+    loss signal accounts for every frame that did not arrive.
+    """
     import struct
 
     import rclpy
     from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 
     from circle_collision_msgs.msg import CircleStateArray
+    from circle_collision_ros.node.input_loss import InputLossMonitor
 
     rclpy.init()
     node = rclpy.create_node("transport_probe_subscriber")
@@ -106,22 +112,43 @@ def subscribe(reliable: bool, seconds: float) -> None:
         qos = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=50,
                          reliability=ReliabilityPolicy.BEST_EFFORT)
     seen: set[int] = set()
-    node.create_subscription(CircleStateArray, TOPIC,
-                             lambda data: seen.add(struct.unpack_from("<iI", data, 4)[1]), qos, raw=True)
+    monitor = InputLossMonitor()
+
+    def on_frame(data: bytes, info) -> None:
+        seen.add(struct.unpack_from("<iI", data, 4)[1])
+        monitor.observe(TOPIC, len(data), info, time.monotonic_ns())
+
+    node.create_subscription(CircleStateArray, TOPIC, on_frame, qos, raw=True)
     end = time.monotonic() + seconds
     try:
         while time.monotonic() < end:
             rclpy.spin_once(node, timeout_sec=0.05)
     except KeyboardInterrupt:  # the publisher is done: report
         pass
-    print(json.dumps({"received": len(seen)}), flush=True)
+    first, last = (min(seen), max(seen)) if seen else (0, 0)
+    print(json.dumps({"received": len(seen), "detected_missing": monitor.missing,
+                      "first": first, "last": last}), flush=True)
     node.destroy_node()
     rclpy.shutdown()
 
 
+class Delivery(NamedTuple):
+    """One measurement: frames sent and received, and what the loss monitor accounted for."""
+
+    sent: int
+    received: int
+    detected_missing: int  # gaps in the writer's sequence numbers seen by InputLossMonitor
+    undetectable: int      # lost before the first or after the last received frame
+
+    @property
+    def accounted(self) -> bool:
+        """Every frame that did not arrive was counted, or could not be (no later frame came)."""
+        return self.received + self.detected_missing + self.undetectable == self.sent
+
+
 def run_pair(size_kb: float, count: int, rate: float, pub_profile: bool, sub_profile: bool,
-             reliable: bool) -> int:
-    """One measurement: both roles as separate processes; returns frames received."""
+             reliable: bool) -> Delivery:
+    """One measurement: both roles as separate processes."""
     bodies = max(1, int(size_kb * 1000 / BYTES_PER_BODY))
     me = [sys.executable, str(Path(__file__).resolve())]
     sub = subprocess.Popen(me + ["--role", "sub", "--seconds", "600"] + (["--reliable"] if reliable else []),
@@ -131,7 +158,9 @@ def run_pair(size_kb: float, count: int, rate: float, pub_profile: bool, sub_pro
     pub.wait(timeout=count / rate + 120)
     sub.send_signal(signal.SIGINT)
     out, _ = sub.communicate(timeout=30)
-    return int(json.loads(out.strip().splitlines()[-1])["received"])
+    row = json.loads(out.strip().splitlines()[-1])
+    undetectable = (row["first"] - 1) + (count - row["last"]) if row["received"] else count
+    return Delivery(count, row["received"], row["detected_missing"], undetectable)
 
 
 def main() -> int:
@@ -158,14 +187,19 @@ def main() -> int:
               ("shipped profile, subscriber only", False, True),
               ("shipped profile, publisher only", True, False)]
     rows = []
-    print(f"| message | set-up | best-effort reader | reliable KEEP_LAST 1 reader |\n|---|---|---|---|")
+    print("| message | set-up | best-effort reader | reliable KEEP_LAST 1 reader |\n|---|---|---|---|")
+
+    def cell(d: Delivery) -> str:
+        check = "" if d.accounted else " (loss count off!)"
+        return f"{d.received} / {d.sent}, {d.detected_missing} counted missing{check}"
+
     for size in opts.sizes_kb:
         for label, pub_profile, sub_profile in setups:
             best = run_pair(size, opts.count, opts.rate, pub_profile, sub_profile, reliable=False)
             rel = run_pair(size, opts.count, opts.rate, pub_profile, sub_profile, reliable=True)
-            rows.append({"size_kb": size, "setup": label, "best_effort": best, "reliable": rel,
-                         "sent": opts.count})
-            print(f"| {size:g} KB | {label} | {best} / {opts.count} | {rel} / {opts.count} |", flush=True)
+            rows.append({"size_kb": size, "setup": label, "best_effort": best._asdict(),
+                         "reliable": rel._asdict()})
+            print(f"| {size:g} KB | {label} | {cell(best)} | {cell(rel)} |", flush=True)
     if opts.json:
         Path(opts.json).write_text(json.dumps(rows, indent=1))
     return 0
