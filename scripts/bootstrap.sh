@@ -114,6 +114,54 @@ PYEOF
   mark package "$h"
 fi
 
+# 4b. Activation gives a ROS environment, like sourcing a workspace's setup.bash:
+# `source .venv/bin/activate` sets AMENT_PREFIX_PATH (ament index: `ros2 run`, `ros2 pkg`,
+# `ros2 interface`), CMAKE_PREFIX_PATH, LD_LIBRARY_PATH (the venv's lib/ and the wheels'
+# bundled ros_*.libs, for non-Python programs; Python re-execs itself with them anyway),
+# ROS_DISTRO/ROS_VERSION/ROS_PYTHON_VERSION, and ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST
+# unless already set (so `ros2` tools see our executables, which default to it).
+# `deactivate` restores each variable as it was. The block is rewritten whenever its
+# content would change (e.g. a new wheel brings another ros_*.libs directory).
+ros_env_block() {
+  local site libs d
+  site=$("$PY" -c 'import sysconfig; print(sysconfig.get_paths()["purelib"])')
+  libs='$VIRTUAL_ENV/lib'
+  for d in "$site"/ros_*.libs; do [ -d "$d" ] && libs="$libs:\$VIRTUAL_ENV/${d#"$VENV"/}"; done
+  local vars="AMENT_PREFIX_PATH CMAKE_PREFIX_PATH LD_LIBRARY_PATH ROS_DISTRO ROS_VERSION ROS_PYTHON_VERSION ROS_AUTOMATIC_DISCOVERY_RANGE"
+  echo "# >>> circle_collision_ros ROS environment (written by scripts/bootstrap.sh) >>>"
+  echo "_ccr_ros_env_restore () {"
+  echo '    [ -n "${_CCR_ROS_ENV_ACTIVE:-}" ] || return 0'
+  for v in $vars; do
+    echo "    if [ -n \"\${_CCR_OLD_$v+x}\" ]; then $v=\"\$_CCR_OLD_$v\"; export $v; unset _CCR_OLD_$v; else unset $v; fi"
+  done
+  echo "    unset _CCR_ROS_ENV_ACTIVE"
+  echo "}"
+  for v in $vars; do
+    echo "if [ -n \"\${$v+x}\" ]; then _CCR_OLD_$v=\"\$$v\"; else unset _CCR_OLD_$v; fi"
+  done
+  echo "_CCR_ROS_ENV_ACTIVE=1"
+  echo 'export AMENT_PREFIX_PATH="$VIRTUAL_ENV${AMENT_PREFIX_PATH:+:$AMENT_PREFIX_PATH}"'
+  echo 'export CMAKE_PREFIX_PATH="$VIRTUAL_ENV${CMAKE_PREFIX_PATH:+:$CMAKE_PREFIX_PATH}"'
+  echo "export LD_LIBRARY_PATH=\"$libs\${LD_LIBRARY_PATH:+:\$LD_LIBRARY_PATH}\""
+  echo 'export ROS_DISTRO=kilted ROS_VERSION=2 ROS_PYTHON_VERSION=3'
+  echo 'export ROS_AUTOMATIC_DISCOVERY_RANGE="${ROS_AUTOMATIC_DISCOVERY_RANGE:-LOCALHOST}"'
+  echo "# <<< circle_collision_ros ROS environment <<<"
+}
+ACTIVATE="$VENV/bin/activate"
+HOOK='    type _ccr_ros_env_restore >/dev/null 2>\&1 \&\& _ccr_ros_env_restore  # circle_collision_ros'
+HOOKED='^    type _ccr_ros_env_restore >/dev/null 2>&1 && _ccr_ros_env_restore  # circle_collision_ros$'
+block=$(ros_env_block)
+current=$(sed -n '/^# >>> circle_collision_ros ROS environment/,/^# <<< circle_collision_ros ROS environment/p' "$ACTIVATE")
+if [ "$current" != "$block" ] || ! grep -q "$HOOKED" "$ACTIVATE"; then
+  say "writing the ROS environment into $ACTIVATE"
+  sed -i -e '/^# >>> circle_collision_ros ROS environment/,/^# <<< circle_collision_ros ROS environment/d' \
+    -e '/_ccr_ros_env_restore.*# circle_collision_ros$/d' "$ACTIVATE"
+  # deactivate (also run by activate itself, "nondestructive") restores our variables first.
+  sed -i "s|^deactivate () {\$|&\n$HOOK|" "$ACTIVATE"
+  grep -q "$HOOKED" "$ACTIVATE" || die "cannot hook deactivate() in $ACTIVATE (unexpected venv activate script)"
+  printf '%s\n' "$block" >> "$ACTIVATE"
+fi
+
 # 5. Compile the numba kernels once into their on-disk cache (__pycache__), so that the
 # first node start or test does not pay the compile; re-runs when the core changes.
 # Old cache files go first: numba checks only the source file of the function it
