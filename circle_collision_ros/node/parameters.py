@@ -4,6 +4,20 @@ Validation is pure (a reason string or None) and runs in the node's on-set
 callback; applying a change happens only in the post-set callback, so a
 refused value never touches the node's state. config/collision_node.yaml holds
 the same defaults for `--ros-args --params-file`.
+
+Two rclpy behaviours shape the declarations (tests/ros/test_parameters.py):
+
+- Every parameter has a value. rclpy's get_parameters service answers a whole
+  request with an empty list if one name in it has no value, so a parameter
+  declared by type only makes `ros2 param dump` print `{}`. An empty list has
+  no element type in rclpy (it infers BYTE_ARRAY from `[]`) and rcl reads `[]`
+  in a params file or `-p name:=[]` as "no value"; list parameters whose
+  default is empty are therefore dynamically typed and always hold a list
+  (empty: `[]`), checked here to be a list of the right element type.
+- Integers are accepted where a double is expected (`-p horizon:=8`, `horizon: 8`
+  in YAML, `ros2 param set ... horizon 8`): double parameters are declared with
+  dynamic typing, any int or float (never bool or string) is checked against
+  the range here, and an integer is stored as the equal double.
 """
 from __future__ import annotations
 
@@ -12,9 +26,10 @@ from dataclasses import dataclass
 from typing import Any
 
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
-from rclpy.exceptions import ParameterUninitializedException
 from rclpy.node import Node
 from rclpy.parameter import Parameter
+
+from circle_collision_ros.pipeline.predictor import HorizonLimits
 
 
 @dataclass(frozen=True)
@@ -27,9 +42,15 @@ class ParamSpec:
     float_range: tuple[float, float] | None = None
     int_range: tuple[int, int] | None = None
 
-    def descriptor(self) -> ParameterDescriptor:
+    @property
+    def dynamically_typed(self) -> bool:
+        """Declared with dynamic typing: doubles (ints accepted) and lists with an empty default."""
+        return self.type_ == Parameter.Type.DOUBLE or self.default == []
+
+    def descriptor(self, read_only: bool | None = None) -> ParameterDescriptor:
         d = ParameterDescriptor(name=self.name, type=self.type_.value, description=self.description,
-                                read_only=self.read_only)
+                                read_only=self.read_only if read_only is None else read_only,
+                                dynamic_typing=self.dynamically_typed)
         if self.float_range:
             d.floating_point_range = [FloatingPointRange(from_value=self.float_range[0],
                                                          to_value=self.float_range[1], step=0.0)]
@@ -45,13 +66,22 @@ PARAMS: tuple[ParamSpec, ...] = (
               read_only=True),
     ParamSpec("single_state_topics", Parameter.Type.STRING_ARRAY, [],
               "Topics carrying one circle_collision_msgs/CircleState each.", read_only=True),
+    ParamSpec("odometry_topics", Parameter.Type.STRING_ARRAY, [],
+              "Topics carrying nav_msgs/Odometry, one robot each; the body id is the topic's namespace.",
+              read_only=True),
+    ParamSpec("odometry_radius", Parameter.Type.DOUBLE, 0.5,
+              "Radius in m of the bodies of odometry_topics.", read_only=True, float_range=(0.0, 1e6)),
+    ParamSpec("odometry_radii", Parameter.Type.DOUBLE_ARRAY, [],
+              "Per-topic radii in m, one per odometry_topics entry; empty: odometry_radius for all.",
+              read_only=True),
     ParamSpec("frame_id", Parameter.Type.STRING, "",
               "Frame every state must be in; empty adopts the first frame seen (no tf: others are rejected).",
               read_only=True),
     ParamSpec("dimensions", Parameter.Type.INTEGER, 2,
               "2: circles in the plane (z ignored); 3: spheres.", read_only=True, int_range=(2, 3)),
     ParamSpec("horizon", Parameter.Type.DOUBLE, 5.0,
-              "Prediction horizon in s: later contacts are not reported.", float_range=(1e-3, 3600.0)),
+              "Prediction horizon in s: later contacts are not reported.",
+              float_range=(HorizonLimits.MIN_S, HorizonLimits.MAX_S)),
     ParamSpec("report_all_pairs", Parameter.Type.BOOL, False,
               "Also list NO_CONTACT pairs (time +inf); only for scenes of at most 100 bodies."),
     ParamSpec("stale_timeout", Parameter.Type.DOUBLE, 2.0,
@@ -69,43 +99,103 @@ PARAMS: tuple[ParamSpec, ...] = (
               read_only=True),
 )
 SPECS = {spec.name: spec for spec in PARAMS}
+_ELEMENT_TYPES = {Parameter.Type.STRING_ARRAY: (str,), Parameter.Type.DOUBLE_ARRAY: (int, float)}
 
 
 def declare_all(node: Node) -> None:
-    """Declare every parameter with its descriptor (overrides from --params-file apply)."""
+    """Declare every parameter with its descriptor (overrides from --params-file apply).
+
+    Afterwards every parameter has a value (see the module docstring); an
+    integer given for a run-time double that passes validation is stored as a
+    double (a read-only one keeps the integer; value_of reads it as float).
+    """
     for spec in PARAMS:
         if spec.default == []:
-            # An empty list has no element type; declare by type so a params file may set it.
-            node.declare_parameter(spec.name, spec.type_, spec.descriptor())
+            _declare_list_with_empty_default(node, spec)
         else:
             node.declare_parameter(spec.name, spec.default, spec.descriptor())
+        value = node.get_parameter(spec.name).value
+        if spec.type_ == Parameter.Type.DOUBLE and _is_integer(value) and not spec.read_only \
+                and validate(spec.name, value) is None:
+            node.set_parameters([Parameter(spec.name, Parameter.Type.DOUBLE, float(value))])
+
+
+def _declare_list_with_empty_default(node: Node, spec: ParamSpec) -> None:
+    """Declare `spec` so that it holds a list even when empty, read-only if the spec says so.
+
+    rcl turns an empty override (`[]`) into "not set", which would leave the
+    parameter without a value; a read-only parameter cannot be fixed after its
+    declaration, so the override is read through a writable declaration first.
+    """
+    given = node.declare_parameter(spec.name, [], spec.descriptor(read_only=False)).value
+    node.undeclare_parameter(spec.name)
+    value = [] if given is None else given
+    node.declare_parameter(spec.name, value, spec.descriptor(), ignore_override=True)
+
+
+def _is_integer(value: Any) -> bool:
+    return isinstance(value, int) and not isinstance(value, bool)
+
+
+def _is_number(value: Any) -> bool:
+    return isinstance(value, (int, float)) and not isinstance(value, bool)
 
 
 def value_of(node: Node, name: str) -> Any:
-    """Current value, with the declared default for a typed-but-unset parameter."""
-    try:
-        value = node.get_parameter(name).value
-    except ParameterUninitializedException:  # declared by type only and not overridden
-        return SPECS[name].default
-    return SPECS[name].default if value is None else value
+    """Current value in its declared type (an integer given for a double as float, lists as list)."""
+    value = node.get_parameter(name).value
+    spec = SPECS[name]
+    if value is None:
+        return spec.default
+    if spec.type_ == Parameter.Type.DOUBLE and _is_number(value):
+        return float(value)
+    if spec.type_ == Parameter.Type.DOUBLE_ARRAY and isinstance(value, (list, tuple)) \
+            and all(_is_number(v) for v in value):
+        return [float(v) for v in value]
+    if spec.type_ in _ELEMENT_TYPES and isinstance(value, (list, tuple)):
+        return list(value)
+    return value  # as given, for validate() to refuse
+
+
+def coerce_integers(params: list[Parameter]) -> list[Parameter]:
+    """Pre-set callback: an integer set at run time for a double parameter becomes that double.
+
+    Anything else is passed unchanged for validate() to judge.
+    """
+    out = []
+    for param in params:
+        spec = SPECS.get(param.name)
+        if spec is not None and spec.type_ == Parameter.Type.DOUBLE and _is_integer(param.value):
+            param = Parameter(param.name, Parameter.Type.DOUBLE, float(param.value))
+        out.append(param)
+    return out
 
 
 def validate(name: str, value: Any) -> str | None:
     """Why `value` is not acceptable for parameter `name`, or None.
 
     Ranges in the descriptors are enforced by rclpy as well; this adds the
-    checks descriptors cannot express (finite, > 0, topic names).
+    checks descriptors cannot express (types of dynamically typed parameters,
+    finite, topic names).
     """
     spec = SPECS.get(name)
     if spec is None:
         return None  # not ours (e.g. qos_overrides.*, use_sim_time)
     if spec.type_ == Parameter.Type.DOUBLE:
-        if not isinstance(value, (int, float)) or not math.isfinite(value):
+        if not _is_number(value) or not math.isfinite(value):
             return f"{name} must be a finite number, got {value!r}"
         low, high = spec.float_range
         if not (low <= value <= high):
             return f"{name} must be in [{low}, {high}], got {value}"
-    if name in ("state_topics", "single_state_topics") and value is not None:
+    elements = _ELEMENT_TYPES.get(spec.type_)
+    if elements is not None:
+        if not isinstance(value, (list, tuple)) or not all(
+                isinstance(v, elements) and not isinstance(v, bool) for v in value):
+            kind = "strings" if spec.type_ == Parameter.Type.STRING_ARRAY else "numbers"
+            return f"{name} must be a list of {kind}, got {value!r}"
+    if name == "odometry_radii" and any(not math.isfinite(r) or r < 0.0 for r in value):
+        return f"odometry_radii must be finite and >= 0, got {list(value)!r}"
+    if name in ("state_topics", "single_state_topics", "odometry_topics") and value is not None:
         if any(not t or " " in t for t in value):
             return f"{name} has an empty or malformed topic name: {list(value)!r}"
     if name == "dimensions" and value not in (2, 3):
