@@ -140,20 +140,51 @@ class CollisionPredictor:
         return ScenePrediction(snapshot, pairs, horizon, self.frame_id, self.config.report_all_pairs)
 
 
+class HorizonLimits:
+    """The horizons accepted, in s: the `horizon` parameter's range, also for the service.
+
+    Above an hour a "time to collision" under constant acceleration says
+    nothing about real motion, and bounds the work one request can ask for.
+    """
+
+    MIN_S = 1e-3
+    MAX_S = 3600.0
+
+
 def predict_once(states: Sequence[CircleState], config: PredictorConfig,
-                 horizon: float | None = None) -> tuple[bool, str, ScenePrediction | None]:
+                 horizon: float | None = None, request_time_ns: int = 0
+                 ) -> tuple[bool, str, ScenePrediction | None]:
     """Stateless prediction for one set of states (the service).
 
-    All states are propagated to the newest stamp among them. Returns
-    (success, message, prediction); the message names the first bad state.
+    Rules (README, "Service"):
+    - horizon None or 0 uses config.horizon; any other value must lie in
+      [HorizonLimits.MIN_S, HorizonLimits.MAX_S], as for the parameter;
+    - an empty request is refused (there is no scene to predict);
+    - a circle with a zero header.stamp is taken as stamped at `request_time_ns`
+      (`ros2 service call` cannot fill in the time); if that is 0 too it is refused;
+    - `remove: true` is refused (nothing persists between requests);
+    - all states are propagated to the newest stamp among them.
+    Returns (success, message, prediction); a refusal names every bad circle
+    with every reason ("circles[k] (id 'x'): reason; reason | circles[j] ...").
     """
-    removals = sum(1 for s in states if s.remove)
-    if removals:
-        return False, f"{removals} circle(s) have remove=true, which a stateless request cannot use", None
-    predictor = CollisionPredictor(replace(config, max_bodies=max(len(states), 1)))
-    report = predictor.ingest(StateBatch.from_messages(states), now_ns=None)
-    if report.rejected:
-        bad = report.rejected[0]
-        more = f" (and {len(report.rejected) - 1} more)" if len(report.rejected) > 1 else ""
-        return False, f"circles[{bad.index}] (id '{bad.body_id}'): {bad.reason}{more}", None
+    if horizon is None or horizon == 0.0:
+        horizon = config.horizon
+    if not (HorizonLimits.MIN_S <= horizon <= HorizonLimits.MAX_S):  # also false for NaN
+        return (False, f"horizon must be 0 (the node's horizon, {config.horizon} s) or in "
+                f"[{HorizonLimits.MIN_S}, {HorizonLimits.MAX_S}] s, got {horizon}", None)
+    if not states:
+        return False, "the request has no circles", None
+    batch = StateBatch.from_messages(states)
+    unstamped = batch.stamp_ns == 0
+    if unstamped.any() and request_time_ns > 0:
+        batch = replace(batch, stamp_ns=np.where(unstamped, np.int64(request_time_ns), batch.stamp_ns))
+    predictor = CollisionPredictor(replace(config, max_bodies=len(states)))
+    report = predictor.ingest(batch, now_ns=None)
+    reasons: dict[int, list[str]] = {r.index: [r.reason] for r in report.rejected}
+    for k, s in enumerate(states):
+        if s.remove:
+            reasons.setdefault(k, []).append("remove=true cannot be used in a stateless request")
+    if reasons:
+        return False, " | ".join(f"circles[{k}] (id '{states[k].id}'): {'; '.join(reasons[k])}"
+                                 for k in sorted(reasons)), None
     return True, "", predictor.predict(horizon)

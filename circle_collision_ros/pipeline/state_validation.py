@@ -47,7 +47,7 @@ class Rejection:
 
     index: int
     body_id: str
-    reason: str
+    reason: str  # every problem of the state, "; "-joined
 
 
 @dataclass(frozen=True)
@@ -62,35 +62,47 @@ class BatchCheck:
 _VECTORS = ("position", "velocity", "acceleration")
 
 
-def _reason(batch: StateBatch, k: int, frame_id: str, now_ns: int | None, dup: bool) -> str:
-    """The first problem of row k, in a fixed order (so the message is deterministic)."""
+class StampHint:
+    """How to stamp a state, for the warning on a zero stamp (the `ros2 topic pub` way)."""
+
+    ZERO = ("header.stamp is zero (unset): stamp each state with the time it is valid at"
+            " (ros2 topic pub: header: {stamp: now})")
+
+
+def _reasons(batch: StateBatch, k: int, frame_id: str, now_ns: int | None, dup: bool) -> str:
+    """Every problem of row k, in a fixed order (so the message is deterministic), "; "-joined."""
+    found: list[str] = []
     if not batch.ids[k]:
-        return "empty id"
+        found.append("empty id")
     if dup:
-        return "id appears more than once in the message"
+        found.append("id appears more than once in the message")
     if not batch.remove[k]:  # a removal needs only id and stamp; its geometry is ignored
         r = float(batch.radius[k])
         if not np.isfinite(r):
-            return f"radius is {r}"
-        if r < 0.0:
-            return f"radius is negative ({r})"
-        if r > ValueLimits.MAX_MAGNITUDE:
-            return f"radius is {r}, beyond {ValueLimits.MAX_MAGNITUDE:g}"
+            found.append(f"radius is {r}")
+        elif r < 0.0:
+            found.append(f"radius is negative ({r})")
+        elif r > ValueLimits.MAX_MAGNITUDE:
+            found.append(f"radius is {r}, beyond {ValueLimits.MAX_MAGNITUDE:g}")
         for name in _VECTORS:
             for axis, value in zip("xyz", getattr(batch, name)[k].tolist()):
                 if not np.isfinite(value):
-                    return f"{name}.{axis} is {value}"
-                if abs(value) > ValueLimits.MAX_MAGNITUDE:
-                    return f"{name}.{axis} is {value}, beyond +-{ValueLimits.MAX_MAGNITUDE:g}"
+                    found.append(f"{name}.{axis} is {value}")
+                elif abs(value) > ValueLimits.MAX_MAGNITUDE:
+                    found.append(f"{name}.{axis} is {value}, beyond +-{ValueLimits.MAX_MAGNITUDE:g}")
         if frame_id and batch.frames[k] != frame_id:
-            return (f"frame '{batch.frames[k]}' is not the scene frame '{frame_id}'"
-                    f" (no tf here: publish in '{frame_id}')")
+            found.append(f"frame '{batch.frames[k]}' is not the scene frame '{frame_id}'"
+                         f" (no tf here: publish in '{frame_id}')")
     stamp = int(batch.stamp_ns[k])
-    if stamp <= 0:
-        return "header.stamp is zero (unset)"
-    if now_ns is not None and stamp - now_ns > StampLimits.MAX_FUTURE_NS:
-        return f"header.stamp is {(stamp - now_ns) * 1e-9:.3f} s in the future"
-    raise AssertionError("row flagged bad without a reason")  # masks and reasons disagree
+    if stamp == 0:
+        found.append(StampHint.ZERO)
+    elif stamp < 0:
+        found.append(f"header.stamp is negative ({stamp * 1e-9:.9f} s)")
+    elif now_ns is not None and stamp - now_ns > StampLimits.MAX_FUTURE_NS:
+        found.append(f"header.stamp is {(stamp - now_ns) * 1e-9:.3f} s in the future")
+    if not found:
+        raise AssertionError("row flagged bad without a reason")  # masks and reasons disagree
+    return "; ".join(found)
 
 
 def check_batch(batch: StateBatch, *, frame_id: str, now_ns: int | None) -> BatchCheck:
@@ -123,6 +135,6 @@ def check_batch(batch: StateBatch, *, frame_id: str, now_ns: int | None) -> Batc
             frame_id = batch.frames[int(candidates[0])]
     if frame_id:
         bad |= ~batch.remove & np.fromiter((f != frame_id for f in batch.frames), dtype=bool, count=n)
-    rejections = [Rejection(int(k), batch.ids[k], _reason(batch, int(k), frame_id, now_ns, bool(dup[k])))
+    rejections = [Rejection(int(k), batch.ids[k], _reasons(batch, int(k), frame_id, now_ns, bool(dup[k])))
                   for k in np.flatnonzero(bad)]
     return BatchCheck(~bad, rejections, frame_id)

@@ -5,7 +5,8 @@ Guarantees proved here:
   published states equal the core narrow phase on every pair;
 - several topics (arrays and single states) merge into one scene by id;
 - the service answers good requests with the same predictions and bad ones with
-  success=false and a message naming the circle; it never raises;
+  success=false and a message naming every bad circle; circles without a stamp
+  are taken at the request time; it never raises;
 - parameters: valid run-time changes apply, invalid ones are refused with a
   reason, read-only ones cannot change;
 - every bad-input class is rejected while the rest of the scene is still
@@ -255,7 +256,29 @@ def test_service_good_and_bad_requests(in_process, ros_node) -> None:
     assert not call(PredictCollisions.Request(circles=states, horizon=-2.0)).success
     assert not call(PredictCollisions.Request(circles=states, horizon=math.inf)).success
     empty = call(PredictCollisions.Request(circles=[], horizon=1.0))
-    assert empty.success and empty.predictions == []
+    assert not empty.success and empty.message == "the request has no circles"
+    assert not call(PredictCollisions.Request(circles=states, horizon=1e7)).success  # cap: 3600 s
+
+
+def test_service_takes_unstamped_circles_at_request_time(in_process, ros_node) -> None:
+    """What `ros2 service call /predict_collisions ...` without stamps sends."""
+    node, _ = in_process
+    client = ros_node.create_client(PredictCollisions, "predict_collisions")
+    assert spin_until(ros_node, client.service_is_ready, 15.0, (node,))
+    circles = [state("a", (0, 0), (1, 0, 0)), state("b", (5, 0)), state("c", (0, 9), r=-1.0)]
+    for c in circles:
+        c.header.stamp.sec = c.header.stamp.nanosec = 0
+    before = _now_ns(ros_node)
+    future = client.call_async(PredictCollisions.Request(circles=circles[:2], horizon=10.0))
+    assert spin_until(ros_node, future.done, 15.0, (node,))
+    answer = future.result()
+    assert answer.success, answer.message
+    assert {(p.id_a, p.id_b): p.time_to_collision for p in answer.predictions} == {("a", "b"): 4.0}
+    contact_ns = answer.predictions[0].contact_time.sec * 10**9 + answer.predictions[0].contact_time.nanosec
+    assert before + 4_000_000_000 <= contact_ns <= _now_ns(ros_node) + 4_000_000_000
+    future = client.call_async(PredictCollisions.Request(circles=circles, horizon=10.0))
+    assert spin_until(ros_node, future.done, 15.0, (node,))
+    assert future.result().message == "circles[2] (id 'c'): radius is negative (-1.0)"
 
 
 def test_params_file_and_qos_override(tmp_path) -> None:
