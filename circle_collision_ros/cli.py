@@ -13,14 +13,21 @@ from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 
 
+COLLISION_NODE_EPILOG = ("ROS arguments follow --ros-args, e.g. --ros-args -p horizon:=3.0 "
+                         "--params-file config/collision_node.yaml")
+
+
 def parse_args(argv: list[str], description: str,
-               add_arguments: Callable[[argparse.ArgumentParser], None] | None = None
-               ) -> argparse.Namespace:
-    """Our own options (and --help); ROS arguments after --ros-args are left to rclpy."""
+               add_arguments: Callable[[argparse.ArgumentParser], None] | None = None,
+               epilog: str = COLLISION_NODE_EPILOG) -> argparse.Namespace:
+    """Our own options (and --help); ROS arguments after --ros-args are left to rclpy.
+
+    epilog : the text after the options, e.g. the executable's ROS parameters
+        (kept as written: line breaks matter).
+    """
     parser = argparse.ArgumentParser(
         prog=os.path.basename(argv[0]) if argv else None, description=description,
-        epilog="ROS arguments follow --ros-args, e.g. --ros-args -p horizon:=3.0 "
-               "--params-file config/collision_node.yaml")
+        epilog=epilog, formatter_class=argparse.RawDescriptionHelpFormatter)
     if add_arguments is not None:
         add_arguments(parser)
     return parser.parse_args(rclpy.utilities.remove_ros_args(argv)[1:])

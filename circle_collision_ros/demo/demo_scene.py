@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import math
 import sys
+from typing import Any, NamedTuple
 
 import numpy as np
 from builtin_interfaces.msg import Time
@@ -92,19 +93,40 @@ class SyntheticScene:
         self.a[k] = self._random_vectors(1, self.max_accel)[0]
 
 
+class DemoParam(NamedTuple):
+    """One demo_scene parameter: name, default, meaning (shown by --help)."""
+
+    name: str
+    default: Any
+    meaning: str
+
+
+DEMO_PARAMS: tuple[DemoParam, ...] = (
+    DemoParam("count", 40, "number of bodies"),
+    DemoParam("area_size", 60.0, "side of the square area in m"),
+    DemoParam("dimensions", 2, "2: circles in the plane, 3: spheres"),
+    DemoParam("seed", 1, "random seed: the same seed gives the same motion"),
+    DemoParam("rate", 30.0, "messages per second (Hz)"),
+    DemoParam("frame_id", "map", "frame of every state"),
+    DemoParam("topic", "circle_states", "CircleStateArray topic to publish on"),
+    DemoParam("bad_fraction", 0.0, "fraction of states made malformed (0..1), to exercise input checks"),
+)
+
+
+def _help_epilog() -> str:
+    rows = "\n".join(f"  {p.name:<13} {p.default!r:<16} {p.meaning}" for p in DEMO_PARAMS)
+    return ("ROS parameters (set after --ros-args with -p name:=value):\n"
+            f"  {'name':<13} {'default':<16} meaning\n{rows}\n\n"
+            "Example: demo_scene --ros-args -p count:=200 -p rate:=10.0")
+
+
 class DemoScenePublisher(Node):
-    """Publishes SyntheticScene as CircleStateArray on `circle_states` at `rate` Hz."""
+    """Publishes SyntheticScene as CircleStateArray on `topic` at `rate` Hz."""
 
     def __init__(self) -> None:
         super().__init__("demo_scene")
-        self.declare_parameter("count", 40)
-        self.declare_parameter("area_size", 60.0)
-        self.declare_parameter("dimensions", 2)
-        self.declare_parameter("seed", 1)
-        self.declare_parameter("rate", 30.0)
-        self.declare_parameter("frame_id", "map")
-        self.declare_parameter("topic", "circle_states")
-        self.declare_parameter("bad_fraction", 0.0)
+        for param in DEMO_PARAMS:
+            self.declare_parameter(param.name, param.default)
         g = lambda name: self.get_parameter(name).value  # noqa: E731
         self.scene = SyntheticScene(g("count"), g("area_size"), g("dimensions"), g("seed"))
         self.frame_id, self.rate, self.bad_fraction = g("frame_id"), g("rate"), g("bad_fraction")
@@ -114,6 +136,10 @@ class DemoScenePublisher(Node):
             CircleStateArray, g("topic"), QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE))
         self.ticks = 0
         self.create_timer(1.0 / self.rate, self._tick)
+        # One line, so whoever started the demo knows what to subscribe to.
+        self.get_logger().info(
+            f"publishing {self.scene.count} {self.scene.dimensions}-D bodies as CircleStateArray on "
+            f"{self.publisher.topic_name} (frame '{self.frame_id}') at {self.rate:g} Hz")
 
     def _tick(self) -> None:
         if self.ticks:
@@ -138,7 +164,7 @@ class DemoScenePublisher(Node):
 
 def main(args: list[str] | None = None) -> int:
     argv = sys.argv if args is None else args
-    parse_args(argv, __doc__.splitlines()[0])
+    parse_args(argv, __doc__.splitlines()[0], epilog=_help_epilog())
     return spin_node(DemoScenePublisher, argv, "demo_scene")
 
 

@@ -3,7 +3,9 @@
 Guarantees proved here: `demo` starts collision_node and demo_scene as
 separate processes, receives predictions over DDS, prints the table (plain
 lines when stdout is not a terminal), writes a valid PNG and exits 0; the demo
-scene is reproducible from its seed.
+scene is reproducible from its seed; `demo_scene --help` lists demo_scene's own
+parameters, and while running it prints one line saying what it publishes,
+where and how fast.
 """
 from __future__ import annotations
 
@@ -39,3 +41,38 @@ def test_synthetic_scene_is_reproducible() -> None:
     assert (a.p[:, :2] >= 0).all() and (a.p[:, :2] <= 60.0).all() and (a.p[:, 2] == 0).all()
     c = SyntheticScene(50, 60.0, 2, seed=8)
     assert not np.array_equal(a.radii, c.radii)
+
+
+def _demo_scene_exe() -> str:
+    import os
+    return os.path.join(sys.prefix, "lib", "circle_collision_ros", "demo_scene")
+
+
+def test_demo_scene_help_shows_its_own_parameters() -> None:
+    from circle_collision_ros.demo.demo_scene import DEMO_PARAMS
+
+    out = subprocess.run([_demo_scene_exe(), "--help"], capture_output=True, text=True, timeout=120)
+    assert out.returncode == 0, out.stderr
+    for param in DEMO_PARAMS:
+        assert re.search(rf"^\s+{param.name}\s+{re.escape(repr(param.default))}\s+\S", out.stdout, re.M), \
+            f"{param.name} missing from --help:\n{out.stdout}"
+    assert "horizon" not in out.stdout and "collision_node.yaml" not in out.stdout
+
+
+def test_demo_scene_says_what_it_publishes_where_and_how_fast() -> None:
+    import signal
+    import time
+
+    proc = subprocess.Popen([_demo_scene_exe(), "--ros-args", "-p", "count:=7", "-p", "rate:=12.5",
+                             "-p", "topic:=demo/states", "-p", "frame_id:=odom"],
+                            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    try:
+        time.sleep(4.0)
+    finally:
+        proc.send_signal(signal.SIGINT)
+        output = proc.communicate(timeout=30)[0]
+    lines = [line for line in output.splitlines() if "publishing" in line]
+    assert len(lines) == 1, output
+    assert re.search(r"publishing 7 2-D bodies as CircleStateArray on /demo/states \(frame 'odom'\)"
+                     r" at 12\.5 Hz", lines[0]), lines[0]
+    assert proc.returncode == 0 and "Traceback" not in output
