@@ -1,7 +1,8 @@
 """collision_node: circle states in, predicted times to collision out.
 
-Subscribes to CircleStateArray (`state_topics`) and CircleState
-(`single_state_topics`) topics, keeps the latest state per body id, and
+Subscribes to CircleStateArray (`state_topics`), CircleState
+(`single_state_topics`) and nav_msgs/Odometry (`odometry_topics`, one robot per
+topic: pipeline/odometry.py) topics, keeps the latest state per body id, and
 publishes `collision_predictions` (CollisionPredictionArray) on every change or
 at `publish_rate`; serves `predict_collisions` (stateless); publishes
 `~/markers` for RViz/Foxglove and a DiagnosticArray on `/diagnostics` (1 Hz).
@@ -12,14 +13,17 @@ publish (and record the same bytes).
 """
 from __future__ import annotations
 
+import functools
 import json
 import sys
 import time
 from collections import deque
+from collections.abc import Callable
 from dataclasses import asdict, dataclass
 
 import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from nav_msgs.msg import Odometry
 from rcl_interfaces.msg import SetParametersResult
 from rclpy.clock import ClockChange, JumpThreshold
 from rclpy.duration import Duration
@@ -36,6 +40,8 @@ from circle_collision_msgs.srv import PredictCollisions
 from circle_collision_ros.node import parameters as node_parameters
 from circle_collision_ros.recording.bag_recorder import BagRecorder, RecordingError
 from circle_collision_ros.pipeline.cdr_codec import CdrError, decode_states
+from circle_collision_ros.pipeline.odometry import odometry_batch, odometry_sources
+from circle_collision_ros.pipeline.state_batch import StateBatch
 from circle_collision_ros.cli import parse_args, spin_node
 from circle_collision_ros.node.markers import MarkerBuilder
 from circle_collision_ros.pipeline.predictor import (CollisionPredictor, IntakeReport,
@@ -104,6 +110,7 @@ class CollisionNode(Node):
             reason = node_parameters.validate(spec.name, node_parameters.value_of(self, spec.name))
             if reason:
                 raise ValueError(f"parameter {reason}")
+        self.add_pre_set_parameters_callback(node_parameters.coerce_integers)
         self.add_on_set_parameters_callback(self._validate_parameters)
         self.add_post_set_parameters_callback(self._apply_parameters)
         p = lambda name: node_parameters.value_of(self, name)  # noqa: E731
@@ -129,10 +136,16 @@ class CollisionNode(Node):
                                                       qos_profile_system_default)
         self._state_subscriptions = []
         self._state_types: dict[str, type] = {}
+        self._decoders: dict[str, Callable[[bytes], StateBatch]] = {}
         for topic in p("state_topics"):
             self._subscribe(topic, CircleStateArray)
         for topic in p("single_state_topics"):
             self._subscribe(topic, CircleState)
+        self._odometry_sources = odometry_sources(
+            [self.resolve_topic_name(t) for t in p("odometry_topics")], p("odometry_radius"),
+            p("odometry_radii"))
+        for topic, source in self._odometry_sources.items():
+            self._subscribe(topic, Odometry, functools.partial(odometry_batch, source=source))
         self.create_service(PredictCollisions, "predict_collisions", self._on_predict_request,
                             qos_profile=Qos.services())
         # A clock that jumps back (use_sim_time with a looping bag, a restarted simulator)
@@ -152,10 +165,13 @@ class CollisionNode(Node):
         self.create_timer(1.0, self._publish_diagnostics)
         self.get_logger().info(
             f"predicting for {p('dimensions')}-D bodies on {list(p('state_topics'))}"
-            f" + {list(p('single_state_topics'))}, horizon {p('horizon')} s")
+            f" + {list(p('single_state_topics'))} + odometry {list(self._odometry_sources)}, horizon {p('horizon')} s")
 
     # -- inputs ---------------------------------------------------------------------------------
-    def _subscribe(self, topic: str, msg_type: type) -> None:
+    def _subscribe(self, topic: str, msg_type: type,
+                   decode: Callable[[bytes], StateBatch] | None = None) -> None:
+        """Subscribe to raw bytes of `msg_type`; `decode` turns them into a StateBatch
+        (default: the CircleState/CircleStateArray decoder)."""
         resolved = self.resolve_topic_name(topic)  # one name for warnings, recording, replay
         # raw=True: the exact received bytes are what a recording must keep.
         sub = self.create_subscription(
@@ -163,6 +179,7 @@ class CollisionNode(Node):
             Qos.states(), raw=True, qos_overriding_options=QoSOverridingOptions.with_default_policies())
         self._state_subscriptions.append(sub)
         self._state_types[resolved] = msg_type
+        self._decoders[resolved] = decode or functools.partial(decode_states, msg_type=msg_type)
 
     def _on_states(self, topic: str, msg_type: type, data: bytes) -> None:
         started = time.perf_counter()
@@ -170,10 +187,10 @@ class CollisionNode(Node):
         self.counters.messages += 1
         self._record(topic, data, now_ns)  # before decoding: even garbage is kept for debugging
         try:
-            batch = decode_states(data, msg_type)
+            batch = self._decoders[topic](data)
         except CdrError as exc:  # a malformed payload must not stop the node
             self.counters.rejected += 1
-            self._warn(topic, f"{topic}: undecodable {msg_type.__name__} ({exc})")
+            self._warn(topic, f"{topic}: rejected {msg_type.__name__}: {exc}")
             return
         try:
             report = self.predictor.receive_batch(batch, now_ns)
@@ -244,11 +261,9 @@ class CollisionNode(Node):
     def _on_predict_request(self, request: PredictCollisions.Request,
                             response: PredictCollisions.Response) -> PredictCollisions.Response:
         try:
-            horizon = request.horizon if request.horizon != 0.0 else self.predictor.config.horizon
-            if not (np.isfinite(horizon) and horizon > 0.0):
-                response.success, response.message = False, f"horizon must be finite and > 0, got {horizon}"
-                return response
-            ok, message, prediction = predict_once(request.circles, self.predictor.config, horizon)
+            ok, message, prediction = predict_once(
+                request.circles, self.predictor.config, request.horizon,
+                request_time_ns=self.get_clock().now().nanoseconds)
             response.success, response.message = ok, message
             response.predictions = prediction.to_message().predictions if prediction is not None else []
         except Exception as exc:  # the caller gets an answer, never a dead service
@@ -327,7 +342,8 @@ class CollisionNode(Node):
         if self._recorder is None or self._recording_error:
             return
         config = dict(asdict(self.predictor.config),
-                      publish_rate=node_parameters.value_of(self, "publish_rate"))
+                      publish_rate=node_parameters.value_of(self, "publish_rate"),
+                      odometry={t: asdict(s) for t, s in self._odometry_sources.items()})
         data = serialize_message(String(data=json.dumps(config, sort_keys=True)))
         self._record(self._config_topic, data, self.get_clock().now().nanoseconds)
         try:  # also as bag metadata, for tools that look there rather than at topics

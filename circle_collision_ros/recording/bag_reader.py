@@ -43,6 +43,7 @@ RECORDED_TYPES = frozenset({
     "circle_collision_msgs/msg/CircleStateArray",
     "circle_collision_msgs/msg/CollisionPredictionArray",
     "circle_collision_msgs/msg/CircleState",
+    "nav_msgs/msg/Odometry",
 })
 """Message types :func:`open_bag` yields by default; other channels are ignored."""
 

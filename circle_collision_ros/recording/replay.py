@@ -19,12 +19,16 @@ import sys
 import time
 from dataclasses import dataclass, field, fields
 
+from nav_msgs.msg import Odometry
 from rclpy.serialization import deserialize_message
 from std_msgs.msg import String
 
 from circle_collision_msgs.msg import CircleState, CircleStateArray, CollisionPredictionArray
 from circle_collision_ros.recording.bag_reader import RECORDED_TYPES, BagError, BagRecord, open_bag
 from circle_collision_ros.pipeline.cdr_codec import CdrError, decode_states
+from circle_collision_ros.pipeline.odometry import (ODOMETRY_TYPE, OdometrySource,
+                                                   odometry_batch)
+from circle_collision_ros.pipeline.state_batch import StateBatch
 from circle_collision_ros.pipeline.predictor import CollisionPredictor, PredictorConfig
 
 
@@ -33,9 +37,26 @@ class RecordedTypes:
 
     STATE_ARRAY = "circle_collision_msgs/msg/CircleStateArray"
     STATE = "circle_collision_msgs/msg/CircleState"
+    ODOMETRY = ODOMETRY_TYPE
     PREDICTIONS = "circle_collision_msgs/msg/CollisionPredictionArray"
     CONFIG = "std_msgs/msg/String"
-    INPUTS = {STATE_ARRAY: CircleStateArray, STATE: CircleState}
+    INPUTS = {STATE_ARRAY: CircleStateArray, STATE: CircleState, ODOMETRY: Odometry}
+
+
+def odometry_from_json(text: str) -> dict[str, OdometrySource]:
+    """Odometry topic -> OdometrySource from the node's recorded configuration."""
+    return {topic: OdometrySource(**source) for topic, source in json.loads(text).get("odometry", {}).items()}
+
+
+def decode_input(record: BagRecord, odometry: dict[str, OdometrySource]) -> StateBatch | None:
+    """The StateBatch the node made of a recorded input, or None if it rejected it undecoded."""
+    try:
+        if record.type_name == RecordedTypes.ODOMETRY:
+            source = odometry.get(record.topic)
+            return odometry_batch(record.data, source) if source is not None else None
+        return decode_states(record.data, RecordedTypes.INPUTS[record.type_name])
+    except CdrError:
+        return None  # the node rejected it the same way; nothing entered the scene
 
 
 RUNTIME_FIELDS = ("horizon", "stale_timeout", "report_all_pairs")
@@ -98,9 +119,12 @@ def replay_offline(records, config: PredictorConfig | None = None) -> ReplayRepo
     """
     report = ReplayReport()
     predictor = CollisionPredictor(config) if config is not None else None
+    odometry: dict[str, OdometrySource] = {}
     for record in records:
         if record.type_name == RecordedTypes.CONFIG:
-            recorded = config_from_json(deserialize_message(record.data, String).data)
+            text = deserialize_message(record.data, String).data
+            recorded = config_from_json(text)
+            odometry = odometry_from_json(text) or odometry
             if predictor is None:
                 predictor = CollisionPredictor(recorded)
             else:
@@ -109,10 +133,7 @@ def replay_offline(records, config: PredictorConfig | None = None) -> ReplayRepo
         if predictor is None:
             predictor = CollisionPredictor(PredictorConfig())  # bag without a config record
         if record.type_name in RecordedTypes.INPUTS:
-            try:
-                batch = decode_states(record.data, RecordedTypes.INPUTS[record.type_name])
-            except CdrError:
-                batch = None  # the node rejected it the same way; nothing entered the scene
+            batch = decode_input(record, odometry)
             if batch is not None:
                 predictor.receive_batch(batch, record.log_time_ns)
             report.inputs += 1
