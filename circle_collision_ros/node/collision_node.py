@@ -38,7 +38,7 @@ from visualization_msgs.msg import MarkerArray
 from circle_collision_msgs.msg import CircleState, CircleStateArray, CollisionPredictionArray
 from circle_collision_msgs.srv import PredictCollisions
 from circle_collision_ros.node import parameters as node_parameters
-from circle_collision_ros.recording.bag_recorder import BagRecorder, RecordingError
+from circle_collision_ros.recording.bag_recorder import BagRecorder, RecordingError, qos_profiles_yaml
 from circle_collision_ros.pipeline.cdr_codec import CdrError, decode_states
 from circle_collision_ros.pipeline.odometry import odometry_batch, odometry_sources
 from circle_collision_ros.pipeline.state_batch import StateBatch
@@ -324,14 +324,38 @@ class CollisionNode(Node):
         try:
             self._recorder = BagRecorder(path)
             for topic, msg_type in self._state_types.items():
-                self._recorder.add_topic(topic, _ros_type_name(msg_type))
+                self._recorder.add_topic(topic, _ros_type_name(msg_type), self._offered_qos(topic))
             self._recorder.add_topic(self._predictions_pub.topic_name,
-                                     _ros_type_name(CollisionPredictionArray))
-            self._recorder.add_topic(self._config_topic, "std_msgs/msg/String")
+                                     _ros_type_name(CollisionPredictionArray),
+                                     qos_profiles_yaml([self._predictions_pub.qos_profile]))
+            # Recorded, not published: offered as `ros2 bag play` should replay it.
+            self._recorder.add_topic(self._config_topic, "std_msgs/msg/String",
+                                     qos_profiles_yaml([Qos.predictions()]))
         except RecordingError as exc:
             raise ValueError(f"record_path: {exc}") from exc
+        # Input publishers may appear after start: look for them off the message path.
+        self._qos_unknown = {t for t in self._state_types if not self._offered_qos(t)}
+        self._qos_timer = self.create_timer(1.0, self._record_offered_qos) if self._qos_unknown else None
         self._record_config()
         self.get_logger().info(f"recording to {self._recorder.path}")
+
+    def _offered_qos(self, topic: str) -> str:
+        """rosbag2's offered_qos_profiles of the publishers on `topic` now ("" if none)."""
+        return qos_profiles_yaml([info.qos_profile for info in self.get_publishers_info_by_topic(topic)])
+
+    def _record_offered_qos(self) -> None:
+        """Timer while recording: fill offered_qos_profiles once a topic's publishers are seen."""
+        for topic in sorted(self._qos_unknown):
+            offered = self._offered_qos(topic)
+            if offered and self._recorder is not None and not self._recording_error:
+                try:
+                    self._recorder.set_offered_qos(topic, offered)
+                except RecordingError as exc:
+                    self._recording_error = self._recording_error or str(exc)
+                self._qos_unknown.discard(topic)
+        if not self._qos_unknown and self._qos_timer is not None:
+            self.destroy_timer(self._qos_timer)
+            self._qos_timer = None
 
     @property
     def _config_topic(self) -> str:

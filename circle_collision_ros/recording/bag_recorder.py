@@ -266,6 +266,28 @@ class BagRecorder:
             self._topics[topic] = _TopicStats(channel_id, type_name, offered_qos, type_hash)
             self._guard_io(lambda: self._write_metadata_yaml(final=False))
 
+    def set_offered_qos(self, topic: str, offered_qos: str) -> None:
+        """Set a declared topic's ``offered_qos_profiles`` in metadata.yaml.
+
+        For topics whose publishers become known only after add_topic (rosbag2
+        records the QoS its publishers offer; ``ros2 bag play`` reads it from
+        metadata.yaml). The MCAP channel keeps what add_topic was given: channel
+        records cannot change once written.
+
+        Raises
+        ------
+        RecordingError
+            If the recorder failed or is closed, or the topic was not added.
+        """
+        with self._lock:
+            self._check_usable()
+            stats = self._topics.get(topic)
+            if stats is None:
+                raise RecordingError(f"{self._path}: topic {topic} was not added")
+            if stats.offered_qos != offered_qos:
+                stats.offered_qos = offered_qos
+                self._guard_io(lambda: self._write_metadata_yaml(final=False))
+
     def write(self, topic: str, data: bytes | bytearray | memoryview, log_time_ns: int,
               publish_time_ns: int | None = None) -> None:
         """Record one serialized (CDR) message.
