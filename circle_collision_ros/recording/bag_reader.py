@@ -48,16 +48,20 @@ TopicInfo = NamedTuple("TopicInfo", [("topic", str), ("type_name", str), ("defin
 
 
 class _ExactReader:
-    """A file whose reads return exactly the bytes asked for, else raise ValueError('truncated: ...')."""
+    """A file whose reads return exactly the bytes asked for, else raise ValueError('truncated: ...').
 
-    def __init__(self, stream: BinaryIO) -> None:
-        self.stream = stream
+    A size beyond the end fails before reading: nothing is allocated for lengths read from garbage.
+    """
+
+    def __init__(self, stream: BinaryIO, size: int) -> None:
+        self.stream, self.size = stream, size
 
     def read(self, size: int = -1) -> bytes:
-        data = self.stream.read(size)
-        if len(data) < size:
-            raise ValueError(f"truncated: the file ends inside a record (byte {self.stream.tell()})")
-        return data
+        position = self.stream.tell()
+        if size > self.size - position:
+            raise ValueError(f"truncated: a record at byte {position} needs {size} bytes, "
+                             f"{self.size - position} remain")
+        return self.stream.read(size)
 
 
 @dataclass
@@ -90,7 +94,7 @@ class BagContents:
 
 def _read(stream: BinaryIO, size: int, bag: dict) -> None:
     """One validating pass: fills bag's schemas, channels, messages and config."""
-    reader = StreamReader(_ExactReader(stream), emit_chunks=True, validate_crcs=True, record_size_limit=size)
+    reader = StreamReader(_ExactReader(stream, size), emit_chunks=True, validate_crcs=True, record_size_limit=size)
     for record in reader.records:
         if not bag["header_seen"] and not isinstance(record, Header):
             raise ValueError("first record is not an MCAP header")

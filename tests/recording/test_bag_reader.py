@@ -278,3 +278,19 @@ def test_mutations_raise_only_bag_error(tmp_path: Path, sample_bytes: bytes,
         except BagError as error:
             assert str(error).startswith(str(path)) and "\n" not in str(error)
     assert time.monotonic() - started < 5.0
+
+
+def test_huge_length_inside_a_record_allocates_nothing(tmp_path: Path, sample_bytes: bytes) -> None:
+    """A chunk whose records field claims 2**62 bytes fails at once, strict and tolerant."""
+    data = bytearray(sample_bytes)
+    pos = len(Limits.MAGIC)
+    while data[pos] != 0x06:  # the first chunk record
+        pos += 9 + struct.unpack_from("<Q", data, pos + 1)[0]
+    compression_length = struct.unpack_from("<I", data, pos + 9 + 28)[0]
+    struct.pack_into("<Q", data, pos + 9 + 32 + compression_length, 2**62)
+    path = tmp_path / "liar.mcap"
+    path.write_bytes(bytes(data))
+    with time_limit(2.0), pytest.raises(BagError, match=r"liar.mcap: truncated: .* needs 4611686018427387904"):
+        open_bag(path)
+    with time_limit(2.0), pytest.raises(BagError, match=r"liar.mcap: no channels.*stopped early: truncated"):
+        open_bag(path, tolerant=True)
