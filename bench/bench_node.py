@@ -17,6 +17,17 @@ input it answers, so
 Also reports the sustained rate: inputs sent as fast as possible for a few
 seconds, predictions received per second. Prints a markdown table; --json
 writes the figures for bench/results.
+
+    .venv/bin/python bench/bench_node.py --targets [--seconds 10] [--json FILE]
+
+prints the issue-14 targets instead, one collision_node process per scenario:
+300 bodies each with its own CircleState publisher at 30 Hz; 1,000 bodies in
+arrays at 30 Hz with default markers and with markers off (same run, ratio);
+5,000 bodies in arrays at 30 Hz; 10,000 at 10 Hz. Per input: latency from the
+client's publish call to the node's publication of the first prediction that
+answers it (the prediction's rmw source timestamp; queue wait and coalescing
+included), so the figure contains receive-to-publish and the inbound DDS hop.
+Ingested / coalesced / missing come from the node's /diagnostics.
 """
 from __future__ import annotations
 
@@ -30,15 +41,20 @@ import sys
 import time
 from pathlib import Path
 
+import threading
+
 import numpy as np
 
-os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
+from circle_collision_ros.cli import apply_ros_environment_defaults
+
+apply_ros_environment_defaults()  # local discovery and the large-scene transport, like the node
 
 import rclpy  # noqa: E402
+from rclpy.executors import SingleThreadedExecutor  # noqa: E402
 from diagnostic_msgs.msg import DiagnosticArray  # noqa: E402
 from rclpy.qos import QoSProfile, ReliabilityPolicy  # noqa: E402
 
-from circle_collision_msgs.msg import CircleStateArray, CollisionPredictionArray  # noqa: E402
+from circle_collision_msgs.msg import CircleState, CircleStateArray, CollisionPredictionArray  # noqa: E402
 from circle_collision_ros.pipeline.cdr_codec import encode_state_array  # noqa: E402
 from circle_collision_ros.demo.demo_scene import SyntheticScene  # noqa: E402
 from circle_collision_ros.pipeline.state_batch import StateBatch  # noqa: E402
@@ -165,6 +181,286 @@ def measure(bodies: int, seconds: float, rate: float) -> dict:
             node_proc.kill()
 
 
+class Targets:
+    """Issue 14's targets (ms, fractions)."""
+
+    STREAM_INGESTED = 0.999
+    STREAM_P99_MS = 15.0
+    ARRAY_1000_P99_MS = 15.0
+    MARKER_RATIO = 1.2
+    ARRAY_5000_P99_MS = 40.0
+    ARRAY_10000_P99_MS = 100.0
+
+
+def _single_state_template(stamp_ns: int) -> tuple[bytearray, int]:
+    """Serialized CircleState with id 'b00000'; returns (bytes, offset of position.x)."""
+    from geometry_msgs.msg import Point
+    from rclpy.serialization import serialize_message
+    from std_msgs.msg import Header
+    from builtin_interfaces.msg import Time
+
+    sentinel = 1234.5678125
+    msg = CircleState(header=Header(stamp=Time(sec=stamp_ns // 10**9, nanosec=stamp_ns % 10**9),
+                                    frame_id="map"), id="b00000", radius=1.0,
+                      position=Point(x=sentinel, y=0.0, z=0.0))
+    data = bytearray(serialize_message(msg))
+    return data, bytes(data).index(struct.pack("<d", sentinel))
+
+
+def receive_predictions(out: str) -> int:
+    """Receiver process: record (stamp, node publish time, receipt) of each prediction until SIGINT.
+
+    A process of its own, so a client busy publishing thousands of messages a second
+    cannot starve the receipts (the GIL) and lose answers from the node's depth-10 queue.
+    """
+    rclpy.init()
+    node = rclpy.create_node("bench_node_receiver")
+    answers: list[tuple[int, int, int]] = []
+
+    def on_prediction(data: bytes, info: dict) -> None:
+        now = time.time_ns()
+        answers.append((_stamp_of(data), info.get("source_timestamp") or now, now))
+
+    node.create_subscription(CollisionPredictionArray, "collision_predictions", on_prediction,
+                             QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE), raw=True)
+    try:
+        rclpy.spin(node)
+    except KeyboardInterrupt:
+        pass
+    finally:
+        Path(out).write_text(json.dumps(answers))
+        node.destroy_node()
+        rclpy.try_shutdown()
+    return 0
+
+
+class ScenarioRun:
+    """One collision_node process, a receiver process, and a client that publishes."""
+
+    def __init__(self, params: dict[str, str]) -> None:
+        import tempfile
+        exe = os.path.join(sys.prefix, "lib", "circle_collision_ros", "collision_node")
+        args = [exe, "--ros-args", "--log-level", "warn"]
+        for key, value in params.items():
+            args += ["-p", f"{key}:={value}"]
+        self.proc = subprocess.Popen(args)
+        self._answers_file = tempfile.NamedTemporaryFile(suffix=".json", delete=False).name
+        self.receiver = subprocess.Popen([sys.executable, __file__, "--receive", self._answers_file])
+        rclpy.init()
+        self.client = rclpy.create_node("bench_node_targets")
+        self.lock = threading.Lock()
+        self.sent: list[tuple[int, int]] = []       # (stamp ns, wall ns at publish) in send order
+        self.answers: list[tuple[int, int, int]] = []  # (stamp ns, node publish wall ns, receipt wall ns)
+        self.diagnostics: dict[str, str] = {}
+        self.client.create_subscription(DiagnosticArray, "/diagnostics", self._on_diagnostics, 10)
+        self.executor = SingleThreadedExecutor()
+        self.executor.add_node(self.client)
+        self.thread = threading.Thread(target=self.executor.spin, daemon=True)
+        self.thread.start()
+        deadline = time.monotonic() + 60
+        while self.client.count_subscribers("/collision_predictions") == 0 and time.monotonic() < deadline:
+            time.sleep(0.1)
+
+    def _collect_answers(self) -> None:
+        self.receiver.send_signal(signal.SIGINT)
+        try:
+            self.receiver.wait(timeout=20)
+            self.answers = [tuple(a) for a in json.loads(Path(self._answers_file).read_text())]
+        except (subprocess.TimeoutExpired, ValueError, OSError):
+            self.receiver.kill()
+        finally:
+            Path(self._answers_file).unlink(missing_ok=True)
+
+    def _on_diagnostics(self, msg: DiagnosticArray) -> None:
+        for status in msg.status:
+            if "collision prediction" in status.name:
+                with self.lock:
+                    self.diagnostics = {kv.key: kv.value for kv in status.values}
+
+    def wait_matched(self, pubs) -> None:
+        deadline = time.monotonic() + 60
+        while any(p.get_subscription_count() == 0 for p in pubs) and time.monotonic() < deadline:
+            time.sleep(0.05)
+        time.sleep(0.5)
+
+    def diagnostics_after(self, seconds: float) -> dict[str, str]:
+        time.sleep(seconds)  # the node publishes /diagnostics once a second
+        with self.lock:
+            return dict(self.diagnostics)
+
+    def latencies(self) -> dict:
+        """Per input: first answer whose stamp covers it (stamps are send times, increasing)."""
+        self._collect_answers()
+        with self.lock:
+            answers = sorted(self.answers)
+            sent = list(self.sent)
+        stamps = np.array([a[0] for a in answers], dtype=np.int64)
+        node_ms, e2e_ms, unanswered = [], [], 0
+        for stamp, wall in sent:
+            k = int(np.searchsorted(stamps, stamp))
+            if k == len(answers):
+                unanswered += 1
+                continue
+            node_ms.append((answers[k][1] - wall) * 1e-6)
+            e2e_ms.append((answers[k][2] - wall) * 1e-6)
+        pct = lambda xs, q: float(np.percentile(xs, q)) if xs else float("nan")  # noqa: E731
+        return {"sent": len(sent), "answers": len(answers), "unanswered": unanswered,
+                "p50_ms": pct(node_ms, 50), "p99_ms": pct(node_ms, 99), "max_ms": pct(node_ms, 100),
+                "e2e_p99_ms": pct(e2e_ms, 99)}
+
+    def close(self) -> None:
+        if self.receiver.poll() is None:
+            self.receiver.kill()
+        self.executor.shutdown()
+        self.client.destroy_node()
+        rclpy.try_shutdown()
+        self.proc.send_signal(signal.SIGINT)
+        try:
+            self.proc.wait(timeout=20)
+        except subprocess.TimeoutExpired:
+            self.proc.kill()
+
+
+def _node_counts(diag: dict[str, str]) -> dict:
+    return {k: int(diag.get(k, "-1")) for k in ("messages", "inputs_coalesced", "inputs_missing",
+                                                "predictions_published")} | {
+        "node_diag_p99_ms": float(diag.get("latency_ms_p99", "nan"))}
+
+
+def run_streams(bodies: int, rate: float, seconds: float) -> dict:
+    """Every body has its own CircleState publisher on one single_state_topics topic."""
+    run = ScenarioRun({"single_state_topics": "['body_states']", "state_topics": "['unused']",
+                       "marker_rate": "0.0", "max_bodies": "100000"})
+    try:
+        qos = QoSProfile(depth=10, reliability=ReliabilityPolicy.BEST_EFFORT)
+        pubs = [run.client.create_publisher(CircleState, "body_states", qos) for _ in range(bodies)]
+        run.wait_matched(pubs)
+        template, pos_at = _single_state_template(time.time_ns())
+        id_at = bytes(template).index(b"b00000")
+        scene = SyntheticScene(bodies, size=float(np.sqrt(bodies * 333.0)), dimensions=2, seed=bodies)
+        messages = []
+        for k in range(bodies):
+            m = bytearray(template)
+            m[id_at:id_at + 6] = f"b{k:05d}".encode()
+            messages.append(m)
+        period = 1.0 / rate
+        phase = np.arange(bodies) * (period / bodies)  # unsynchronised sources, evenly spread
+        start = time.monotonic() + 0.2
+        next_send = start + phase
+        warm_until = start + 1.0
+        end = start + 1.0 + seconds
+        published = 0
+        while True:
+            now = time.monotonic()
+            if now >= end:
+                break
+            due = np.flatnonzero(next_send <= now)
+            for k in due.tolist():
+                t = now - start
+                data = messages[k]
+                stamp = time.time_ns()
+                struct.pack_into("<iI", data, 4, stamp // 10**9, stamp % 10**9)
+                struct.pack_into("<2d", data, pos_at, *(scene.p[k, :2] + t * scene.v[k, :2]))
+                pubs[k].publish(bytes(data))
+                published += 1
+                if now >= warm_until:
+                    with run.lock:
+                        run.sent.append((stamp, stamp))
+                next_send[k] += period
+            time.sleep(max(0.0, min(0.002, float(next_send.min()) - time.monotonic())))
+        diag = run.diagnostics_after(2.2)
+        result = {"scenario": f"{bodies} bodies, own CircleState stream each, {rate:.0f} Hz",
+                  "bodies": bodies, "rate_hz": rate, **run.latencies(), **_node_counts(diag)}
+        result["published_total"] = published  # warm-up included, like the node's count
+        result["ingested_fraction"] = result["messages"] / max(1, published)
+        return result
+    finally:
+        run.close()
+
+
+def run_arrays(bodies: int, rate: float, seconds: float, marker_rate: float) -> dict:
+    run = ScenarioRun({"marker_rate": str(float(marker_rate)), "max_bodies": "100000"})
+    try:
+        pub = run.client.create_publisher(CircleStateArray, "circle_states",
+                                          QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE))
+        run.wait_matched([pub])
+        scene = SyntheticScene(bodies, size=float(np.sqrt(bodies * 333.0)), dimensions=2, seed=bodies)
+        period = 1.0 / rate
+        for _ in range(5):  # warm-up, not measured
+            pub.publish(scene_bytes(scene, time.time_ns()))
+            time.sleep(period)
+        time.sleep(1.0)
+        start = time.monotonic()
+        next_send = start
+        frames = 0
+        while time.monotonic() - start < seconds:
+            if time.monotonic() >= next_send:
+                scene.step(period)
+                stamp = time.time_ns()
+                data = scene_bytes(scene, stamp)  # built before the timed publish call
+                wall = time.time_ns()
+                pub.publish(data)
+                frames += 1
+                with run.lock:
+                    run.sent.append((stamp, wall))
+                next_send += period
+            time.sleep(max(0.0, min(0.002, next_send - time.monotonic())))
+        diag = run.diagnostics_after(2.2)
+        counts = _node_counts(diag)
+        label = f"{bodies} bodies in arrays, {rate:.0f} Hz, markers " + (
+            f"{marker_rate:g} Hz" if marker_rate else "off")
+        return {"scenario": label, "bodies": bodies, "rate_hz": rate, "marker_rate": marker_rate,
+                **run.latencies(), **counts, "frames": frames, "warmup_frames": 5}
+    finally:
+        run.close()
+
+
+def measure_targets(seconds: float) -> list[dict]:
+    rows = [run_streams(300, 30.0, seconds)]
+    rows.append(run_arrays(1000, 30.0, seconds, marker_rate=10.0))
+    rows.append(run_arrays(1000, 30.0, seconds, marker_rate=0.0))
+    rows.append(run_arrays(5000, 30.0, seconds, marker_rate=10.0))
+    rows.append(run_arrays(10000, 10.0, seconds, marker_rate=10.0))
+    return rows
+
+
+def targets_table(rows: list[dict]) -> str:
+    """Markdown: each scenario's figures and the target it is held to."""
+    by = {r["scenario"]: r for r in rows}
+    on = next((r for r in rows if r["bodies"] == 1000 and r.get("marker_rate")), None)
+    off = next((r for r in rows if r["bodies"] == 1000 and r.get("marker_rate") == 0.0), None)
+    lines = ["| scenario | inputs sent | ingested by node | coalesced | missing | answered/unanswered |"
+             " p50 ms | p99 ms | max ms | node /diagnostics p99 ms | target | met |",
+             "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|---|"]
+    for r in by.values():
+        if "ingested_fraction" in r:
+            target = f">= {Targets.STREAM_INGESTED:.1%} ingested, p99 <= {Targets.STREAM_P99_MS:g} ms"
+            met = r["ingested_fraction"] >= Targets.STREAM_INGESTED and r["p99_ms"] <= Targets.STREAM_P99_MS
+            ingested = f"{r['messages']} ({r['ingested_fraction']:.2%})"
+        else:
+            ingested = f"{r['messages']}"
+            every = r["unanswered"] == 0 and r["inputs_missing"] == 0
+            if r["bodies"] == 1000 and r.get("marker_rate"):
+                ratio = r["p99_ms"] / off["p99_ms"] if off else float("nan")
+                target = (f"p99 <= {Targets.ARRAY_1000_P99_MS:g} ms and <= {Targets.MARKER_RATIO:.1f} x "
+                          f"markers-off (ratio {ratio:.2f})")
+                met = r["p99_ms"] <= Targets.ARRAY_1000_P99_MS and ratio <= Targets.MARKER_RATIO
+            elif r["bodies"] == 1000:
+                target, met = "reference for the markers ratio", True
+            elif r["bodies"] == 5000:
+                target = f"every frame answered or coalesced, p99 <= {Targets.ARRAY_5000_P99_MS:g} ms"
+                met = every and r["p99_ms"] <= Targets.ARRAY_5000_P99_MS
+            else:
+                target = f"p99 <= {Targets.ARRAY_10000_P99_MS:g} ms"
+                met = every and r["p99_ms"] <= Targets.ARRAY_10000_P99_MS
+        lines.append(f"| {r['scenario']} | {r['sent']} | {ingested} | {r['inputs_coalesced']} |"
+                     f" {r['inputs_missing']} | {r['answers']}/{r['unanswered']} | {r['p50_ms']:.2f} |"
+                     f" {r['p99_ms']:.2f} | {r['max_ms']:.2f} | {r['node_diag_p99_ms']:.2f} | {target} |"
+                     f" {'yes' if met else 'NO'} |")
+    _ = on
+    return "\n".join(lines)
+
+
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--bodies", type=int, nargs="+", default=[100, 1000])
@@ -172,8 +468,19 @@ def main() -> int:
     parser.add_argument("--rate", type=float, default=30.0)
     parser.add_argument("--quick", action="store_true", help="3 s per size")
     parser.add_argument("--json", help="also write the figures to this file")
+    parser.add_argument("--receive", help=argparse.SUPPRESS)  # internal: the receiver process
+    parser.add_argument("--targets", action="store_true",
+                        help="run the issue-14 target scenarios instead (see the module docstring)")
     opts = parser.parse_args()
     seconds = 3.0 if opts.quick else opts.seconds
+    if opts.receive:
+        return receive_predictions(opts.receive)
+    if opts.targets:
+        rows = measure_targets(seconds)
+        print(targets_table(rows))
+        if opts.json:
+            Path(opts.json).write_text(json.dumps(rows, indent=2))
+        return 0
     rows = [measure(n, seconds, opts.rate) for n in opts.bodies]
     print(f"| bodies | input Hz | answered/sent | end-to-end p50 ms | p99 ms | node p50 ms | node p99 ms"
           f" | candidate pairs | burst in/s | burst out/s |")

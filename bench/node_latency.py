@@ -1,8 +1,11 @@
 """Node: input-to-output latency and sustained rate against N through real DDS.
 
-    .venv/bin/python bench/node_latency.py [--quick] [--out DIR]
+    .venv/bin/python bench/node_latency.py [--quick] [--out DIR] [--targets]
 
-(normally driven by ``bench/run_all.py``).  Drives ``bench/bench_node.py``
+(normally driven by ``bench/run_all.py``). ``--targets`` also runs
+``bench_node.py --targets`` (issue 14's stream scenarios: per-body streams,
+markers on/off in the same run, 5,000 and 10,000 bodies) and adds that table
+to node.md.  Drives ``bench/bench_node.py``
 as a subprocess (``--json``), one collision_node process per scene size, in
 an environment with ``ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST`` (localhost
 discovery only; ``ROS_DOMAIN_ID`` is passed through from the caller).
@@ -65,6 +68,25 @@ def run(quick: bool = False, bodies=None, seconds=None, rate: float = RATE_HZ, l
                 domain_id=env.get("ROS_DOMAIN_ID", "0"))
 
 
+def run_targets(seconds: float, log=print) -> dict:
+    """bench_node.py --targets in a subprocess; its rows and markdown table."""
+    env = dict(os.environ)
+    env["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
+    env.pop("ROS_STATIC_PEERS", None)
+    with tempfile.TemporaryDirectory() as tmp:
+        js = Path(tmp) / "targets.json"
+        cmd = [sys.executable, str(_common.HERE / "bench_node.py"), "--targets", "--seconds", str(seconds),
+               "--json", str(js)]
+        proc = subprocess.run(cmd, env=env, cwd=str(_common.ROOT), capture_output=True, text=True,
+                              timeout=600 + 10 * seconds)
+        if proc.returncode != 0 or not js.exists():
+            log(f"  targets: FAILED: {(proc.stderr or proc.stdout)[-800:]}")
+            return dict(rows=[], table="", error=(proc.stderr or proc.stdout)[-800:])
+        table_lines = [line for line in proc.stdout.splitlines() if line.startswith("|")]
+        log("\n".join(table_lines))
+        return dict(rows=json.loads(js.read_text()), table="\n".join(table_lines), seconds=seconds)
+
+
 def _f(x):
     return fmt_ms(x) if isinstance(x, (int, float)) and not math.isnan(x) else "n/a"
 
@@ -97,6 +119,14 @@ def write_markdown(res: dict, out: Path) -> Path:
         txt.append("\nFailures:\n")
         txt += [f"- N={e['bodies']}: `{e['error'].strip().splitlines()[-1] if e['error'].strip() else '?'}`"
                 for e in res["errors"]]
+    if res.get("targets", {}).get("table"):
+        txt += ["\n## Issue 14 targets (bench/bench_node.py --targets)\n",
+                "Per input: client publish call -> the node's publication of the first prediction that "
+                "answers it (rmw source timestamp of the prediction; inbound DDS hop, queue wait and "
+                "coalescing included). Ingested/coalesced/missing: the node's /diagnostics. The 1,000-body "
+                "rows run markers on and off in the same run; the ratio is of their p99s. This machine "
+                "(2 cores) is shared: read ratios, not absolute figures.\n",
+                res["targets"]["table"]]
     txt.append("\n![node latency](node.png)\n")
     p.write_text("\n".join(txt))
     return p
@@ -126,10 +156,13 @@ def main(argv=None) -> int:
     ap.add_argument("--bodies", type=int, nargs="+")
     ap.add_argument("--seconds", type=float)
     ap.add_argument("--out", default=str(_common.HERE / "results"))
+    ap.add_argument("--targets", action="store_true", help="also run issue 14's target scenarios")
     a = ap.parse_args(argv)
     out = Path(a.out)
     out.mkdir(parents=True, exist_ok=True)
     res = run(a.quick, a.bodies, a.seconds)
+    if a.targets:
+        res["targets"] = run_targets(a.seconds or (SECONDS_QUICK if a.quick else 10.0))
     (out / "node.json").write_text(json.dumps(res, indent=1))
     write_markdown(res, out)
     plot(res, out)

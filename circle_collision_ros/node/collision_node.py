@@ -7,9 +7,24 @@ publishes `collision_predictions` (CollisionPredictionArray) on every change or
 at `publish_rate`; serves `predict_collisions` (stateless); publishes
 `~/markers` for RViz/Foxglove and a DiagnosticArray on `/diagnostics` (1 Hz).
 
-The path of a message: raw bytes (recorded as received) -> deserialize ->
-CollisionPredictor.receive -> CollisionPredictor.predict -> serialize ->
+The path of a message: raw bytes (recorded as received) -> decode ->
+CollisionPredictor.receive_batch -> CollisionPredictor.predict -> CDR bytes ->
 publish (and record the same bytes).
+
+Stream rules (README, "Real-time behaviour"):
+- Coalescing: a callback takes every input already waiting on every input
+  subscription (rmw take, oldest first per topic) and ingests each, then
+  predicts once for the newest state of every body. Under a backlog the node
+  therefore never answers a stale frame, and never skips one either: every
+  taken input is ingested. Inputs and predictions are recorded in that order,
+  so replay reproduces the same coalescing.
+- Expiry runs on its own timer (EXPIRY_PERIOD_S), whatever publish_rate is: a
+  scene changed by expiry is published (possibly empty) within stale_timeout +
+  EXPIRY_PERIOD_S + compute time after its sources go silent.
+- Markers are drawn on their own thread (node/markers.py); the prediction path
+  only hands over a reference.
+- Health: latency is measured from the rmw receive timestamp of the oldest
+  input a prediction answers to its publication (queue wait included).
 """
 from __future__ import annotations
 
@@ -27,6 +42,7 @@ from nav_msgs.msg import Odometry
 from rcl_interfaces.msg import SetParametersResult
 from rclpy.clock import ClockChange, JumpThreshold
 from rclpy.duration import Duration
+from rclpy.exceptions import InvalidHandle
 from rclpy.node import Node
 from rclpy.qos import (DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy,
                        qos_profile_system_default)
@@ -42,8 +58,10 @@ from circle_collision_ros.recording.bag_recorder import BagRecorder, RecordingEr
 from circle_collision_ros.pipeline.cdr_codec import CdrError, decode_states
 from circle_collision_ros.pipeline.odometry import odometry_batch, odometry_sources
 from circle_collision_ros.pipeline.state_batch import StateBatch
+from circle_collision_ros.pipeline.state_groups import ingest_single_states
 from circle_collision_ros.cli import parse_args, spin_node
-from circle_collision_ros.node.markers import MarkerBuilder
+from circle_collision_ros.node.input_loss import InputLossMonitor
+from circle_collision_ros.node.markers import MarkerPublisher
 from circle_collision_ros.pipeline.predictor import (CollisionPredictor, IntakeReport,
                                                       PredictorConfig, predict_once)
 
@@ -59,6 +77,14 @@ class Qos:
     def states() -> QoSProfile:
         # Best-effort requests match both reliable and best-effort publishers.
         return QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=50,
+                          reliability=ReliabilityPolicy.BEST_EFFORT,
+                          durability=DurabilityPolicy.VOLATILE)
+
+    @staticmethod
+    def single_states() -> QoSProfile:
+        # One topic carries every body's own stream (300 bodies at 30 Hz: 9,000/s); the queue
+        # must outlast a prediction cycle or KEEP_LAST overwrites states before they are taken.
+        return QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=2000,
                           reliability=ReliabilityPolicy.BEST_EFFORT,
                           durability=DurabilityPolicy.VOLATILE)
 
@@ -92,16 +118,42 @@ class Counters:
     removed: int = 0
     expired: int = 0
     published: int = 0
+    coalesced: int = 0  # inputs answered by a prediction together with newer inputs
     errors: int = 0
     clock_jumps_back: int = 0
+
+
+@dataclass
+class InputTopic:
+    """One input subscription: resolved topic, message type, its decoder, the rclpy subscription."""
+
+    topic: str
+    msg_type: type
+    decode: Callable[[bytes], StateBatch]
+    subscription: object = None
+
+
+@dataclass
+class Unanswered:
+    """Inputs ingested since the last publication."""
+
+    inputs: int = 0
+    oldest_received_ns: int | None = None  # rmw receive time (system clock)
+    changed: bool = False
+
+    def note(self, received_ns: int, changed: bool) -> None:
+        self.inputs += 1
+        if self.oldest_received_ns is None:
+            self.oldest_received_ns = received_ns
+        self.changed = self.changed or changed
 
 
 class CollisionNode(Node):
     """The ROS face of CollisionPredictor; see the module docstring."""
 
     WARN_THROTTLE_S = 2.0
-    MARKER_BUDGET = 0.1  # fraction of wall time markers may take
     LATENCY_WINDOW = 1000
+    EXPIRY_PERIOD_S = 0.05
 
     def __init__(self, **kwargs) -> None:
         super().__init__("collision_node", **kwargs)
@@ -121,10 +173,11 @@ class CollisionNode(Node):
             max_bodies=p("max_bodies")))
         self.predictor.warm_up()  # pay numba's compile/cache load before the first message
         self.counters = Counters()
+        # Receive (rmw timestamp of the oldest input answered) to publish, s.
         self.latencies_s: deque[float] = deque(maxlen=self.LATENCY_WINDOW)
-        self._markers = MarkerBuilder(p("dimensions"))
-        self._marker_rate = p("marker_rate")
-        self._next_marker_time = 0.0
+        self._unanswered = Unanswered()
+        self._last_drain_ns = 0
+        self.input_loss = InputLossMonitor()
         self._last_warning: dict[str, float] = {}
 
         overrides = QoSOverridingOptions.with_default_policies()
@@ -132,20 +185,22 @@ class CollisionNode(Node):
             CollisionPredictionArray, "collision_predictions", Qos.predictions(),
             qos_overriding_options=overrides)
         self._markers_pub = self.create_publisher(MarkerArray, "~/markers", Qos.markers())
+        self.markers = MarkerPublisher(p("dimensions"), p("marker_rate"), self._markers_pub.publish,
+                                       on_error=lambda text: self._warn("markers", text))
         self._diagnostics_pub = self.create_publisher(DiagnosticArray, "/diagnostics",
                                                       qos_profile_system_default)
-        self._state_subscriptions = []
-        self._state_types: dict[str, type] = {}
-        self._decoders: dict[str, Callable[[bytes], StateBatch]] = {}
+        self._inputs: list[InputTopic] = []
         for topic in p("state_topics"):
-            self._subscribe(topic, CircleStateArray)
+            self._subscribe(topic, CircleStateArray, Qos.states())
         for topic in p("single_state_topics"):
-            self._subscribe(topic, CircleState)
+            self._subscribe(topic, CircleState, Qos.single_states())
         self._odometry_sources = odometry_sources(
             [self.resolve_topic_name(t) for t in p("odometry_topics")], p("odometry_radius"),
             p("odometry_radii"))
         for topic, source in self._odometry_sources.items():
-            self._subscribe(topic, Odometry, functools.partial(odometry_batch, source=source))
+            self._subscribe(topic, Odometry, Qos.states(), functools.partial(odometry_batch, source=source))
+        # Everything a callback may take in one go: what the input queues can hold.
+        self._drain_limit = sum(s.subscription.qos_profile.depth for s in self._inputs) or 1
         self.create_service(PredictCollisions, "predict_collisions", self._on_predict_request,
                             qos_profile=Qos.services())
         # A clock that jumps back (use_sim_time with a looping bag, a restarted simulator)
@@ -162,45 +217,118 @@ class CollisionNode(Node):
 
         self._publish_timer = None
         self._set_publish_rate(p("publish_rate"))
+        self.create_timer(self.EXPIRY_PERIOD_S, self._on_expiry_timer)
         self.create_timer(1.0, self._publish_diagnostics)
         self.get_logger().info(
             f"predicting for {p('dimensions')}-D bodies on {list(p('state_topics'))}"
             f" + {list(p('single_state_topics'))} + odometry {list(self._odometry_sources)}, horizon {p('horizon')} s")
 
     # -- inputs ---------------------------------------------------------------------------------
-    def _subscribe(self, topic: str, msg_type: type,
+    def _subscribe(self, topic: str, msg_type: type, qos: QoSProfile,
                    decode: Callable[[bytes], StateBatch] | None = None) -> None:
         """Subscribe to raw bytes of `msg_type`; `decode` turns them into a StateBatch
         (default: the CircleState/CircleStateArray decoder)."""
         resolved = self.resolve_topic_name(topic)  # one name for warnings, recording, replay
-        # raw=True: the exact received bytes are what a recording must keep.
-        sub = self.create_subscription(
-            msg_type, resolved, lambda data, t=resolved, m=msg_type: self._on_states(t, m, data),
-            Qos.states(), raw=True, qos_overriding_options=QoSOverridingOptions.with_default_policies())
-        self._state_subscriptions.append(sub)
-        self._state_types[resolved] = msg_type
-        self._decoders[resolved] = decode or functools.partial(decode_states, msg_type=msg_type)
+        source = InputTopic(resolved, msg_type,
+                            decode or functools.partial(decode_states, msg_type=msg_type))
+        # raw=True: the exact received bytes are what a recording must keep; the two-argument
+        # callback receives the rmw MessageInfo (receive timestamp, writer sequence number).
+        source.subscription = self.create_subscription(
+            msg_type, resolved, functools.partial(self._on_input, source), qos, raw=True,
+            qos_overriding_options=QoSOverridingOptions.with_default_policies())
+        self._inputs.append(source)
 
-    def _on_states(self, topic: str, msg_type: type, data: bytes) -> None:
-        started = time.perf_counter()
-        now_ns = self.get_clock().now().nanoseconds
-        self.counters.messages += 1
-        self._record(topic, data, now_ns)  # before decoding: even garbage is kept for debugging
+    def _on_input(self, source: InputTopic, data: bytes, info: dict) -> None:
+        """Ingest this input and every input already waiting, then publish once (on-change mode)."""
+        with self.markers.node_busy():
+            now_ns = self._drain_clock()
+            taken = [(source, data, info)]
+            self._take_waiting(taken)
+            self._ingest_all(taken, now_ns)
+            if self._publish_timer is None and self._unanswered.changed:
+                self._publish(now_ns)
+
+    def _drain_clock(self) -> int:
+        """The receive time of one drain: the clock, but never equal to the previous drain's.
+
+        Replay tells one drain's run of single states from the next by their log time
+        (pipeline/state_groups); only a stopped clock (sim time) could repeat it.
+        """
+        now_ns = max(self.get_clock().now().nanoseconds, self._last_drain_ns + 1)
+        self._last_drain_ns = now_ns
+        return now_ns
+
+    def _take_waiting(self, taken: list) -> None:
+        """Append what waits on every input subscription (at most what the queues hold)."""
+        budget = self._drain_limit
+        while budget > 0:
+            before = len(taken)
+            for source in self._inputs:
+                sub = source.subscription
+                while len(taken) - before < budget:
+                    try:
+                        with sub.handle:
+                            message = sub.handle.take_message(source.msg_type, True)
+                    except InvalidHandle:  # destroyed during shutdown
+                        return
+                    if message is None:
+                        break
+                    taken.append((source, message[0], message[1]))
+            if len(taken) == before:
+                return
+            budget -= len(taken) - before
+
+    def _ingest_all(self, taken: list, now_ns: int) -> None:
+        """Record every taken input in order, then merge: arrays one by one, runs of single states together."""
+        run: list = []
+        for source, data, info in taken:
+            received_ns = (info or {}).get("received_timestamp") or time.time_ns()
+            self.counters.messages += 1
+            self.input_loss.observe(source.topic, len(data), info, received_ns)
+            # Before decoding: even garbage is kept for debugging. The recording's order is the
+            # order of ingestion, and its log time the clock the scene was told.
+            self._record(source.topic, data, now_ns, (info or {}).get("source_timestamp") or None)
+            if source.msg_type is CircleState:
+                run.append((source, data, received_ns))
+                continue
+            self._ingest_run(run, now_ns)
+            run = []
+            self._ingest_message(source, data, received_ns, now_ns)
+        self._ingest_run(run, now_ns)
+
+    def _ingest_message(self, source: InputTopic, data: bytes, received_ns: int, now_ns: int) -> None:
+        topic, changed = source.topic, False
         try:
-            batch = self._decoders[topic](data)
+            report = self.predictor.receive_batch(source.decode(data), now_ns)
+            changed = report.changed
+            self._account(topic, report)
         except CdrError as exc:  # a malformed payload must not stop the node
             self.counters.rejected += 1
-            self._warn(topic, f"{topic}: rejected {msg_type.__name__}: {exc}")
-            return
-        try:
-            report = self.predictor.receive_batch(batch, now_ns)
+            self._warn(topic, f"{topic}: rejected {source.msg_type.__name__}: {exc}")
         except Exception as exc:  # a bug must cost one message, not the node
             self.counters.errors += 1
-            self._warn("receive", f"{topic}: message of {len(batch)} states skipped: {exc!r}")
+            self._warn("receive", f"{topic}: message skipped: {exc!r}")
+        self._unanswered.note(received_ns, changed)
+
+    def _ingest_run(self, run: list, now_ns: int) -> None:
+        """Consecutive single-state messages of one drain, merged as one group (pipeline/state_groups)."""
+        if not run:
             return
-        self._account(topic, report)
-        if self._publish_timer is None and report.changed:
-            self._publish(now_ns, started)
+        changed = False
+        try:
+            outcome = ingest_single_states(self.predictor, [data for _, data, _ in run], now_ns)
+            for (source, _, _), report, error in zip(run, outcome.reports, outcome.errors):
+                if error is not None:
+                    self.counters.rejected += 1
+                    self._warn(source.topic, f"{source.topic}: undecodable CircleState ({error})")
+                else:
+                    changed = changed or report.changed
+                    self._account(source.topic, report)
+        except Exception as exc:  # a bug must cost these messages, not the node
+            self.counters.errors += 1
+            self._warn("receive", f"{len(run)} single-state message(s) skipped: {exc!r}")
+        for _, _, received_ns in run:
+            self._unanswered.note(received_ns, changed)
 
     def _account(self, topic: str, report: IntakeReport) -> None:
         c = self.counters
@@ -223,12 +351,21 @@ class CollisionNode(Node):
 
     # -- outputs --------------------------------------------------------------------------------
     def _on_publish_timer(self) -> None:
-        started = time.perf_counter()
-        now_ns = self.get_clock().now().nanoseconds
-        self.counters.expired += len(self.predictor.expire(now_ns))
-        self._publish(now_ns, started)
+        with self.markers.node_busy():
+            now_ns = self.get_clock().now().nanoseconds
+            self.counters.expired += len(self.predictor.expire(now_ns))
+            self._publish(now_ns)
 
-    def _publish(self, now_ns: int, started: float) -> None:
+    def _on_expiry_timer(self) -> None:
+        """Bodies whose sources went silent leave the scene, and the changed scene is published."""
+        now_ns = self.get_clock().now().nanoseconds
+        expired = self.predictor.expire(now_ns)
+        if expired:
+            self.counters.expired += len(expired)
+            with self.markers.node_busy():
+                self._publish(now_ns)
+
+    def _publish(self, now_ns: int) -> None:
         try:
             prediction = self.predictor.predict()
             data = prediction.to_cdr()
@@ -238,25 +375,17 @@ class CollisionNode(Node):
                                   f"bodies skipped: {exc!r}")
             return
         self._predictions_pub.publish(data)
+        published_ns = time.time_ns()  # the rmw receive timestamps are system-clock times too
         # Log time = the clock reading the prediction was computed at, so replay can
         # recompute it at the same instant (expiry depends on it).
         self._record(self._predictions_pub.topic_name, data, now_ns)
         self.counters.published += 1
-        self.latencies_s.append(time.perf_counter() - started)
-        if self._marker_rate > 0 and time.monotonic() >= self._next_marker_time:
-            self._publish_markers(prediction)
-
-    def _publish_markers(self, prediction) -> None:
-        """Markers at most every 1/marker_rate s, and within MARKER_BUDGET of the node's time.
-
-        Building and serializing a MarkerArray costs ~0.13 s at 1,000 bodies, more than
-        a whole 30 Hz prediction cycle: markers are for eyes, predictions for robots,
-        so large scenes get fewer marker updates rather than late predictions.
-        """
-        started = time.monotonic()
-        self._markers_pub.publish(self._markers.build(prediction))
-        cost = time.monotonic() - started
-        self._next_marker_time = started + max(1.0 / self._marker_rate, cost / self.MARKER_BUDGET)
+        pending = self._unanswered
+        if pending.oldest_received_ns is not None:
+            self.latencies_s.append(max(0, published_ns - pending.oldest_received_ns) * 1e-9)
+        self.counters.coalesced += max(0, pending.inputs - 1)
+        self._unanswered = Unanswered()
+        self.markers.offer(prediction)
 
     def _on_predict_request(self, request: PredictCollisions.Request,
                             response: PredictCollisions.Response) -> PredictCollisions.Response:
@@ -277,6 +406,7 @@ class CollisionNode(Node):
             return
         bodies = len(self.predictor.registry)
         self.predictor.registry.clear()
+        self._last_drain_ns = 0
         if backwards:
             self.counters.clock_jumps_back += 1
             self.get_logger().warning(
@@ -292,12 +422,21 @@ class CollisionNode(Node):
             "states_accepted": c.accepted, "states_rejected": c.rejected,
             "states_ignored_not_newer": c.ignored, "bodies_removed": c.removed,
             "bodies_expired": c.expired, "predictions_published": c.published,
+            "inputs_coalesced": c.coalesced, "inputs_missing": self.input_loss.missing,
             "candidate_pairs": s.candidate_pairs, "contacts": s.contacts,
             "compute_ms_last": f"{s.compute_s * 1e3:.3f}",
+            # From the rmw receive timestamp of the oldest input answered to publication:
+            # queue wait, coalescing, decoding, prediction and encoding included.
             "latency_ms_p50": f"{np.percentile(lat, 50) * 1e3:.3f}",
             "latency_ms_p99": f"{np.percentile(lat, 99) * 1e3:.3f}",
+            "latency_ms_max": f"{lat.max() * 1e3:.3f}",
+            "markers_drawn": self.markers.drawn,
+            "marker_ms_last": f"{self.markers.last_cost_s * 1e3:.3f}",
             "errors": c.errors, "clock_jumps_back": c.clock_jumps_back,
         }
+        self.input_loss.forget_silent(time.time_ns())
+        for line in self.input_loss.new_losses():
+            self._warn("input_loss", line)
         # A failed recording must show where operators look, not only once in the log
         # (tests/reliability/test_faults_recording.py::test_recording_directory_removed).
         recording_error = self._recording_error or (self._recorder.error if self._recorder else None)
@@ -323,8 +462,9 @@ class CollisionNode(Node):
         """Open the bag; an unusable record_path refuses start-up (no silent non-recording)."""
         try:
             self._recorder = BagRecorder(path)
-            for topic, msg_type in self._state_types.items():
-                self._recorder.add_topic(topic, _ros_type_name(msg_type), self._offered_qos(topic))
+            for source in self._inputs:
+                self._recorder.add_topic(source.topic, _ros_type_name(source.msg_type),
+                                         self._offered_qos(source.topic))
             self._recorder.add_topic(self._predictions_pub.topic_name,
                                      _ros_type_name(CollisionPredictionArray),
                                      qos_profiles_yaml([self._predictions_pub.qos_profile]))
@@ -334,7 +474,7 @@ class CollisionNode(Node):
         except RecordingError as exc:
             raise ValueError(f"record_path: {exc}") from exc
         # Input publishers may appear after start: look for them off the message path.
-        self._qos_unknown = {t for t in self._state_types if not self._offered_qos(t)}
+        self._qos_unknown = {s.topic for s in self._inputs if not self._offered_qos(s.topic)}
         self._qos_timer = self.create_timer(1.0, self._record_offered_qos) if self._qos_unknown else None
         self._record_config()
         self.get_logger().info(f"recording to {self._recorder.path}")
@@ -375,16 +515,19 @@ class CollisionNode(Node):
         except RecordingError as exc:
             self._recording_error = self._recording_error or str(exc)
 
-    def _record(self, topic: str, data: bytes, log_time_ns: int) -> None:
+    def _record(self, topic: str, data: bytes, log_time_ns: int,
+                publish_time_ns: int | None = None) -> None:
+        """publish_time_ns: the writer's source timestamp of an input, when rmw gives it."""
         if self._recorder is None or self._recording_error:
             return
         try:
-            self._recorder.write(topic, data, log_time_ns)
+            self._recorder.write(topic, data, log_time_ns, publish_time_ns)
         except RecordingError as exc:  # keep predicting; say so loudly, once
             self._recording_error = str(exc)
             self.get_logger().error(f"recording stopped, predictions continue: {exc}")
 
     def destroy_node(self) -> None:
+        self.markers.close()  # clears the display while the publisher still exists
         if self._recorder is not None:
             try:
                 self._recorder.close()
@@ -409,7 +552,7 @@ class CollisionNode(Node):
             if param.name == "publish_rate":
                 self._set_publish_rate(param.value)
             elif param.name == "marker_rate":
-                self._marker_rate = param.value
+                self.markers.set_rate(param.value)
         if changes or any(p.name == "publish_rate" for p in params):
             self._record_config()  # replay must know what was in force from here on
 
@@ -423,6 +566,9 @@ class CollisionNode(Node):
 
 def main(args: list[str] | None = None) -> int:
     argv = sys.argv if args is None else args
+    # A thread waiting for the interpreter lock (the prediction path, woken by a message while
+    # the marker thread computes) gets it after at most this long instead of 5 ms.
+    sys.setswitchinterval(0.0005)
     parse_args(argv, __doc__.splitlines()[0])
     return spin_node(CollisionNode, argv, "collision_node")
 

@@ -30,6 +30,7 @@ from circle_collision_ros.pipeline.odometry import (ODOMETRY_TYPE, OdometrySourc
                                                    odometry_batch)
 from circle_collision_ros.pipeline.state_batch import StateBatch
 from circle_collision_ros.pipeline.predictor import CollisionPredictor, PredictorConfig
+from circle_collision_ros.pipeline.state_groups import ingest_single_states
 
 
 class RecordedTypes:
@@ -75,6 +76,7 @@ class ReplayReport:
 
     inputs: int = 0
     predictions: int = 0
+    coalesced: int = 0  # inputs answered together with newer ones (all but one per prediction)
     pairs_compared: int = 0
     max_time_difference: float = 0.0
     mismatches: list[str] = field(default_factory=list)
@@ -116,11 +118,30 @@ def replay_offline(records, config: PredictorConfig | None = None) -> ReplayRepo
     Each input is received at its recorded log time; each recorded prediction is
     recomputed at its log time (the node records predictions with the clock
     reading it computed them at) and compared.
+
+    Coalescing needs no extra record: the node records every input as it
+    takes it and each prediction after the inputs it answers, all on one
+    thread, so log-time order (ties in file order) is the node's order of work.
+    The inputs between two predictions are the ones the node coalesced; a run
+    of CircleState records with one log time is one drain's group, merged as
+    the node merged it (pipeline/state_groups).
     """
     report = ReplayReport()
     predictor = CollisionPredictor(config) if config is not None else None
     odometry: dict[str, OdometrySource] = {}
+    unanswered = 0  # inputs since the last prediction: the node coalesced them into the next one
+    run: list[bytes] = []  # consecutive CircleState records of one log time: one node drain
+    run_time = -1
+
+    def flush() -> None:
+        nonlocal run
+        if run:
+            ingest_single_states(predictor, run, run_time)
+            run = []
+
     for record in records:
+        if run and not (record.type_name == RecordedTypes.STATE and record.log_time_ns == run_time):
+            flush()
         if record.type_name == RecordedTypes.CONFIG:
             text = deserialize_message(record.data, String).data
             recorded = config_from_json(text)
@@ -132,12 +153,20 @@ def replay_offline(records, config: PredictorConfig | None = None) -> ReplayRepo
             continue
         if predictor is None:
             predictor = CollisionPredictor(PredictorConfig())  # bag without a config record
-        if record.type_name in RecordedTypes.INPUTS:
+        if record.type_name == RecordedTypes.STATE:
+            run.append(record.data)
+            run_time = record.log_time_ns
+            report.inputs += 1
+            unanswered += 1
+        elif record.type_name in RecordedTypes.INPUTS:
             batch = decode_input(record, odometry)
             if batch is not None:
                 predictor.receive_batch(batch, record.log_time_ns)
             report.inputs += 1
+            unanswered += 1
         elif record.type_name == RecordedTypes.PREDICTIONS:
+            report.coalesced += max(0, unanswered - 1)
+            unanswered = 0
             recorded = deserialize_message(record.data, CollisionPredictionArray)
             predictor.expire(record.log_time_ns)
             # The same bytes the node publishes, decoded the same way as the recording.
@@ -145,6 +174,7 @@ def replay_offline(records, config: PredictorConfig | None = None) -> ReplayRepo
                                            CollisionPredictionArray)
             report.predictions += 1
             compare_predictions(recorded, replayed, f"prediction #{report.predictions}", report)
+    flush()
     return report
 
 

@@ -1,0 +1,147 @@
+"""Many single CircleState messages ingested as a few batches (per-body streams at scene scale).
+
+A node fed by one CircleState stream per body takes thousands of small
+messages a second; decoding and merging them one by one costs more than the
+prediction. The node therefore ingests each run of single-state messages it
+takes in one go as a StateGroup, and replay rebuilds the same runs from the
+recording (consecutive CircleState records with one log time), so both do the
+same work in the same order.
+
+Rule: the run is split into waves, wave k holding each body's k-th state of
+the run, in arrival order; waves are merged in order, then bodies are expired
+once at the run's receive time. So every body's states are merged in the order
+they arrived, and no batch holds an id twice (which check_batch would reject
+as a duplicate). Effects across bodies within one run (which of two new ids
+fills the last max_bodies place) follow wave order, identically live and in replay. A message that is not plain little-endian CDR,
+or is malformed, goes through cdr_codec.decode_states alone (same acceptance,
+same error).
+"""
+from __future__ import annotations
+
+import struct
+from typing import NamedTuple
+
+import numpy as np
+
+from circle_collision_msgs.msg import CircleState
+from circle_collision_ros.pipeline.cdr_codec import CdrError, decode_states
+from circle_collision_ros.pipeline.predictor import CollisionPredictor, IntakeReport
+from circle_collision_ros.pipeline.state_batch import StateBatch
+
+_HEADER_LE = b"\x00\x01"
+_U32 = struct.Struct("<I")
+_TIME = struct.Struct("<iI")
+_NUMBERS = struct.Struct("<10d")
+
+
+def _string(data: bytes, pos: int) -> tuple[str, int] | None:
+    pos += (-(pos - 4)) % 4
+    if pos + 4 > len(data):
+        return None
+    (size,) = _U32.unpack_from(data, pos)
+    start = pos + 4
+    if size == 0:  # some writers send a bare zero length for ""
+        return "", start
+    if start + size > len(data) or data[start + size - 1] != 0:
+        return None
+    return data[start:start + size - 1].decode(), start + size
+
+
+def _decode_one(data: bytes) -> tuple | None:
+    """(stamp ns, frame, id, 10 numbers, remove) of well-formed LE CircleState bytes, else None."""
+    if len(data) < 4 or data[:2] != _HEADER_LE:
+        return None
+    try:
+        if len(data) < 12:
+            return None
+        sec, nanosec = _TIME.unpack_from(data, 4)
+        stamp_ns = sec * 1_000_000_000 + nanosec
+        frame = _string(data, 12)
+        if frame is None:
+            return None
+        body = _string(data, frame[1])
+        if body is None:
+            return None
+        pos = body[1]
+        pos += (-(pos - 4)) % 8
+        if pos + 81 > len(data):
+            return None
+        return stamp_ns, frame[0], body[0], _NUMBERS.unpack_from(data, pos), data[pos + 80] != 0
+    except UnicodeDecodeError:
+        return None  # decode_states names the error
+
+
+class GroupOutcome(NamedTuple):
+    """Per message of the group: its report (None if undecodable) or the decoding error."""
+
+    reports: list[IntakeReport | None]
+    errors: list[CdrError | None]
+
+
+def ingest_single_states(predictor: CollisionPredictor, messages: list[bytes], now_ns: int,
+                         array_frame: str = "") -> GroupOutcome:
+    """Decode and merge a run of serialized CircleState messages received at `now_ns`.
+
+    Returns per message the share of the intake it caused; expiry at `now_ns`
+    is reported on the first message. Raises what predictor.receive_batch raises.
+    """
+    rows: list[tuple] = []
+    owner: list[int] = []
+    errors: list[CdrError | None] = [None] * len(messages)
+    for k, data in enumerate(messages):
+        row = _decode_one(data)
+        if row is None:
+            try:
+                batch = decode_states(data, CircleState)
+            except CdrError as exc:
+                errors[k] = exc
+                continue
+            if len(batch) != 1:  # cannot happen for CircleState; keep the rule explicit
+                errors[k] = CdrError(f"expected one CircleState, decoded {len(batch)}")
+                continue
+            row = (int(batch.stamp_ns[0]), batch.frames[0], batch.ids[0],
+                   (float(batch.radius[0]), *batch.position[0].tolist(), *batch.velocity[0].tolist(),
+                    *batch.acceleration[0].tolist()), bool(batch.remove[0]))
+        rows.append(row)
+        owner.append(k)
+    reports: list[IntakeReport | None] = [None if errors[k] else IntakeReport()
+                                          for k in range(len(messages))]
+    if not rows:
+        return GroupOutcome(reports, errors)
+    stamps = np.array([r[0] for r in rows], dtype=np.int64)
+    numbers = np.array([r[3] for r in rows], dtype=np.float64).reshape(len(rows), 10)
+    ids = [r[2] for r in rows]
+    batch = StateBatch(ids=ids, frames=[r[1] or array_frame for r in rows], stamp_ns=stamps,
+                       radius=numbers[:, 0], position=numbers[:, 1:4], velocity=numbers[:, 4:7],
+                       acceleration=numbers[:, 7:10], remove=np.array([r[4] for r in rows], dtype=bool))
+    seen: dict[str, int] = {}
+    wave = np.array([seen.__setitem__(i, seen.get(i, -1) + 1) or seen[i] for i in ids], dtype=np.int64)
+    for w in range(int(wave.max()) + 1):
+        take = np.flatnonzero(wave == w)
+        report = predictor.ingest(_select(batch, take), now_ns)
+        _share(report, [owner[t] for t in take.tolist()], reports)
+    expired = predictor.expire(now_ns)
+    reports[owner[0]].expired = expired
+    return GroupOutcome(reports, errors)
+
+
+def _select(batch: StateBatch, rows: np.ndarray) -> StateBatch:
+    if len(rows) == len(batch):
+        return batch
+    index = rows.tolist()
+    return StateBatch(ids=[batch.ids[k] for k in index], frames=[batch.frames[k] for k in index],
+                      stamp_ns=batch.stamp_ns[rows], radius=batch.radius[rows],
+                      position=batch.position[rows], velocity=batch.velocity[rows],
+                      acceleration=batch.acceleration[rows], remove=batch.remove[rows])
+
+
+def _share(report: IntakeReport, owners: list[int], reports: list[IntakeReport | None]) -> None:
+    """Attribute a wave's report to its messages (one state each): counts to the first message,
+    each rejection to the message that carried the state (index 0 of that message)."""
+    target = reports[owners[0]]
+    target.accepted += report.accepted
+    target.removed += report.removed
+    target.ignored += report.ignored
+    for rejection in report.rejected:
+        owner = owners[rejection.index] if 0 <= rejection.index < len(owners) else owners[0]
+        reports[owner].rejected.append(type(rejection)(0, rejection.body_id, rejection.reason))
