@@ -320,7 +320,7 @@ class CollisionNode(Node):
             for (source, _, _), report, error in zip(run, outcome.reports, outcome.errors):
                 if error is not None:
                     self.counters.rejected += 1
-                    self._warn(source.topic, f"{source.topic}: undecodable CircleState ({error})")
+                    self._warn(source.topic, f"{source.topic}: rejected CircleState: {error}")
                 else:
                     changed = changed or report.changed
                     self._account(source.topic, report)
