@@ -3,9 +3,10 @@
 Namespaces: `bodies` (one cylinder or sphere per body, coloured by its most
 urgent contact) and `contacts` (a small sphere at each predicted contact
 point). A body or pair keeps its marker id while it is in the scene; when it
-leaves, the next array carries a DELETE for that id and the id returns to a
-free list (smallest first), so the id tables hold exactly the live scene and
-ids stay below the largest scene seen.
+leaves, its id returns to a free list (smallest first), so the id tables hold
+exactly the live scene and ids stay below the largest scene seen. Each array
+starts with a DELETEALL and lists the whole scene, so it is complete on its
+own (a display that missed an array or joined late shows no ghosts).
 
 MarkerPublisher draws on its own thread: the prediction path only hands over
 the newest prediction (a reference, under a lock). The thread draws at most
@@ -265,7 +266,7 @@ def _marker_layout(frame: bytes, ns: bytes, marker_type: int, action: int, resid
 
 
 class MarkerBuilder:
-    """Serialized MarkerArrays: ADD for what is in the prediction, DELETE for what left since the last one."""
+    """Serialized MarkerArrays: a DELETEALL, then the whole scene, with ids bounded by the live scene."""
 
     CONTACT_DIAMETER_M = 0.3
     FLAT_HEIGHT_M = 0.05
@@ -313,19 +314,23 @@ class MarkerBuilder:
                                          contact_points, np.full((m, 3), self.CONTACT_DIAMETER_M),
                                          Urgency.colours(contact_ttc))
         pause()
-        # An id freed and handed to a newcomer in this same array needs no DELETE: the ADD replaces it.
-        segments = [self._deletions("bodies", shape, np.setdiff1d(gone_bodies, bodies.ids)),
-                    self._deletions("contacts", SPHERE, np.setdiff1d(gone_pairs, contacts_segment.ids)),
-                    bodies, contacts_segment]
+        # Each array starts with a DELETEALL, so it is complete on its own: a display that missed
+        # an array (the publisher keeps only the newest) or joined late shows no ghosts. The
+        # departed ids are freed (gone_*) for reuse, which keeps ids bounded by the live scene.
+        del gone_bodies, gone_pairs
+        segments = [self._clear_segment(), bodies, contacts_segment]
         return self._encoder.encode(prediction.stamp, prediction.frame_id, segments, pause)
 
     def clear_all(self, stamp: tuple[int, int] = (0, 0), frame_id: str = "") -> bytes:
         """One DELETEALL (every namespace), and forget every id."""
         self.body_ids.clear()
         self.pair_ids.clear()
-        return self._encoder.encode(stamp, frame_id, [MarkerSegment(
-            "", SPHERE, DELETEALL, np.zeros(1, np.int32), np.zeros((1, 3)), np.zeros((1, 3)),
-            np.zeros((1, 4), np.float32))])
+        return self._encoder.encode(stamp, frame_id, [self._clear_segment()])
+
+    @staticmethod
+    def _clear_segment() -> MarkerSegment:
+        return MarkerSegment("", SPHERE, DELETEALL, np.zeros(1, np.int32), np.zeros((1, 3)),
+                             np.zeros((1, 3)), np.zeros((1, 4), np.float32))
 
     @classmethod
     def _assign(cls, table: MarkerIds, keys: list, pause: Callable[[], None]) -> np.ndarray:
@@ -343,12 +348,6 @@ class MarkerBuilder:
         live = set(keys)
         gone = [k for k in table.keys() if k not in live]
         return np.array([table.release(k) for k in gone], dtype=np.int32)
-
-    @staticmethod
-    def _deletions(ns: str, marker_type: int, ids: np.ndarray) -> MarkerSegment:
-        n = len(ids)
-        return MarkerSegment(ns, marker_type, DELETE, ids, np.zeros((n, 3)), np.zeros((n, 3)),
-                             np.zeros((n, 4), np.float32))
 
 
 class MarkerPublisher:

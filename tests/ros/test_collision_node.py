@@ -149,7 +149,8 @@ def test_markers_and_diagnostics_are_published(in_process, ros_node) -> None:
     harness.send(state_array(_stamped_now([state("a", (0, 0), (1, 0, 0)), state("b", (3, 0))], ros_node)))
     assert spin_until(ros_node, lambda: harness.markers and harness.diagnostics, 15.0, (node,))
     markers = harness.markers[-1].markers
-    assert {(m.ns, m.action) for m in markers} == {("bodies", 0), ("contacts", 0)}
+    assert markers[0].action == markers[0].DELETEALL
+    assert {(m.ns, m.action) for m in markers[1:]} == {("bodies", 0), ("contacts", 0)}
     assert sorted(m.id for m in markers if m.ns == "bodies") == [0, 1]
     values = {kv.key: kv.value for kv in harness.diagnostics[-1].status[0].values}
     assert values["bodies"] == "2" and int(values["predictions_published"]) >= 1

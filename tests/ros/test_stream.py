@@ -299,7 +299,7 @@ def test_thousand_body_arrays_with_markers(make_node, ros_node) -> None:
     leaving = states[::2]
     pub.publish(state_array([state(s.id, (0, 0), stamp_ns=t, remove=True) for s in leaving]))
     assert client.spin(20.0, lambda: len(scene_of(node)) == 500)
-    assert client.spin(10.0, lambda: sum(1 for ns, _ in displayed(client.markers) if ns == "bodies") == 500)
+    assert client.spin(30.0, lambda: sum(1 for ns, _ in displayed(client.markers) if ns == "bodies") == 500)
     client.spin(0.5)
     shown = displayed(client.markers)
     assert sum(1 for ns, _ in shown if ns == "bodies") == 500
