@@ -47,7 +47,7 @@ def _profile_env(use_profile: bool) -> dict[str, str]:
     return env
 
 
-def publish(bodies: int, count: int, rate: float, wait_s: float) -> None:
+def publish(bodies: int, count: int, rate: float, wait_s: float, topic: str = TOPIC) -> None:
     """Publisher role: wait for a subscriber, send `count` frames stamped 1..count, exit."""
     import struct
 
@@ -61,7 +61,7 @@ def publish(bodies: int, count: int, rate: float, wait_s: float) -> None:
 
     rclpy.init()
     node = rclpy.create_node("transport_probe_publisher")
-    pub = node.create_publisher(CircleStateArray, TOPIC,
+    pub = node.create_publisher(CircleStateArray, topic,
                                 QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE))
     rng = np.random.default_rng(1)
     batch = StateBatch(ids=[f"b{k:05d}" for k in range(bodies)], frames=["map"] * bodies,
@@ -169,6 +169,7 @@ def main() -> int:
     parser.add_argument("--bodies", type=int, default=0, help=argparse.SUPPRESS)
     parser.add_argument("--seconds", type=float, default=0.0, help=argparse.SUPPRESS)
     parser.add_argument("--reliable", action="store_true", help=argparse.SUPPRESS)
+    parser.add_argument("--topic", default=TOPIC, help=argparse.SUPPRESS)
     parser.add_argument("--sizes-kb", type=float, nargs="+", default=[100, 400, 600, 1200])
     parser.add_argument("--count", type=int, default=150)
     parser.add_argument("--rate", type=float, default=30.0)
@@ -176,7 +177,7 @@ def main() -> int:
     parser.add_argument("--json", help="also write the rows to this file")
     opts = parser.parse_args()
     if opts.role == "pub":
-        publish(opts.bodies, opts.count, opts.rate, wait_s=10.0)
+        publish(opts.bodies, opts.count, opts.rate, wait_s=10.0, topic=opts.topic)
         return 0
     if opts.role == "sub":
         subscribe(opts.reliable, opts.seconds)

@@ -30,6 +30,7 @@ from __future__ import annotations
 
 import functools
 import json
+import os
 import sys
 import time
 from collections import deque
@@ -59,7 +60,7 @@ from circle_collision_ros.pipeline.cdr_codec import CdrError, decode_states
 from circle_collision_ros.pipeline.odometry import odometry_batch, odometry_sources
 from circle_collision_ros.pipeline.state_batch import StateBatch
 from circle_collision_ros.pipeline.state_groups import ingest_single_states
-from circle_collision_ros.cli import parse_args, spin_node
+from circle_collision_ros.cli import TransportProfile, parse_args, spin_node
 from circle_collision_ros.node.input_loss import InputLossMonitor
 from circle_collision_ros.node.markers import MarkerPublisher
 from circle_collision_ros.pipeline.predictor import (CollisionPredictor, IntakeReport,
@@ -74,18 +75,27 @@ class Qos:
     """
 
     @staticmethod
-    def states() -> QoSProfile:
-        # Best-effort requests match both reliable and best-effort publishers.
+    def states(reliability: str) -> QoSProfile:
+        """Whole-scene topics (arrays, one robot's odometry): each frame supersedes the last.
+
+        best_effort matches both reliable and best-effort publishers; reliable keeps only
+        the newest frame, so a slow node never works through a queue of stale ones
+        (README, "Large scenes").
+        """
+        if reliability == "reliable":
+            return QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1,
+                              reliability=ReliabilityPolicy.RELIABLE,
+                              durability=DurabilityPolicy.VOLATILE)
         return QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=50,
                           reliability=ReliabilityPolicy.BEST_EFFORT,
                           durability=DurabilityPolicy.VOLATILE)
 
     @staticmethod
-    def single_states() -> QoSProfile:
+    def single_states(reliability: str) -> QoSProfile:
         # One topic carries every body's own stream (300 bodies at 30 Hz: 9,000/s); the queue
         # must outlast a prediction cycle or KEEP_LAST overwrites states before they are taken.
-        return QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=2000,
-                          reliability=ReliabilityPolicy.BEST_EFFORT,
+        policy = ReliabilityPolicy.RELIABLE if reliability == "reliable" else ReliabilityPolicy.BEST_EFFORT
+        return QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=2000, reliability=policy,
                           durability=DurabilityPolicy.VOLATILE)
 
     @staticmethod
@@ -178,6 +188,10 @@ class CollisionNode(Node):
         self._unanswered = Unanswered()
         self._last_drain_ns = 0
         self.input_loss = InputLossMonitor()
+        # What Fast DDS loaded at rclpy.init (cli.use_large_scene_transport sets it before).
+        self._transport_profile = (os.environ.get(TransportProfile.ENV)
+                                   or os.environ.get(TransportProfile.DEPRECATED_ENV) or "")
+        self._unmatched_publishers: list[str] = []
         self._last_warning: dict[str, float] = {}
 
         overrides = QoSOverridingOptions.with_default_policies()
@@ -191,14 +205,15 @@ class CollisionNode(Node):
                                                       qos_profile_system_default)
         self._inputs: list[InputTopic] = []
         for topic in p("state_topics"):
-            self._subscribe(topic, CircleStateArray, Qos.states())
+            self._subscribe(topic, CircleStateArray, Qos.states(p("state_reliability")))
         for topic in p("single_state_topics"):
-            self._subscribe(topic, CircleState, Qos.single_states())
+            self._subscribe(topic, CircleState, Qos.single_states(p("state_reliability")))
         self._odometry_sources = odometry_sources(
             [self.resolve_topic_name(t) for t in p("odometry_topics")], p("odometry_radius"),
             p("odometry_radii"))
         for topic, source in self._odometry_sources.items():
-            self._subscribe(topic, Odometry, Qos.states(), functools.partial(odometry_batch, source=source))
+            self._subscribe(topic, Odometry, Qos.states(p("state_reliability")),
+                            functools.partial(odometry_batch, source=source))
         # Everything a callback may take in one go: what the input queues can hold.
         self._drain_limit = sum(s.subscription.qos_profile.depth for s in self._inputs) or 1
         self.create_service(PredictCollisions, "predict_collisions", self._on_predict_request,
@@ -434,8 +449,10 @@ class CollisionNode(Node):
             "marker_ms_last": f"{self.markers.last_cost_s * 1e3:.3f}",
             "errors": c.errors, "clock_jumps_back": c.clock_jumps_back,
         }
+        values.update(self._transport_values())
         self.input_loss.forget_silent(time.time_ns())
-        for line in self.input_loss.new_losses():
+        losses = self.input_loss.new_losses()
+        for line in losses:
             self._warn("input_loss", line)
         # A failed recording must show where operators look, not only once in the log
         # (tests/reliability/test_faults_recording.py::test_recording_directory_removed).
@@ -450,12 +467,39 @@ class CollisionNode(Node):
         if recording_error:
             level = DiagnosticStatus.WARN
             problems.append("recording failed, predictions continue")
+        if losses or self._unmatched_publishers:
+            level = DiagnosticStatus.WARN
+            problems += losses + self._unmatched_publishers
         status = DiagnosticStatus(
             level=level, name=f"{self.get_name()}: collision prediction",
             message="; ".join(problems) or "ok",
             hardware_id=self.get_fully_qualified_name(),
             values=[KeyValue(key=k, value=str(v)) for k, v in values.items()])
         self._diagnostics_pub.publish(DiagnosticArray(header=Header(stamp=self.get_clock().now().to_msg()), status=[status]))
+
+    def _transport_values(self) -> dict[str, str]:
+        """What the transport delivers: profile in force, largest input, input publishers and their QoS.
+
+        Also sets _unmatched_publishers: best-effort publishers a reliable subscription
+        (state_reliability:=reliable) can never receive from.
+        """
+        reliable = node_parameters.value_of(self, "state_reliability") == "reliable"
+        summary, unmatched = [], []
+        for source in self._inputs:
+            kinds: dict[str, int] = {}
+            for info in self.get_publishers_info_by_topic(source.topic):
+                kind = info.qos_profile.reliability.name.lower()
+                kinds[kind] = kinds.get(kind, 0) + 1
+            shown = ", ".join(f"{n} {k}" for k, n in sorted(kinds.items())) or "none"
+            summary.append(f"{source.topic}: {shown}")
+            if reliable and kinds.get("best_effort"):
+                unmatched.append(f"{source.topic}: {kinds['best_effort']} best-effort publisher(s) cannot "
+                                 "reach this node's reliable subscription (state_reliability)")
+        self._unmatched_publishers = unmatched
+        largest = max((t.largest_bytes for t in self.input_loss.topics.values()), default=0)
+        return {"transport_profile": self._transport_profile or "Fast DDS defaults",
+                "largest_input_kb": f"{largest / 1024:.1f}",
+                "input_publishers": "; ".join(summary)}
 
     # -- recording ------------------------------------------------------------------------------
     def _start_recording(self, path: str) -> None:

@@ -94,11 +94,16 @@ PARAMS: tuple[ParamSpec, ...] = (
     ParamSpec("max_bodies", Parameter.Type.INTEGER, 10_000,
               "New ids beyond this many are rejected (bounds memory and compute).", read_only=True,
               int_range=(1, 1_000_000)),
+    ParamSpec("state_reliability", Parameter.Type.STRING, "best_effort",
+              "QoS of the input subscriptions: best_effort (matches every publisher; frames may be "
+              "lost) or reliable (keep last 1 per array topic: the newest frame, delivered; matches "
+              "reliable publishers only).", read_only=True),
     ParamSpec("record_path", Parameter.Type.STRING, "",
               "Bag directory to record inputs and predictions to (MCAP, rosbag2 layout); empty: off.",
               read_only=True),
 )
 SPECS = {spec.name: spec for spec in PARAMS}
+STATE_RELIABILITY = ("best_effort", "reliable")
 _ELEMENT_TYPES = {Parameter.Type.STRING_ARRAY: (str,), Parameter.Type.DOUBLE_ARRAY: (int, float)}
 
 
@@ -198,6 +203,8 @@ def validate(name: str, value: Any) -> str | None:
     if name in ("state_topics", "single_state_topics", "odometry_topics") and value is not None:
         if any(not t or " " in t for t in value):
             return f"{name} has an empty or malformed topic name: {list(value)!r}"
+    if name == "state_reliability" and value not in STATE_RELIABILITY:
+        return f"state_reliability must be one of {', '.join(STATE_RELIABILITY)}, got {value!r}"
     if name == "dimensions" and value not in (2, 3):
         return f"dimensions must be 2 or 3, got {value!r}"
     return None

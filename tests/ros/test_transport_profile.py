@@ -94,3 +94,95 @@ def test_no_loss_is_reported_for_small_frames() -> None:
     delivery = bench.run_pair(size_kb=20, count=100, rate=50.0, pub_profile=True, sub_profile=True,
                               reliable=False)
     assert delivery.detected_missing == 0 and delivery.accounted, delivery
+
+
+# -- through collision_node ---------------------------------------------------------------------
+def _node_diagnostics(tmp_path: Path, monkeypatch: pytest.MonkeyPatch, profile: str | None,
+                      **params) -> dict:
+    """Start collision_node with FASTDDS_DEFAULT_PROFILES_FILE = `profile` (None: unset); its /diagnostics."""
+    from tests.reliability.node_process import Client, NodeProcess
+
+    monkeypatch.delenv(TransportProfile.DEPRECATED_ENV, raising=False)
+    if profile is None:
+        monkeypatch.delenv(TransportProfile.ENV, raising=False)
+    else:
+        monkeypatch.setenv(TransportProfile.ENV, profile)
+    node = NodeProcess(tmp_path / "node.log", marker_rate=0.0, **params)
+    client = Client()
+    try:
+        return client.last_diagnostics(timeout=30.0)
+    finally:
+        client.close()
+        node.stop()
+
+
+def test_the_node_loads_the_shipped_profile_when_none_is_set(tmp_path, monkeypatch) -> None:
+    values = _node_diagnostics(tmp_path, monkeypatch, None)
+    assert values["transport_profile"] == str(TransportProfile.path())
+
+
+def test_the_node_leaves_the_users_profile_in_force(tmp_path, monkeypatch) -> None:
+    theirs = tmp_path / "their_profile.xml"
+    theirs.write_text(TransportProfile.path().read_text())
+    values = _node_diagnostics(tmp_path, monkeypatch, str(theirs))
+    assert values["transport_profile"] == str(theirs)
+
+
+def test_state_reliability_reliable_reports_best_effort_publishers_it_cannot_hear(tmp_path, monkeypatch) -> None:
+    from tests.reliability.node_process import Client, NodeProcess
+
+    node = NodeProcess(tmp_path / "node.log", marker_rate=0.0, state_reliability="reliable")
+    reliable, best_effort = Client("reliable_tracker"), Client("best_effort_tracker", reliable=False)
+    try:
+        reliable.wait_matched()
+        assert reliable.spin(30.0, lambda: bool(reliable.diagnostics) and "best_effort" in
+                             reliable.diagnostics[-1].get("input_publishers", ""))
+        values = reliable.diagnostics[-1]
+        assert "1 reliable" in values["input_publishers"], values["input_publishers"]
+        assert values["_level"] == 1 and "cannot reach" in values["_message"], values
+    finally:
+        reliable.close()
+        best_effort.close()
+        node.stop()
+
+
+def test_bad_state_reliability_stops_the_node_with_one_line(tmp_path) -> None:
+    import subprocess
+
+    from tests.reliability.node_process import EXE
+
+    run = subprocess.run([EXE, "--ros-args", "-p", "state_reliability:=sometimes"],
+                         capture_output=True, text=True, timeout=60)
+    assert run.returncode == 2 and "state_reliability must be one of" in run.stderr, run.stderr
+
+
+@pytest.mark.slow
+def test_large_frames_lost_by_the_publishers_transport_show_on_diagnostics(tmp_path, monkeypatch) -> None:
+    """A publisher without the profile sends 0.7 MB frames best-effort: the node counts what never
+    arrived and points to the profile. (With the profile on the publisher nothing is missing:
+    test_one_megabyte_frames_cross_processes_best_effort_with_the_profile.)"""
+    import subprocess
+
+    from tests.reliability.node_process import Client, NodeProcess
+
+    bench = _bench_module()
+    node = NodeProcess(tmp_path / "node.log", marker_rate=0.0)
+    client = Client()
+    try:
+        client.wait_matched()
+        publisher = subprocess.Popen([sys.executable, str(ROOT / "bench" / "transport_delivery.py"), "--role",
+                                      "pub", "--bodies", "6000", "--count", "60", "--rate", "30",
+                                      "--topic", "circle_states"], env=bench._profile_env(False))
+        publisher.wait(timeout=120)
+
+        def lost() -> bool:
+            return bool(client.diagnostics) and int(client.diagnostics[-1]["inputs_missing"]) > 0
+        if not client.spin(10.0, lost):
+            pytest.skip("this run lost no frames without the profile (nothing to report)")
+        values = client.diagnostics[-1]
+        assert float(values["largest_input_kb"]) > 600
+        assert "fastdds_large_scenes.xml" in "".join(d["_message"] for d in client.diagnostics)
+        assert "fastdds_large_scenes.xml" in node.log()
+    finally:
+        client.close()
+        node.stop()
