@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
 import pytest
 
 from circle_collision_msgs.msg import CollisionPrediction
@@ -188,3 +189,65 @@ def test_predict_once_names_the_bad_circle() -> None:
     ok, message, out = predict_once([state("a", (0, 0), (1, 0, 0)), state("b", (5, 0))],
                                     PredictorConfig(), horizon=10.0)
     assert ok and contacts_of(out.to_message()) == {("a", "b"): 4.0}
+
+
+def test_late_state_after_removal_is_ignored() -> None:
+    """Issue 14 repro: a state older than the body's removal must not bring it back."""
+    predictor = CollisionPredictor(PredictorConfig(horizon=5.0))
+    receive(predictor, [state("a", (0, 0), r=1.0), state("g", (3, 0), (-1, 0, 0), r=1.0)], NOW)
+    assert contacts_of(predictor.predict().to_message()) == {("a", "g"): 1.0}
+    removal = receive(predictor, [state("g", (0, 0), stamp_ns=BASE_NS + 200_000_000, remove=True)], NOW)
+    assert removal.removed == 1 and predictor.predict().to_message().predictions == []
+    late = receive(predictor, [state("g", (2.9, 0), (-1, 0, 0), r=1.0, stamp_ns=BASE_NS + 100_000_000)], NOW)
+    assert late.accepted == 0 and late.ignored == 1 and not late.changed
+    assert predictor.predict().to_message().predictions == [] and "g" not in predictor
+    newer = receive(predictor, [state("g", (2.7, 0), (-1, 0, 0), r=1.0, stamp_ns=BASE_NS + 300_000_000)], NOW)
+    assert newer.accepted == 1 and "g" in predictor  # a newer state is a new track
+
+
+def test_removal_memory_is_kept_for_stale_timeout() -> None:
+    predictor = CollisionPredictor(PredictorConfig(stale_timeout=1.0))
+    receive(predictor, [state(f"r{k}", (0, 0), stamp_ns=BASE_NS, remove=True) for k in range(100)], NOW)
+    late = receive(predictor, [state("r1", (0, 0), stamp_ns=BASE_NS - 1)], NOW + 500_000_000)
+    assert late.ignored == 1 and late.accepted == 0
+    # One stale_timeout (receive clock) after the removals they are forgotten: memory stays bounded.
+    predictor.expire(NOW + 1_000_000_001)
+    assert predictor._scene.remembered_removals == 0
+    report = receive(predictor, [state("r1", (0, 0), stamp_ns=BASE_NS - 1)], NOW + 1_000_000_001)
+    assert report.accepted == 1
+
+
+def test_max_bodies_counts_after_removals_in_the_same_message() -> None:
+    """Issue 14 repro: full scene (3 of 3), one message [remove g, add h] must accept h."""
+    predictor = CollisionPredictor(PredictorConfig(max_bodies=3))
+    receive(predictor, [state("a", (0, 0)), state("b", (5, 0)), state("g", (10, 0))], NOW)
+    report = receive(predictor, [state("g", (0, 0), stamp_ns=BASE_NS + 1, remove=True),
+                                 state("h", (20, 0), stamp_ns=BASE_NS + 1)], NOW)
+    assert not report.rejected, report.rejected
+    assert (report.removed, report.accepted) == (1, 1) and "h" in predictor and len(predictor) == 3
+    full = receive(predictor, [state("i", (30, 0), stamp_ns=BASE_NS + 2)], NOW)
+    assert "scene is full" in full.rejected[0].reason
+
+
+def test_one_body_updates_equal_full_recomputation_and_fresh_predictor() -> None:
+    """Per-body streams (each state its own message, newer interleaved stamps): every output
+    equals a full recomputation, and the last one equals, byte for byte, a fresh predictor
+    given the final states in one message; it also matches the brute-force rule."""
+    states = random_states(80, seed=11, spread=15.0)
+    live = CollisionPredictor(PredictorConfig(horizon=4.0))
+    receive(live, states, NOW)
+    live.predict()
+    current = {s.id: s for s in states}
+    for k, s in enumerate(random_states(80, seed=12, spread=15.0)[:40]):
+        s.header.stamp.nanosec += 1_000_000 * (k % 7) + 50_000_000
+        current[s.id] = s
+        receive(live, [s], NOW + k)
+        out, full = live.predict().contacts, live._scene.full_recomputation()
+        assert out.id_a.tolist() == full.id_a.tolist() and out.id_b.tolist() == full.id_b.tolist()
+        assert np.array_equal(out.ttc, full.ttc) and np.array_equal(out.contact_ns, full.contact_ns)
+    fresh = CollisionPredictor(PredictorConfig(horizon=4.0))
+    receive(fresh, list(current.values()), NOW + 100)
+    final = live.predict()
+    assert final.to_cdr() == fresh.predict().to_cdr()
+    assert contacts_of(final.to_message()) == expected_contacts(list(current.values()), 4.0)
+    assert len(final.contacts) > 10
