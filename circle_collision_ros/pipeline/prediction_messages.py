@@ -38,11 +38,6 @@ def split_ns(ns: int) -> tuple[int, int]:
     return divmod(ns, _NS_PER_S)
 
 
-def ns_to_time(ns: int) -> Time:
-    sec, nanosec = split_ns(ns)
-    return Time(sec=sec, nanosec=nanosec)
-
-
 class PredictionRow(NamedTuple):
     """One CollisionPrediction entry (point and normal always 3-D, z = 0 for circles)."""
 
@@ -117,20 +112,18 @@ class ScenePrediction:
         ttc, contact_ns, closing = c.ttc[k], c.contact_ns[k], c.closing_speed[k]
         if self.report_all_pairs and len(self.capture) <= ReportAll.MAX_BODIES:
             ids = self.capture.ids()
-            if True:
-                rank = {b: r for r, b in enumerate(ids)}
-                pairs = set(zip(map(rank.__getitem__, id_a), map(rank.__getitem__, id_b)))
-                rest = [(a, b) for a in range(len(ids)) for b in range(a + 1, len(ids))
-                        if (a, b) not in pairs]
-                m = len(rest)
-                id_a = id_a + [ids[a] for a, _ in rest]
-                id_b = id_b + [ids[b] for _, b in rest]
-                status = np.concatenate([status, np.full(m, CollisionPrediction.NO_CONTACT, np.uint8)])
-                ttc = np.concatenate([ttc, np.full(m, np.inf)])
-                contact_ns = np.concatenate([contact_ns, np.zeros(m, np.int64)])
-                point = np.concatenate([point, np.zeros((m, 3))])
-                normal = np.concatenate([normal, np.zeros((m, 3))])
-                closing = np.concatenate([closing, np.zeros(m)])
+            rank = {b: r for r, b in enumerate(ids)}
+            pairs = set(zip(map(rank.__getitem__, id_a), map(rank.__getitem__, id_b)))
+            rest = [(a, b) for a in range(len(ids)) for b in range(a + 1, len(ids)) if (a, b) not in pairs]
+            m = len(rest)
+            id_a = id_a + [ids[a] for a, _ in rest]
+            id_b = id_b + [ids[b] for _, b in rest]
+            status = np.concatenate([status, np.full(m, CollisionPrediction.NO_CONTACT, np.uint8)])
+            ttc = np.concatenate([ttc, np.full(m, np.inf)])
+            contact_ns = np.concatenate([contact_ns, np.zeros(m, np.int64)])
+            point = np.concatenate([point, np.zeros((m, 3))])
+            normal = np.concatenate([normal, np.zeros((m, 3))])
+            closing = np.concatenate([closing, np.zeros(m)])
         return PredictionColumns(id_a, id_b, status, np.ascontiguousarray(ttc, dtype=np.float64),
                                  np.ascontiguousarray(contact_ns, dtype=np.int64), point, normal,
                                  np.ascontiguousarray(closing, dtype=np.float64))
