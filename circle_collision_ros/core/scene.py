@@ -63,6 +63,7 @@ from __future__ import annotations
 
 import bisect
 import math
+import weakref
 from dataclasses import dataclass
 from typing import Hashable, NamedTuple, Sequence
 
@@ -177,6 +178,8 @@ class Scene:
     # ------------------------------------------------------------------ basics
     def clear(self) -> None:
         """Forget every body, every remembered removal and the reference time."""
+        if getattr(self, "_captures", None):
+            self._detach_captures()
         cap = 16
         D = self._dim
         self._P = np.zeros((cap, D))
@@ -208,6 +211,7 @@ class Scene:
         self._version = getattr(self, "_version", 0) + 1
         self._cache = None
         self.evaluated_pairs = 0  # narrow-phase pair evaluations of the last predictions() call
+        self._captures = weakref.WeakSet()  # live captures sharing the state arrays
 
     # Pair records: one row per pair with a contact within H + S of its t_p, in
     # growable buffers; rows of updated bodies are marked dead (compacted when
@@ -312,6 +316,7 @@ class Scene:
         remove : (k,) bool; a removal's geometry is ignored.  received_ns : the
         receive clock for expiry.  Rows must be valid (finite, radius >= 0).
         """
+        self._detach_captures()
         stamps = np.asarray(stamps_ns, dtype=np.int64)
         remove = np.asarray(remove, dtype=bool)
         received_ns = int(received_ns)
@@ -410,6 +415,8 @@ class Scene:
         if self._removals:
             self._removals = {k: v for k, v in self._removals.items() if v[1] >= limit}
         stale = np.flatnonzero(self._alive & (self._recv < limit))
+        if stale.size:
+            self._detach_captures()
         gone = sorted(self._ids[s] for s in stale.tolist())
         for s in stale.tolist():
             self._drop(s)
@@ -461,11 +468,22 @@ class Scene:
         return self.capture().snapshot()
 
     def capture(self) -> "_Capture":
-        """A frozen copy of the stored states (cheap: a few memcpys); snapshot() on demand."""
-        order = self._sorted_slots()
-        n = self._R.shape[0]
-        return _Capture(self.reference_ns or 0, order, self._ids.copy(), self._P[:n].copy(),
-                        self._V[:n].copy(), self._A[:n].copy(), self._R[:n].copy(), self._T[:n].copy())
+        """The stored states as of now, for a snapshot on demand (markers).
+
+        Free while the scene is unchanged: the capture shares the scene's
+        arrays and is given its own copy only when the scene is about to
+        change while the capture is still referenced.
+        """
+        cap = _Capture(self.reference_ns or 0, self._sorted_slots(), self._ids, self._P, self._V,
+                       self._A, self._R, self._T)
+        self._captures.add(cap)
+        return cap
+
+    def _detach_captures(self) -> None:
+        if self._captures:
+            for cap in list(self._captures):
+                cap.detach()
+            self._captures.clear()
 
     def stored_states(self):
         """``(ids, P, V, A, R, T_ns)`` exactly as stored, ids sorted."""
@@ -824,11 +842,17 @@ class Scene:
 
 
 class _Capture:
-    """Stored states frozen at a prediction, propagated to the reference time on demand."""
+    """Stored states as of a prediction, propagated to the reference time on demand."""
 
     def __init__(self, reference_ns, order, ids, P, V, A, R, T) -> None:
         self._args = (reference_ns, order, ids, P, V, A, R, T)
         self._snapshot = None
+
+    def detach(self) -> None:
+        """Take a private copy of the rows in use (the scene is about to change)."""
+        ref, order, ids, P, V, A, R, T = self._args
+        self._args = (ref, np.arange(order.shape[0]), ids[order], P[order], V[order], A[order],
+                      R[order], T[order])
 
     def __len__(self) -> int:
         return int(self._args[1].shape[0])

@@ -275,14 +275,14 @@ def _encode_predictions(buf, u32, f64, sec, nanosec, frame, horizon, names, name
 
 def _encoded_names(names: list[str]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """UTF-8 bytes of all names back to back, with each name's start and length."""
-    blob = "".join(names).encode()
-    if len(blob) == sum(map(len, names)):  # ASCII: byte length = character length
+    joined = "".join(names)
+    if joined.isascii():  # byte length = character length
         lengths = np.fromiter(map(len, names), dtype=np.int64, count=len(names))
     else:
         lengths = np.fromiter((len(x.encode()) for x in names), dtype=np.int64, count=len(names))
     starts = np.zeros(len(names), dtype=np.int64)
     np.cumsum(lengths[:-1], out=starts[1:])
-    return np.frombuffer(blob, dtype=np.uint8), starts, lengths
+    return np.frombuffer(joined.encode(), dtype=np.uint8), starts, lengths
 
 
 def encode_prediction_array(stamp: tuple[int, int], frame_id: str, horizon: float, columns) -> bytes:
