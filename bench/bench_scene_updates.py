@@ -34,20 +34,11 @@ from rclpy.serialization import serialize_message
 
 from circle_collision_msgs.msg import CircleState, CircleStateArray
 from circle_collision_ros.demo.demo_scene import SyntheticScene
-from circle_collision_ros.pipeline.cdr_codec import decode_states, encode_state_array
+from circle_collision_ros.pipeline.cdr_codec import decode_states
 from circle_collision_ros.pipeline.predictor import CollisionPredictor, PredictorConfig
-from circle_collision_ros.pipeline.state_batch import StateBatch
+from bench_node import scene_bytes  # the same CircleStateArray bytes the node benchmark sends
 
 MS = 1_000_000
-
-
-def _array_bytes(scene: SyntheticScene, stamp_ns: int) -> bytes:
-    n = scene.count
-    batch = StateBatch(ids=[f"b{k:05d}" for k in range(n)], frames=["map"] * n,
-                       stamp_ns=np.full(n, stamp_ns, dtype=np.int64), radius=scene.radii,
-                       position=scene.p, velocity=scene.v, acceleration=scene.a,
-                       remove=np.zeros(n, dtype=bool))
-    return encode_state_array(batch, stamp_ns, "map")
 
 
 def _state_bytes(scene: SyntheticScene, k: int, stamp_ns: int) -> bytes:
@@ -96,8 +87,8 @@ def main() -> int:
     slack_ns = int(round(config.horizon / 4 * 1e9))
     start = (1_700_000_000 * 1_000_000_000 // slack_ns + 1) * slack_ns + 10 * MS  # just after an epoch start
     stamp = start
-    node_side(predictor, _array_bytes(scene, stamp), CircleStateArray, stamp)  # fill the scene
-    first = node_side(predictor, _array_bytes(scene, stamp + 1), CircleStateArray, stamp + 1)[1]
+    node_side(predictor, scene_bytes(scene, stamp), CircleStateArray, stamp)  # fill the scene
+    first = node_side(predictor, scene_bytes(scene, stamp + 1), CircleStateArray, stamp + 1)[1]
     stamp += 1
     print(f"scene: {n} bodies, {len(first.contacts)} contacts within {config.horizon:g} s, "
           f"{predictor.stats.candidate_pairs} pairs evaluated on the full path")
@@ -137,7 +128,7 @@ def main() -> int:
     for _ in range(arrays):
         stamp += 33 * MS
         scene.step(0.033)
-        data = _array_bytes(scene, stamp)
+        data = scene_bytes(scene, stamp)
         arr.append(node_side(predictor, data, CircleStateArray, stamp)[0])
     at = np.array(arr)
     print(f"\n3. whole {n}-body CircleStateArray (every body moved): {_ms(at[:, 4])}")

@@ -9,9 +9,8 @@ from builtin_interfaces.msg import Time
 from geometry_msgs.msg import Point, Vector3
 from std_msgs.msg import Header
 
-from tests.scene_rule import rule_contacts
 from circle_collision_msgs.msg import CircleState, CircleStateArray, CollisionPredictionArray
-from circle_collision_ros.core import time_to_collision
+from tests.scene_rule import rule_contacts
 
 BASE_NS = 1_700_000_000 * 1_000_000_000
 
