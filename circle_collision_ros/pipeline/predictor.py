@@ -22,7 +22,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from circle_collision_msgs.msg import CircleState
-from circle_collision_ros.core.scene import Scene
+from circle_collision_ros.core.scene import Scene, SceneSnapshot
 from circle_collision_ros.pipeline.prediction_messages import ScenePrediction
 from circle_collision_ros.pipeline.state_batch import StateBatch
 from circle_collision_ros.pipeline.state_validation import Rejection, check_batch
@@ -100,6 +100,10 @@ class CollisionPredictor:
     def reference_ns(self) -> int | None:
         """Newest accepted stamp since the scene was last empty (predictions count from it)."""
         return self._scene.reference_ns
+
+    def snapshot(self) -> SceneSnapshot:
+        """Every body propagated to the reference time, ordered by id."""
+        return self._scene.snapshot()
 
     def clear(self) -> None:
         """Forget every body and remembered removal (e.g. after the clock jumped back)."""
