@@ -851,8 +851,7 @@ class _Capture:
     def detach(self) -> None:
         """Take a private copy of the rows in use (the scene is about to change)."""
         ref, order, ids, P, V, A, R, T = self._args
-        self._args = (ref, np.arange(order.shape[0]), ids[order], P[order], V[order], A[order],
-                      R[order], T[order])
+        self._args = (ref, order, ids.copy(), P.copy(), V.copy(), A.copy(), R.copy(), T.copy())
 
     def __len__(self) -> int:
         return int(self._args[1].shape[0])
