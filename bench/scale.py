@@ -87,7 +87,8 @@ def scene_update(p, v, a, r, h, rng, updates: int) -> dict:
     n, dim = p.shape
     sc = Scene(h, dim)
     t0 = time.perf_counter()
-    sc.upsert_many(range(n), p, v, a, r)
+    stamp = 1_700_000_000 * 10**9
+    sc.upsert_many([f"b{k:06d}" for k in range(n)], p, v, a, r, stamp)
     sc.predictions()
     build = time.perf_counter() - t0
     side = float(np.ptp(p[:, 0])) if n > 1 else 1.0
@@ -96,7 +97,7 @@ def scene_update(p, v, a, r, h, rng, updates: int) -> dict:
     ts = []
     for k in range(updates):
         t0 = time.perf_counter()
-        sc.upsert(int(ids[k]), q[k], w[k], e[k], float(s[k]))
+        sc.upsert(f"b{int(ids[k]):06d}", q[k], w[k], e[k], float(s[k]), stamp_ns=stamp + k + 1)
         sc.predictions()
         ts.append(time.perf_counter() - t0)
     return dict(scene_build_ms=build * 1e3, update_median_ms=statistics.median(ts) * 1e3,

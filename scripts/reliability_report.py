@@ -48,7 +48,7 @@ FIXES = [
      "test_fuzz_cdr::test_short_buffers_are_cdr_errors"),
     ("state_validation.py", "finite values beyond the core's input range accepted: a 1e160 radius hid "
      "two overlapping pairs; now magnitudes beyond 1e12 are rejected", "test_fuzz_messages::test_huge_radius_is_rejected"),
-    ("body_registry.py", "after a tracker's stamps jumped back, the reference time stayed in the old "
+    ("core/scene.py (was body_registry.py)", "after a tracker's stamps jumped back, the reference time stayed in the old "
      "future: every body propagated ~30 s ahead, contacts missed", "test_faults_clock::test_stamps_jump_backwards"),
     ("collision_node.py", "use_sim_time, /clock jumping back: all new states ignored (node silent) and "
      "old bodies never expired; now the scene is cleared at the jump", "test_faults_clock::test_sim_time_clock_jumps"),

@@ -13,20 +13,28 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
 import pytest
 
 from circle_collision_msgs.msg import CollisionPrediction
-from circle_collision_ros.pipeline.predictor import CollisionPredictor, PredictorConfig, predict_once
+from circle_collision_ros.pipeline.predictor import (CollisionPredictor, IntakeReport, PredictorConfig,
+                                                      predict_once)
+from circle_collision_ros.pipeline.state_batch import StateBatch
 from tests.ros.node_helpers import (BASE_NS, assert_no_nan, contacts_of, expected_contacts,
                                     random_states, state)
 
 NOW = BASE_NS + 10_000_000
 
 
+def receive(predictor: CollisionPredictor, states, now_ns: int, array_frame: str = "") -> IntakeReport:
+    """One received message of CircleState objects (the node's receive_batch path)."""
+    return predictor.receive_batch(StateBatch.from_messages(states, array_frame), now_ns)
+
+
 def test_matches_core_on_every_pair() -> None:
     states = random_states(60, seed=3)
     predictor = CollisionPredictor(PredictorConfig(horizon=5.0))
-    report = predictor.receive(states, NOW)
+    report = receive(predictor, states, NOW)
     assert report.accepted == 60 and not report.rejected
     out = predictor.predict().to_message()
     want = expected_contacts(states, 5.0)
@@ -42,7 +50,7 @@ def test_matches_core_on_every_pair() -> None:
 def test_three_d_scene_matches_core() -> None:
     states = random_states(40, seed=5, dimensions=3, spread=10.0)
     predictor = CollisionPredictor(PredictorConfig(horizon=4.0, dimensions=3))
-    predictor.receive(states, NOW)
+    receive(predictor, states, NOW)
     assert contacts_of(predictor.predict().to_message()) == expected_contacts(states, 4.0, dimensions=3)
 
 
@@ -50,14 +58,14 @@ def test_two_d_mode_ignores_z() -> None:
     a = state("a", (0, 0, 100.0), (1, 0, 0))
     b = state("b", (5, 0, -100.0))
     predictor = CollisionPredictor(PredictorConfig(horizon=10.0))
-    predictor.receive([a, b], NOW)
+    receive(predictor, [a, b], NOW)
     (p,) = predictor.predict().to_message().predictions
     assert p.time_to_collision == 4.0 and p.contact_point.z == 0.0
 
 
 def test_overlapping_status_and_details() -> None:
     predictor = CollisionPredictor(PredictorConfig(horizon=10.0))
-    predictor.receive([state("a", (0, 0), r=1.0), state("b", (1.5, 0), r=1.0),
+    receive(predictor, [state("a", (0, 0), r=1.0), state("b", (1.5, 0), r=1.0),
                        state("c", (10, 0), (-1, 0, 0), r=1.0)], NOW)
     out = {(p.id_a, p.id_b): p for p in predictor.predict().to_message().predictions}
     assert out[("a", "b")].status == CollisionPrediction.OVERLAPPING
@@ -88,7 +96,7 @@ def test_bad_state_rejected_rest_predicted(mutate, reason) -> None:
     states = [state("a", (0, 0), (1, 0, 0)), state("b", (5, 0)), state("bad", (2.5, 3), (0, -1, 0))]
     mutate(states[2])
     predictor = CollisionPredictor(PredictorConfig(frame_id="map", horizon=10.0))
-    report = predictor.receive(states, NOW)
+    report = receive(predictor, states, NOW)
     assert report.accepted == 2 and len(report.rejected) == 1
     assert reason in report.rejected[0].reason and report.rejected[0].index == 2
     out = predictor.predict().to_message()
@@ -98,30 +106,30 @@ def test_bad_state_rejected_rest_predicted(mutate, reason) -> None:
 
 def test_duplicate_ids_in_one_message_are_all_rejected() -> None:
     predictor = CollisionPredictor(PredictorConfig())
-    report = predictor.receive([state("a", (0, 0)), state("a", (9, 9)), state("b", (3, 0))], NOW)
+    report = receive(predictor, [state("a", (0, 0)), state("a", (9, 9)), state("b", (3, 0))], NOW)
     assert report.accepted == 1 and [r.body_id for r in report.rejected] == ["a", "a"]
     assert "more than once" in report.rejected[0].reason
 
 
 def test_empty_message_changes_nothing() -> None:
     predictor = CollisionPredictor(PredictorConfig())
-    report = predictor.receive([], NOW)
+    report = receive(predictor, [], NOW)
     assert not report.changed
     assert predictor.predict().to_message().predictions == []
 
 
 def test_first_frame_is_adopted_then_enforced() -> None:
     predictor = CollisionPredictor(PredictorConfig(frame_id=""))
-    predictor.receive([state("a", (0, 0), frame="odom")], NOW)
-    report = predictor.receive([state("b", (0, 0), frame="map")], NOW)
+    receive(predictor, [state("a", (0, 0), frame="odom")], NOW)
+    report = receive(predictor, [state("b", (0, 0), frame="map")], NOW)
     assert predictor.frame_id == "odom" and "not the scene frame 'odom'" in report.rejected[0].reason
 
 
 def test_latest_stamp_wins_and_late_states_are_ignored() -> None:
     predictor = CollisionPredictor(PredictorConfig(horizon=100.0))
-    predictor.receive([state("a", (0, 0), (1, 0, 0), stamp_ns=BASE_NS), state("b", (10, 0))], NOW)
-    late = predictor.receive([state("a", (0, 0), (-1, 0, 0), stamp_ns=BASE_NS - 1)], NOW)
-    dup = predictor.receive([state("a", (0, 0), (1, 0, 0), stamp_ns=BASE_NS)], NOW)
+    receive(predictor, [state("a", (0, 0), (1, 0, 0), stamp_ns=BASE_NS), state("b", (10, 0))], NOW)
+    late = receive(predictor, [state("a", (0, 0), (-1, 0, 0), stamp_ns=BASE_NS - 1)], NOW)
+    dup = receive(predictor, [state("a", (0, 0), (1, 0, 0), stamp_ns=BASE_NS)], NOW)
     assert late.ignored == 1 and dup.ignored == 1 and not late.changed and not dup.changed
     assert contacts_of(predictor.predict().to_message()) == {("a", "b"): 9.0}
 
@@ -129,31 +137,31 @@ def test_latest_stamp_wins_and_late_states_are_ignored() -> None:
 def test_states_are_propagated_to_the_newest_stamp() -> None:
     # a was seen 2 s before b: at b's stamp a has moved 2 m, so contact is 2 s sooner.
     predictor = CollisionPredictor(PredictorConfig(horizon=100.0))
-    predictor.receive([state("a", (0, 0), (1, 0, 0), stamp_ns=BASE_NS - 2_000_000_000),
+    receive(predictor, [state("a", (0, 0), (1, 0, 0), stamp_ns=BASE_NS - 2_000_000_000),
                        state("b", (10, 0), stamp_ns=BASE_NS)], NOW)
     assert contacts_of(predictor.predict().to_message()) == {("a", "b"): 7.0}
 
 
 def test_removal_and_expiry() -> None:
     predictor = CollisionPredictor(PredictorConfig(stale_timeout=1.0))
-    predictor.receive([state("a", (0, 0)), state("b", (1, 0))], NOW)
-    report = predictor.receive([state("a", (0, 0), stamp_ns=BASE_NS + 1, remove=True)], NOW)
-    assert report.removed == 1 and "a" not in predictor.registry
-    report = predictor.receive([], NOW + 1_500_000_000)
-    assert report.expired == ["b"] and len(predictor.registry) == 0
-    assert not predictor.receive([state("zz", (0, 0), stamp_ns=BASE_NS + 2, remove=True)], NOW).changed
+    receive(predictor, [state("a", (0, 0)), state("b", (1, 0))], NOW)
+    report = receive(predictor, [state("a", (0, 0), stamp_ns=BASE_NS + 1, remove=True)], NOW)
+    assert report.removed == 1 and "a" not in predictor
+    report = receive(predictor, [], NOW + 1_500_000_000)
+    assert report.expired == ["b"] and len(predictor) == 0
+    assert not receive(predictor, [state("zz", (0, 0), stamp_ns=BASE_NS + 2, remove=True)], NOW).changed
 
 
 def test_max_bodies_bounds_the_scene() -> None:
     predictor = CollisionPredictor(PredictorConfig(max_bodies=10))
-    report = predictor.receive(random_states(25, seed=1), NOW)
+    report = receive(predictor, random_states(25, seed=1), NOW)
     assert report.accepted == 10 and len(report.rejected) == 15
     assert "scene is full" in report.rejected[0].reason
 
 
 def test_report_all_pairs_lists_no_contact_pairs_without_nan() -> None:
     predictor = CollisionPredictor(PredictorConfig(report_all_pairs=True, horizon=1.0))
-    predictor.receive(random_states(12, seed=9, spread=30.0), NOW)
+    receive(predictor, random_states(12, seed=9, spread=30.0), NOW)
     out = predictor.predict().to_message()
     assert len(out.predictions) == 12 * 11 // 2
     none = [p for p in out.predictions if p.status == CollisionPrediction.NO_CONTACT]
@@ -167,7 +175,7 @@ def test_same_inputs_give_bit_identical_outputs() -> None:
         predictor = CollisionPredictor(PredictorConfig())
         outs = []
         for k in range(5):
-            predictor.receive(random_states(30, seed=k, stamp_ns=BASE_NS + k * 33_000_000), NOW + k)
+            receive(predictor, random_states(30, seed=k, stamp_ns=BASE_NS + k * 33_000_000), NOW + k)
             outs.append(predictor.predict().to_message())
         runs.append(outs)
     assert runs[0] == runs[1]  # message equality compares float fields exactly
@@ -181,3 +189,65 @@ def test_predict_once_names_the_bad_circle() -> None:
     ok, message, out = predict_once([state("a", (0, 0), (1, 0, 0)), state("b", (5, 0))],
                                     PredictorConfig(), horizon=10.0)
     assert ok and contacts_of(out.to_message()) == {("a", "b"): 4.0}
+
+
+def test_late_state_after_removal_is_ignored() -> None:
+    """Issue 14 repro: a state older than the body's removal must not bring it back."""
+    predictor = CollisionPredictor(PredictorConfig(horizon=5.0))
+    receive(predictor, [state("a", (0, 0), r=1.0), state("g", (3, 0), (-1, 0, 0), r=1.0)], NOW)
+    assert contacts_of(predictor.predict().to_message()) == {("a", "g"): 1.0}
+    removal = receive(predictor, [state("g", (0, 0), stamp_ns=BASE_NS + 200_000_000, remove=True)], NOW)
+    assert removal.removed == 1 and predictor.predict().to_message().predictions == []
+    late = receive(predictor, [state("g", (2.9, 0), (-1, 0, 0), r=1.0, stamp_ns=BASE_NS + 100_000_000)], NOW)
+    assert late.accepted == 0 and late.ignored == 1 and not late.changed
+    assert predictor.predict().to_message().predictions == [] and "g" not in predictor
+    newer = receive(predictor, [state("g", (2.7, 0), (-1, 0, 0), r=1.0, stamp_ns=BASE_NS + 300_000_000)], NOW)
+    assert newer.accepted == 1 and "g" in predictor  # a newer state is a new track
+
+
+def test_removal_memory_is_kept_for_stale_timeout() -> None:
+    predictor = CollisionPredictor(PredictorConfig(stale_timeout=1.0))
+    receive(predictor, [state(f"r{k}", (0, 0), stamp_ns=BASE_NS, remove=True) for k in range(100)], NOW)
+    late = receive(predictor, [state("r1", (0, 0), stamp_ns=BASE_NS - 1)], NOW + 500_000_000)
+    assert late.ignored == 1 and late.accepted == 0
+    # One stale_timeout (receive clock) after the removals they are forgotten: memory stays bounded.
+    predictor.expire(NOW + 1_000_000_001)
+    assert predictor._scene.remembered_removals == 0
+    report = receive(predictor, [state("r1", (0, 0), stamp_ns=BASE_NS - 1)], NOW + 1_000_000_001)
+    assert report.accepted == 1
+
+
+def test_max_bodies_counts_after_removals_in_the_same_message() -> None:
+    """Issue 14 repro: full scene (3 of 3), one message [remove g, add h] must accept h."""
+    predictor = CollisionPredictor(PredictorConfig(max_bodies=3))
+    receive(predictor, [state("a", (0, 0)), state("b", (5, 0)), state("g", (10, 0))], NOW)
+    report = receive(predictor, [state("g", (0, 0), stamp_ns=BASE_NS + 1, remove=True),
+                                 state("h", (20, 0), stamp_ns=BASE_NS + 1)], NOW)
+    assert not report.rejected, report.rejected
+    assert (report.removed, report.accepted) == (1, 1) and "h" in predictor and len(predictor) == 3
+    full = receive(predictor, [state("i", (30, 0), stamp_ns=BASE_NS + 2)], NOW)
+    assert "scene is full" in full.rejected[0].reason
+
+
+def test_one_body_updates_equal_full_recomputation_and_fresh_predictor() -> None:
+    """Per-body streams (each state its own message, newer interleaved stamps): every output
+    equals a full recomputation, and the last one equals, byte for byte, a fresh predictor
+    given the final states in one message; it also matches the brute-force rule."""
+    states = random_states(80, seed=11, spread=15.0)
+    live = CollisionPredictor(PredictorConfig(horizon=4.0))
+    receive(live, states, NOW)
+    live.predict()
+    current = {s.id: s for s in states}
+    for k, s in enumerate(random_states(80, seed=12, spread=15.0)[:40]):
+        s.header.stamp.nanosec += 1_000_000 * (k % 7) + 50_000_000
+        current[s.id] = s
+        receive(live, [s], NOW + k)
+        out, full = live.predict().contacts, live._scene.full_recomputation()
+        assert out.id_a.tolist() == full.id_a.tolist() and out.id_b.tolist() == full.id_b.tolist()
+        assert np.array_equal(out.ttc, full.ttc) and np.array_equal(out.contact_ns, full.contact_ns)
+    fresh = CollisionPredictor(PredictorConfig(horizon=4.0))
+    receive(fresh, list(current.values()), NOW + 100)
+    final = live.predict()
+    assert final.to_cdr() == fresh.predict().to_cdr()
+    assert contacts_of(final.to_message()) == expected_contacts(list(current.values()), 4.0)
+    assert len(final.contacts) > 10

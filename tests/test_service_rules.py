@@ -17,6 +17,7 @@ import math
 import pytest
 
 from circle_collision_ros.pipeline.predictor import CollisionPredictor, PredictorConfig, predict_once
+from circle_collision_ros.pipeline.state_batch import StateBatch
 from tests.ros.node_helpers import BASE_NS, contacts_of, state
 
 
@@ -79,6 +80,6 @@ def test_empty_request_is_refused() -> None:
 
 def test_topics_refuse_zero_stamps_and_say_how_to_stamp() -> None:
     predictor = CollisionPredictor(PredictorConfig(frame_id="map"))
-    report = predictor.receive(_unstamped(state("a", (0, 0))), BASE_NS)
+    report = predictor.receive_batch(StateBatch.from_messages(_unstamped(state("a", (0, 0)))), BASE_NS)
     assert report.accepted == 0
     assert "header: {stamp: now}" in report.rejected[0].reason

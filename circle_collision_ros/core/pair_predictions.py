@@ -33,8 +33,7 @@ class PairPredictions:
 
     Attributes
     ----------
-    i, j : (K,) body indices (``predict_all_pairs``: int64, ``i < j``) or body ids
-        (``Scene``: ``i`` orders before ``j``).
+    i, j : (K,) body indices (int64, ``i < j``).
     ttc : (K,) float64 time to first contact, s (0 for pairs already overlapping).
     point, normal : (K, D) contact point (m) and unit normal from i towards j.
     closing_speed : (K,) m/s, as returned by ``contact_details``.

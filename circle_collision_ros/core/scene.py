@@ -1,174 +1,237 @@
-"""Stateful scene for streams of body states: incremental whole-scene prediction.
+"""The one scene model: bodies of a state stream and their incrementally kept pair predictions.
 
-Design (exactness first)
-------------------------
-* Every body is stored as it was given: ``(p, v, a, r)`` plus its reference
-  time ``t_ref`` (the stamp the state refers to; default the scene time at the
-  update).  States are never propagated in place, so advancing time never
-  re-rounds them; ``state(id)`` propagates from ``t_ref`` in one step.
-* The scene has a time ``now`` (``set_time`` / ``advance``, monotone) and an
-  *epoch* ``E <= now``.  When ``now`` passes ``E + slack`` the epoch moves to
-  ``now`` and everything is rebuilt, so ``now - E <= slack`` always.
-* A pair ``(a, b)`` (``a`` orders before ``b`` by id) is evaluated at
-  ``t_p = max(E, t_ref_a, t_ref_b)``: both states are propagated to ``t_p`` and
-  the narrow phase runs with horizon ``H + slack`` giving ``tau``.  Because
-  ``now - t_p <= slack`` that window covers ``[now, now + H]``.  The reported time is
-  ``ttc = tau - (now - t_p)`` (bitwise ``tau`` when ``t_p == now``).  If the contact
-  already lies in the past (``ttc < 0``: overlapping or touched since ``t_p``)
-  the pair is evaluated again at ``now`` with horizon ``H``, on every query.
-  Pairs with ``ttc <= H`` are reported.
-* Swept bounds cover ``[max(E, t_ref), E + slack + H]``, which contains every
-  reportable contact, so they stay valid until the epoch moves.
-* Consequently a pair's result is a pure function of the two stored states,
-  their ``t_ref``, ``E`` and ``now``; an update re-evaluates only the pairs of
-  the updated bodies (found through a hashed uniform grid of the bounds),
-  and ``advance`` only shifts cached times.  "Incremental equals
-  full recomputation" therefore holds bitwise, where the full recomputation
-  (:meth:`Scene.full_recomputation`) applies the same rule to all stored states
-  from scratch.  A reported ``ttc`` may differ in the last bits from running the
-  narrow phase on states propagated to ``now`` (it was evaluated at ``t_p``); it
-  is identical when all bodies were updated at ``now`` *and* the narrow phase's
-  root does not depend on the horizon argument.
+The node, the `predict_collisions` service and `replay` all run on this class
+(through ``pipeline.predictor.CollisionPredictor``).  Times are integer
+nanoseconds (header stamps), so nothing depends on float rounding of ~1.7e18.
 
-``slack`` trades bound size (more candidates) against how often the epoch rolls
-(full rebuild); the default is ``horizon / 4``.
+Stream rules (deterministic: the same calls in the same order give the same
+scene, bit for bit)
+----------------------------------------------------------------------------
+* A body's state is replaced only by a strictly newer stamp; an older or
+  equal one is ignored (late and duplicated states are harmless).
+* A removal at stamp ``T`` deletes the body if its state is not newer than
+  ``T`` and is remembered: a later-arriving state of that id stamped ``<= T``
+  is ignored.  Removals are forgotten ``stale_timeout`` after they were
+  received (receive clock), so this memory is bounded by the input rate.
+* Within one ``merge`` call the removals are applied first, so ``max_bodies``
+  counts the scene after them.
+* Staleness is judged on the receive clock given by the caller (never read
+  here): ``expire(now_ns, timeout_ns)`` drops bodies received before
+  ``now_ns - timeout_ns``.
+* The reference time ``R`` is the newest accepted stamp since the scene was
+  last empty.  Predictions are reported relative to ``R``.
 
-Costs: an update of k bodies is O(k x neighbours) (hashed grid, numpy per
-body) unless k exceeds ``full_rebuild_fraction`` of the scene, when one
-vectorised rebuild is cheaper.  A query at an unchanged time merges the new
-rows into the previous sorted result; after a time change it re-sorts the
-cached records and re-evaluates only pairs whose contact has passed.
+Prediction rule (what is published)
+-----------------------------------
+Let ``H`` be the horizon, ``S`` the slack (default ``H / 4``, in ns) and the
+epoch ``E = R - (R mod S)`` (a pure function of ``R``).  Each stored state
+``(p, v, a, r)`` at its own stamp ``T`` is never propagated in place.
 
-Typical node use (states stamped at various times, predictions relative to
-the newest stamp)::
+* A pair ``(a, b)`` (``a``'s id sorts first) is evaluated at its pair time
+  ``t_p = max(E, T_a, T_b)``: both states are propagated to ``t_p`` with
+  ``dt = (t_p - T) * 1e-9`` s as ``p + dt (v + (dt/2) a)``, ``v + dt a``, and
+  the narrow phase runs with horizon ``H + S`` giving ``tau``.
+* If ``t_p == R`` the pair reports ``ttc = tau``.  Otherwise, with
+  ``d = (R - t_p) * 1e-9`` (< S), it reports ``ttc = tau - d`` if
+  ``tau > d``; if the contact already began before ``R`` (``tau <= d``) the
+  pair is evaluated again at ``R`` with horizon ``H``.
+* A pair is reported iff ``ttc <= H``; rows are sorted by ``(ttc, id_a,
+  id_b)``.  ``contact_ns = t_p + round(tau * 1e9)`` (``R + round(ttc * 1e9)``
+  for a pair evaluated at ``R``); a pair with ``ttc == 0`` whose propagated
+  gap at ``R`` is negative is *overlapping*.
 
-    scene.set_time(newest_stamp)
-    scene.upsert_many(ids, P, V, A, R, stamps=stamps)   # stamps <= newest_stamp
-    pred = scene.predictions()                            # ttc from newest_stamp
+So a pair's result is a pure function of its two stored states, ``R`` and
+``H``, ``S``: a one-body update re-evaluates only that body's candidate pairs
+(a hashed grid of swept bounds finds them), a newer stamp that keeps the epoch
+only shifts the cached times, and a rebuild happens when the epoch moves
+(every ``S`` of stamp time), the horizon changes, or more than
+``full_rebuild_fraction`` of the bodies changed (a tracker array moving every
+body takes the vectorised full-scene path).  :meth:`Scene.full_recomputation`
+applies the rule from scratch; incremental results equal it bitwise.
+
+When every body carries the stamp ``R`` (a tracker array), ``t_p == R`` for
+every pair and the result is the narrow phase on the states propagated to
+``R``, i.e. ``predict_all_pairs`` on them (the narrow phase's root does not
+depend on the horizon argument once the contact lies inside it).  Bodies with
+older stamps are evaluated at the newer stamp of their pair and shifted, which
+can differ from propagating everything to ``R`` in the last bits.
+
+Swept bounds cover ``[max(E, T), E + S + H]``, which contains every reportable
+contact until the epoch moves.
 """
 from __future__ import annotations
 
 import bisect
 import math
-from typing import Hashable, Iterable
+import weakref
+from dataclasses import dataclass
+from typing import Hashable, NamedTuple, Sequence
 
 import numpy as np
 
 from circle_collision_ros.core import broad_phase as _bp
 from circle_collision_ros.core.pair_predictions import (
-    PairPredictions, details_on_pairs, narrow_on_pairs, validate_bodies, _check_horizon)
+    details_on_pairs, narrow_on_pairs, validate_bodies, _check_horizon)
 
-__all__ = ["Scene"]
+__all__ = ["Scene", "SceneContacts", "SceneSnapshot", "MergeResult"]
 
 
-def _idkey(x):
-    # ids of one type compare natively; mixed types are grouped by type name
-    return (type(x).__name__, x)
+class MergeResult(NamedTuple):
+    """Row indices (into the merged arrays) by outcome."""
+
+    accepted: np.ndarray        # states stored
+    not_newer: np.ndarray       # states not newer than the body's state or its removal
+    full: np.ndarray            # new ids refused: max_bodies reached
+    removed: np.ndarray         # removals that deleted a body
+    removal_ignored: np.ndarray  # removals of unknown ids or older than the body's state
+
+
+@dataclass(frozen=True)
+class SceneContacts:
+    """Reported pairs at ``reference_ns``, soonest first (arrays are read-only).
+
+    id_a, id_b : body ids (id_a sorts first).  ttc : s from reference_ns.
+    contact_ns : absolute contact time, ns.  overlapping : (K,) bool.
+    point, normal : (K, D) m and unit.  closing_speed : (K,) m/s.
+    """
+
+    reference_ns: int
+    id_a: np.ndarray
+    id_b: np.ndarray
+    ttc: np.ndarray
+    contact_ns: np.ndarray
+    overlapping: np.ndarray
+    point: np.ndarray
+    normal: np.ndarray
+    closing_speed: np.ndarray
+
+    def __len__(self) -> int:
+        return int(self.ttc.shape[0])
+
+
+@dataclass(frozen=True)
+class SceneSnapshot:
+    """All bodies propagated to ``reference_ns``, ordered by id; arrays (N, D) and (N,)."""
+
+    reference_ns: int
+    ids: list
+    positions: np.ndarray
+    velocities: np.ndarray
+    accelerations: np.ndarray
+    radii: np.ndarray
+
+
+def _propagate_ns(P, V, A, dt_ns):
+    """States moved by ``dt_ns`` (int64 ns, >= 0): ``p + dt (v + (dt/2) a)``, ``v + dt a``."""
+    # Integer subtraction first (by the caller): stamps ~1.7e18 ns would lose detail as floats.
+    dt = (np.asarray(dt_ns).astype(np.float64) * 1e-9)[:, None]
+    return P + dt * (V + (0.5 * dt) * A), V + dt * A
+
+
+_EMPTY_I = np.empty(0, dtype=np.int64)
 
 
 class Scene:
-    """Bodies keyed by id with incrementally maintained pair predictions.
+    """Bodies keyed by id (mutually orderable, e.g. str) with incrementally kept predictions.
 
     Parameters
     ----------
-    horizon : float
-        Prediction horizon H, s (finite, > 0).
-    dim : int
-        2 or 3.
-    time : float
-        Initial scene time, s.
-    slack : float, optional
-        Epoch length, s (default ``horizon / 4``); see module docstring.
-    method : str
-        Broad-phase generator for full rebuilds (``"sweep"`` or ``"grid"``).
-    full_rebuild_fraction : float
-        If more than this fraction of bodies changed since the last query, all
-        pairs are rebuilt with the vectorised broad phase instead of per body.
-
-    Bodies are keyed by hashable ids; ids must be mutually orderable within a
-    type (ids of different types are ordered by type name first).
+    horizon : s, finite > 0.   dim : 2 or 3.
+    slack : s (default horizon / 4): epoch length; trades bound size against
+        how often the whole scene is rebuilt.
+    max_bodies : new ids beyond this many are refused (None: no limit).
+    method : broad phase of full rebuilds ("sweep" or "grid").
+    full_rebuild_fraction : above this fraction of changed bodies, one
+        vectorised rebuild replaces per-body updates.
     """
 
-    def __init__(self, horizon: float, dim: int = 2, *, time: float = 0.0,
-                 slack: float | None = None, method: str = "sweep",
+    def __init__(self, horizon: float, dim: int = 2, *, slack: float | None = None,
+                 max_bodies: int | None = None, method: str = "sweep",
                  full_rebuild_fraction: float = 0.05) -> None:
-        self._h = _check_horizon(horizon)
         if dim not in (2, 3):
             raise ValueError(f"dim must be 2 or 3, got {dim}")
-        self._dim = dim
-        self._slack = self._h / 4.0 if slack is None else float(slack)
-        if not (math.isfinite(self._slack) and self._slack >= 0.0):
-            raise ValueError(f"slack must be finite and >= 0, got {slack!r}")
-        t = float(time)
-        if not math.isfinite(t):
-            raise ValueError(f"time must be finite, got {time!r}")
-        self._now = t
-        self._epoch = t
         if method not in ("sweep", "grid"):
             raise ValueError(f"unknown broad-phase method {method!r}")
+        self._dim = dim
         self._method = method
         self._full_frac = float(full_rebuild_fraction)
+        self.max_bodies = max_bodies
+        self._slack_arg = slack
+        self._set_horizon(horizon)
         self.clear()
+
+    def _set_horizon(self, horizon: float) -> None:
+        self._h = _check_horizon(horizon)
+        slack = self._h / 4.0 if self._slack_arg is None else float(self._slack_arg)
+        if not (math.isfinite(slack) and slack > 0.0):
+            raise ValueError(f"slack must be finite and > 0, got {slack!r}")
+        self._slack_ns = max(1, int(round(slack * 1e9)))
+        self._h_eval = self._h + self._slack_ns * 1e-9  # narrow-phase horizon at t_p
+
+    def set_horizon(self, horizon: float) -> None:
+        """Change the horizon (s); the next query rebuilds every pair."""
+        if float(horizon) != self._h:
+            self._set_horizon(horizon)
+            self._need_full = True
+            self._version += 1
 
     # ------------------------------------------------------------------ basics
     def clear(self) -> None:
-        """Remove all bodies (time and epoch are kept)."""
+        """Forget every body, every remembered removal and the reference time."""
+        if getattr(self, "_captures", None):
+            self._detach_captures()
         cap = 16
         D = self._dim
         self._P = np.zeros((cap, D))
         self._V = np.zeros((cap, D))
         self._A = np.zeros((cap, D))
         self._R = np.zeros(cap)
-        self._T = np.zeros(cap)
+        self._T = np.zeros(cap, dtype=np.int64)      # stamp, ns
+        self._Tf = np.zeros(cap)                      # (T - E) s, for the broad phase
+        self._recv = np.zeros(cap, dtype=np.int64)   # receive clock, ns
         self._lo = np.zeros((cap, D))
         self._hi = np.zeros((cap, D))
         self._alive = np.zeros(cap, dtype=bool)
-        self._ids = np.full(cap, None, dtype=object)   # slot -> id
-        self._keys: list = [None] * cap                  # slot -> _idkey(id)
-        # id order: rank[slot] = position of its id in sorted order (-1: free);
-        # maintained by bisection for single adds/removes, re-sorted in bulk
+        self._ids = np.full(cap, None, dtype=object)
         self._rank = np.full(cap, -1, dtype=np.int64)
         self._okeys: list = []
         self._rank_ok = True
+        self._order = None  # alive slots in id order (cached until membership changes)
         self._slot: dict = {}
         self._free: list[int] = list(range(cap - 1, -1, -1))
+        self._removals: dict = {}  # id -> (removal stamp ns, received ns)
         self._dirty: set[int] = set()
         self._need_full = True
         self._cell = 1.0
         self._grid_built = False
+        self._n_new = 0
+        self.reference_ns: int | None = None
+        self._epoch: int | None = None
         self._clear_records()
-        self._version = 0
+        self._version = getattr(self, "_version", 0) + 1
         self._cache = None
+        self.evaluated_pairs = 0  # narrow-phase pair evaluations of the last predictions() call
+        self._captures = weakref.WeakSet()  # live captures sharing the state arrays
 
-    # Pair records: one row per pair with a contact within H + slack of its t_p,
-    # in growable buffers; rows of updated bodies are marked dead (compacted
-    # when dead rows dominate) so an update touches O(its pairs) rows.
+    # Pair records: one row per pair with a contact within H + S of its t_p, in
+    # growable buffers; rows of updated bodies are marked dead (compacted when
+    # dead rows dominate) so an update touches O(its pairs) rows.
     _REC = ("_ra", "_rb", "_rtp", "_rtau", "_rpt", "_rnm", "_rcs")
 
     def _clear_records(self, cap: int = 256) -> None:
         D = self._dim
-        self._ra = np.zeros(cap, dtype=np.int64)  # slot of body a (orders first by id)
+        self._ra = np.zeros(cap, dtype=np.int64)
         self._rb = np.zeros(cap, dtype=np.int64)
-        self._rtp = np.zeros(cap)                 # evaluation time t_p, s
-        self._rtau = np.zeros(cap)                # narrow-phase time from t_p, s
+        self._rtp = np.zeros(cap, dtype=np.int64)  # pair time t_p, ns
+        self._rtau = np.zeros(cap)                  # narrow-phase time from t_p, s
         self._rpt = np.zeros((cap, D))
         self._rnm = np.zeros((cap, D))
         self._rcs = np.zeros(cap)
         self._rlive = np.zeros(cap, dtype=bool)
-        self._rn = 0        # rows used
-        self._rdead = 0     # dead rows among them
-        self._new_rows: list[np.ndarray] = []  # rows stored since the last query
-        self._out = None    # last query's sorted rows (slots and values), for merging
-
-    @property
-    def time(self) -> float:
-        """Current scene time, s; predictions are relative to it."""
-        return self._now
-
-    @property
-    def epoch(self) -> float:
-        """Epoch E, s (pairs are evaluated at ``max(E, t_ref_a, t_ref_b)``)."""
-        return self._epoch
+        self._rn = 0
+        self._rdead = 0
+        self._new_rows: list[np.ndarray] = []
+        self._out = None  # last query's sorted rows with (reference, epoch, horizon)
 
     @property
     def horizon(self) -> float:
@@ -176,7 +239,13 @@ class Scene:
 
     @property
     def slack(self) -> float:
-        return self._slack
+        return self._slack_ns * 1e-9
+
+    @property
+    def epoch_ns(self) -> int | None:
+        """E = R - (R mod S), or None for an empty scene."""
+        r = self.reference_ns
+        return None if r is None else r - r % self._slack_ns
 
     @property
     def dim(self) -> int:
@@ -188,34 +257,41 @@ class Scene:
     def __contains__(self, body_id: Hashable) -> bool:
         return body_id in self._slot
 
+    @property
+    def remembered_removals(self) -> int:
+        """How many removals are remembered (bounded by expire)."""
+        return len(self._removals)
+
     def ids(self) -> list:
         """Body ids, sorted."""
         self._ensure_rank()
-        return [k[1] for k in self._okeys]
+        return list(self._okeys)
 
     def _ensure_rank(self) -> None:
         if self._rank_ok:
             return
         slots = np.flatnonzero(self._alive)
-        keys = self._keys
-        order = sorted(slots.tolist(), key=keys.__getitem__)
-        self._okeys = [keys[x] for x in order]
+        ids = self._ids
+        order = sorted(slots.tolist(), key=ids.__getitem__)
+        self._okeys = [ids[x] for x in order]
         self._rank[:] = -1
         self._rank[np.array(order, dtype=np.int64)] = np.arange(len(order))
         self._rank_ok = True
 
     def _rank_insert(self, s: int) -> None:
+        self._order = None
         if not self._rank_ok:
             return
         if len(self._okeys) > 64 and self._n_new > 32:
             self._rank_ok = False  # bulk insert: cheaper to re-sort once
             return
-        pos = bisect.bisect_left(self._okeys, self._keys[s])
-        self._okeys.insert(pos, self._keys[s])
+        pos = bisect.bisect_left(self._okeys, self._ids[s])
+        self._okeys.insert(pos, self._ids[s])
         self._rank[self._rank >= pos] += 1
         self._rank[s] = pos
 
     def _rank_remove(self, s: int) -> None:
+        self._order = None
         if not self._rank_ok:
             return
         pos = int(self._rank[s])
@@ -223,132 +299,162 @@ class Scene:
         self._rank[self._rank > pos] -= 1
         self._rank[s] = -1
 
-    # -------------------------------------------------------------------- time
-    def set_time(self, t: float) -> None:
-        """Move the scene clock to ``t`` (s, must not go backwards).
-
-        Stored states are not touched (see module docstring); cached pair times
-        shift.  Rolls the epoch (full rebuild at the next query) when
-        ``t > epoch + slack``.
-        """
-        t = float(t)
-        if not math.isfinite(t) or t < self._now:
-            raise ValueError(f"scene time must be finite and non-decreasing: {t!r} < {self._now!r}"
-                             " (use clear() after a clock reset)")
-        if t == self._now:
-            return
-        self._now = t
-        self._version += 1
-        if t - self._epoch > self._slack:
-            self._epoch = t
-            self._need_full = True
-
-    def advance(self, dt: float) -> None:
-        """``set_time(time + dt)``, ``dt >= 0`` s: every body moves on its own parabola."""
-        self.set_time(self._now + float(dt))
+    def _sorted_slots(self) -> np.ndarray:
+        if self._order is None:
+            self._ensure_rank()
+            slots = np.flatnonzero(self._alive)
+            self._order = slots[np.argsort(self._rank[slots])]
+        return self._order
 
     # ---------------------------------------------------------------- updates
-    def upsert(self, body_id: Hashable, p, v, a, r: float, stamp: float | None = None) -> None:
-        """Insert or replace one body; ``p, v, a`` (D,) at time ``stamp`` (default now).
+    def merge(self, ids: Sequence[Hashable], stamps_ns, positions, velocities, accelerations,
+              radii, remove, received_ns: int) -> MergeResult:
+        """Apply one message: removals first, then states (rules in the module docstring).
 
-        Raises ValueError for non-finite values, negative radius, wrong shape or
-        ``stamp > time`` (call ``set_time`` first).
+        ids : k distinct ids.  stamps_ns : (k,) int ns > 0.  positions, velocities,
+        accelerations : (k, >= dim) (extra columns ignored).  radii : (k,).
+        remove : (k,) bool; a removal's geometry is ignored.  received_ns : the
+        receive clock for expiry.  Rows must be valid (finite, radius >= 0).
         """
-        self.upsert_many([body_id], np.asarray(p, dtype=np.float64)[None],
-                         np.asarray(v, dtype=np.float64)[None],
-                         np.asarray(a, dtype=np.float64)[None], [r],
-                         None if stamp is None else [stamp])
+        self._detach_captures()
+        stamps = np.asarray(stamps_ns, dtype=np.int64)
+        remove = np.asarray(remove, dtype=bool)
+        received_ns = int(received_ns)
+        removed, removal_ignored = [], []
+        for k in np.flatnonzero(remove).tolist():
+            bid, st = ids[k], int(stamps[k])
+            s = self._slot.get(bid)
+            if s is not None and st < self._T[s]:
+                removal_ignored.append(k)  # the body's state is newer than the removal
+                continue
+            old = self._removals.get(bid)
+            if old is None or st >= old[0]:
+                self._removals[bid] = (st, received_ns)
+            if s is None:
+                removal_ignored.append(k)
+            else:
+                self._drop(s)
+                removed.append(k)
+        rows = np.flatnonzero(~remove)
+        D = self._dim
+        get = self._slot.get
+        slots = np.fromiter((get(ids[k], -1) for k in rows.tolist()), dtype=np.int64, count=rows.size)
+        st = stamps[rows]
+        known = slots >= 0
+        newer = np.ones(rows.size, dtype=bool)
+        newer[known] = st[known] > self._T[slots[known]]
+        if self._removals:
+            for x in np.flatnonzero(~known).tolist():
+                gone = self._removals.get(ids[rows[x]])
+                if gone is not None:
+                    if st[x] <= gone[0]:
+                        newer[x] = False  # older than its removal: a late state of a removed body
+                    else:
+                        del self._removals[ids[rows[x]]]
+        fresh = np.flatnonzero(~known & newer)
+        room = len(fresh) if self.max_bodies is None else max(0, self.max_bodies - len(self._slot))
+        full = fresh[room:]
+        fresh = fresh[:room]
+        self._n_new = int(fresh.size)
+        for x in fresh.tolist():
+            s = self._alloc()
+            bid = ids[rows[x]]
+            self._slot[bid] = s
+            self._ids[s] = bid
+            self._alive[s] = True
+            self._rank_insert(s)
+            slots[x] = s
+        take = newer.copy()
+        take[full] = False
+        sl, src = slots[take], rows[take]
+        if src.size:
+            self._P[sl] = np.asarray(positions)[src, :D]
+            self._V[sl] = np.asarray(velocities)[src, :D]
+            self._A[sl] = np.asarray(accelerations)[src, :D]
+            self._R[sl] = np.asarray(radii)[src]
+            self._T[sl] = stamps[src]
+            self._recv[sl] = received_ns
+            self._dirty.update(sl.tolist())
+            newest = int(stamps[src].max())
+            if self.reference_ns is None or newest > self.reference_ns:
+                self.reference_ns = newest
+        if src.size or removed:
+            self._version += 1
+        return MergeResult(accepted=src, not_newer=rows[~newer], full=rows[full],
+                           removed=np.array(removed, dtype=np.int64),
+                           removal_ignored=np.array(removal_ignored, dtype=np.int64))
 
-    def add(self, body_id: Hashable, p, v, a, r: float, stamp: float | None = None) -> None:
-        """Like :meth:`upsert` but KeyError if ``body_id`` already exists."""
-        if body_id in self._slot:
-            raise KeyError(f"body {body_id!r} already in scene")
-        self.upsert(body_id, p, v, a, r, stamp)
-
-    def upsert_many(self, ids: Iterable[Hashable], positions, velocities, accelerations,
-                    radii, stamps=None) -> None:
-        """Insert or replace several bodies; arrays ``(k, D)``/``(k,)``, ``stamps`` (k,) s or None.
-
-        Validated as a whole before anything changes (ValueError names bad rows).
-        """
+    def upsert_many(self, ids: Sequence[Hashable], positions, velocities, accelerations, radii,
+                    stamps_ns, received_ns: int = 0) -> MergeResult:
+        """Validated ``merge`` of states only (ValueError names bad rows; then nothing changes)."""
         ids = list(ids)
         p, v, a, r = validate_bodies(positions, velocities, accelerations, radii)
-        if p.shape[0] != len(ids) or p.shape[1] != self._dim:
+        st = np.broadcast_to(np.asarray(stamps_ns, dtype=np.int64), (len(ids),))
+        if p.shape != (len(ids), self._dim):
             raise ValueError(f"expected {len(ids)} rows of dimension {self._dim}, got {p.shape}")
         if len(set(ids)) != len(ids):
             raise ValueError("duplicate ids in one update")
-        if stamps is None:
-            st = np.full(len(ids), self._now)
-        else:
-            st = np.asarray(stamps, dtype=np.float64).reshape(-1)
-            if st.shape[0] != len(ids):
-                raise ValueError("stamps must have one entry per id")
-            bad = np.flatnonzero(~np.isfinite(st) | (st > self._now))
-            if bad.size:
-                raise ValueError(f"stamps must be finite and <= scene time {self._now}; rows {bad.tolist()}")
-        get = self._slot.get
-        slots = [get(b) for b in ids]
-        self._n_new = slots.count(None)
-        if self._n_new:
-            for k, bid in enumerate(ids):
-                if slots[k] is None:
-                    s = self._alloc()
-                    self._slot[bid] = s
-                    self._ids[s] = bid
-                    self._keys[s] = _idkey(bid)
-                    self._alive[s] = True
-                    self._rank_insert(s)
-                    slots[k] = s
-        sl = np.array(slots, dtype=np.int64)
-        self._P[sl] = p
-        self._V[sl] = v
-        self._A[sl] = a
-        self._R[sl] = r
-        self._T[sl] = st
-        self._dirty.update(slots)
-        self._version += 1
+        return self.merge(ids, st, p, v, a, r, np.zeros(len(ids), dtype=bool), received_ns)
 
-    def remove(self, body_id: Hashable) -> None:
-        """Remove one body (KeyError if absent)."""
-        self.remove_many([body_id])
+    def upsert(self, body_id: Hashable, p, v, a, r: float, stamp_ns: int,
+               received_ns: int = 0) -> MergeResult:
+        """One body's state (see upsert_many)."""
+        return self.upsert_many([body_id], np.asarray(p, dtype=np.float64)[None],
+                                np.asarray(v, dtype=np.float64)[None],
+                                np.asarray(a, dtype=np.float64)[None], [r], [stamp_ns], received_ns)
 
-    def remove_many(self, ids: Iterable[Hashable]) -> None:
-        """Remove several bodies (KeyError if any is absent; then nothing changes)."""
-        ids = list(ids)
-        missing = [b for b in ids if b not in self._slot]
-        if missing:
-            raise KeyError(f"unknown body id(s): {missing[:20]}")
-        if len(ids) > 32:
-            self._rank_ok = False
-        for bid in ids:
-            s = self._slot.pop(bid)
-            self._rank_remove(s)
-            self._ids[s] = None
-            self._keys[s] = None
-            self._alive[s] = False
-            self._dirty.add(s)
-            self._free.append(s)
+    def remove(self, body_id: Hashable, stamp_ns: int, received_ns: int = 0) -> bool:
+        """A removal at ``stamp_ns``; True if it deleted the body."""
+        res = self.merge([body_id], [stamp_ns], np.zeros((1, 3)), np.zeros((1, 3)), np.zeros((1, 3)),
+                         [0.0], [True], received_ns)
+        return bool(res.removed.size)
+
+    def expire(self, now_ns: int, timeout_ns: int) -> list:
+        """Drop bodies (and remembered removals) received before ``now_ns - timeout_ns``; ids dropped, sorted."""
+        limit = int(now_ns) - int(timeout_ns)
+        if self._removals:
+            self._removals = {k: v for k, v in self._removals.items() if v[1] >= limit}
+        stale = np.flatnonzero(self._alive & (self._recv < limit))
+        if stale.size:
+            self._detach_captures()
+        gone = sorted(self._ids[s] for s in stale.tolist())
+        for s in stale.tolist():
+            self._drop(s)
+        if gone:
+            self._version += 1
+        return gone
+
+    def _drop(self, s: int) -> None:
+        del self._slot[self._ids[s]]
+        self._rank_remove(s)
+        self._ids[s] = None
+        self._alive[s] = False
+        self._dirty.add(s)
+        self._free.append(s)
         self._version += 1
+        if not self._slot:
+            # Nothing left to propagate: forget the reference time, else after a tracker's
+            # clock reset (stamps jump back) new bodies would be propagated into the old
+            # future (tests/reliability/test_faults_clock.py::test_stamps_jump_backwards).
+            self.reference_ns = None
+            self._need_full = True
 
     def _alloc(self) -> int:
         if not self._free:
             old = self._R.shape[0]
             new = 2 * old
             for name in ("_P", "_V", "_A", "_lo", "_hi"):
-                arr = getattr(self, name)
                 grown = np.zeros((new, self._dim))
-                grown[:old] = arr
+                grown[:old] = getattr(self, name)
                 setattr(self, name, grown)
-            for name, dt in (("_R", np.float64), ("_T", np.float64), ("_alive", bool),
-                             ("_rank", np.int64)):
-                arr = getattr(self, name)
+            for name, dt in (("_R", np.float64), ("_T", np.int64), ("_Tf", np.float64),
+                             ("_recv", np.int64), ("_alive", bool), ("_rank", np.int64)):
                 grown = np.full(new, -1 if name == "_rank" else 0, dtype=dt)
-                grown[:old] = arr
+                grown[:old] = getattr(self, name)
                 setattr(self, name, grown)
             ids = np.full(new, None, dtype=object)
             ids[:old] = self._ids
             self._ids = ids
-            self._keys.extend([None] * (new - old))
             if self._grid_built:
                 stale = np.ones(new, dtype=bool)
                 stale[:old] = self._gstale
@@ -357,46 +463,57 @@ class Scene:
         return self._free.pop()
 
     # ------------------------------------------------------------------ states
-    def state(self, body_id: Hashable) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
-        """``(p, v, a, r)`` of one body propagated to the scene time."""
-        s = self._slot[body_id]
-        p, v = _bp.propagate(self._P[s], self._V[s], self._A[s], self._now - self._T[s])
-        return p, v, self._A[s].copy(), float(self._R[s])
+    def snapshot(self) -> SceneSnapshot:
+        """Every body propagated to the reference time, ordered by id."""
+        return self.capture().snapshot()
 
-    def states(self) -> tuple[list, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        """``(ids, P, V, A, R)`` of all bodies at the scene time, ids sorted."""
-        ids = self.ids()
-        sl = np.array([self._slot[b] for b in ids], dtype=np.int64)
-        P, V = _bp.propagate(self._P[sl], self._V[sl], self._A[sl], self._now - self._T[sl])
-        return ids, P, V, self._A[sl].copy(), self._R[sl].copy()
+    def capture(self) -> "_Capture":
+        """The stored states as of now, for a snapshot on demand (markers).
 
-    def stored_states(self) -> tuple[list, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        """``(ids, P, V, A, R, T_ref)``: states exactly as stored (at their own ``T_ref``), ids sorted."""
-        ids = self.ids()
-        sl = np.array([self._slot[b] for b in ids], dtype=np.int64)
-        return (ids, self._P[sl].copy(), self._V[sl].copy(), self._A[sl].copy(),
-                self._R[sl].copy(), self._T[sl].copy())
+        Free while the scene is unchanged: the capture shares the scene's
+        arrays and is given its own copy only when the scene is about to
+        change while the capture is still referenced.
+        """
+        cap = _Capture(self.reference_ns or 0, self._sorted_slots(), self._ids, self._P, self._V,
+                       self._A, self._R, self._T)
+        self._captures.add(cap)
+        return cap
+
+    def _detach_captures(self) -> None:
+        if self._captures:
+            for cap in list(self._captures):
+                cap.detach()
+            self._captures.clear()
+
+    def stored_states(self):
+        """``(ids, P, V, A, R, T_ns)`` exactly as stored, ids sorted."""
+        sl = self._sorted_slots()
+        return ([self._ids[s] for s in sl.tolist()], self._P[sl].copy(), self._V[sl].copy(),
+                self._A[sl].copy(), self._R[sl].copy(), self._T[sl].copy())
 
     # ------------------------------------------------------------ pair engine
     def _bounds(self, slots: np.ndarray):
-        t_end = self._epoch + self._slack + self._h
+        E = self._epoch
         tr = self._T[slots]
-        t0 = np.maximum(self._epoch, tr) - tr
-        return _bp.swept_bounds(self._P[slots], self._V[slots], self._A[slots], self._R[slots],
-                                t0, t_end - tr)
+        t0 = (np.maximum(E, tr) - tr).astype(np.float64) * 1e-9
+        t1 = (E + self._slack_ns - tr).astype(np.float64) * 1e-9 + self._h
+        return _bp.swept_bounds(self._P[slots], self._V[slots], self._A[slots], self._R[slots], t0, t1)
 
-    def _evaluate(self, A: np.ndarray, B: np.ndarray, t_eval: np.ndarray | None, horizon: float):
-        """Narrow phase + details for slot pairs (A[k], B[k]) at times t_eval (None: rule t_p)."""
-        if t_eval is None:
-            t_eval = np.maximum(self._epoch, np.maximum(self._T[A], self._T[B]))
-        pa, va = _bp.propagate(self._P[A], self._V[A], self._A[A], t_eval - self._T[A])
-        pb, vb = _bp.propagate(self._P[B], self._V[B], self._A[B], t_eval - self._T[B])
+    def _evaluate(self, A: np.ndarray, B: np.ndarray, t_eval: np.ndarray, horizon: float):
+        """Narrow phase + details for slot pairs (A[k], B[k]) at t_eval (ns); the hits."""
+        pa, va = _propagate_ns(self._P[A], self._V[A], self._A[A], t_eval - self._T[A])
+        pb, vb = _propagate_ns(self._P[B], self._V[B], self._A[B], t_eval - self._T[B])
         aa, ab, ra, rb = self._A[A], self._A[B], self._R[A], self._R[B]
         tau = narrow_on_pairs(pa, va, aa, ra, pb, vb, ab, rb, horizon)
+        self.evaluated_pairs += int(tau.shape[0])
         hit = tau <= horizon
         h = np.flatnonzero(hit)
         pt, nm, cs = details_on_pairs(pa[h], va[h], aa[h], ra[h], pb[h], vb[h], ab[h], rb[h], tau[h])
         return hit, t_eval[h], tau[h], pt, nm, cs
+
+    def _evaluate_at_tp(self, A, B):
+        t_p = np.maximum(self._epoch, np.maximum(self._T[A], self._T[B]))
+        return self._evaluate(A, B, t_p, self._h_eval)
 
     def _orient(self, X: np.ndarray, Y: np.ndarray):
         """Order each slot pair so that the first body's id sorts first."""
@@ -405,21 +522,20 @@ class Scene:
         return np.where(swap, Y, X), np.where(swap, X, Y)
 
     def _pairs_full(self):
-        """All candidate slot pairs (a before b by id), from scratch."""
-        self._ensure_rank()
-        slots = np.flatnonzero(self._alive)
-        slots = slots[np.argsort(self._rank[slots])]
-        lo, hi = self._bounds(slots)
-        self._last_bounds = (slots, lo, hi)
+        """All candidate slot pairs (a before b by id), from scratch; sets bounds."""
+        slots = self._sorted_slots()
+        if slots.size:
+            self._Tf[slots] = (self._T[slots] - self._epoch).astype(np.float64) * 1e-9
+            lo, hi = self._bounds(slots)
+            self._lo[slots] = lo
+            self._hi[slots] = hi
         if slots.size < 2:
-            e = np.empty(0, dtype=np.int64)
-            return slots, e, e.copy()
+            return slots, _EMPTY_I, _EMPTY_I
         I, J, _ = _bp.candidate_pairs(
-            lo, hi, p=self._P[slots], v=self._V[slots], a=self._A[slots], r=self._R[slots],
-            tref=self._T[slots], t_start=self._epoch, t_end=self._epoch + self._slack + self._h,
-            method=self._method)
-        # local indices follow sorted-id order, and candidate_pairs returns I < J
-        return slots, slots[I], slots[J]
+            self._lo[slots], self._hi[slots], p=self._P[slots], v=self._V[slots], a=self._A[slots],
+            r=self._R[slots], tref=self._Tf[slots], t_start=0.0,
+            t_end=self._slack_ns * 1e-9 + self._h, method=self._method)
+        return slots, slots[I], slots[J]  # local order is id order and I < J
 
     def _store(self, A, B, res) -> None:
         hit, tp, tau, pt, nm, cs = res
@@ -427,11 +543,8 @@ class Scene:
         n = self._rn
         if n + k > self._rlive.shape[0]:
             live = np.flatnonzero(self._rlive[:n])
-            new_cap = max(256, 2 * (live.size + k))
             old = [getattr(self, name)[live] for name in self._REC]
-            self._new_rows = []  # row numbers change; the merge path is not used
-            self._out = None
-            self._clear_records(new_cap)
+            self._clear_records(max(256, 2 * (live.size + k)))  # row numbers change: no merge
             n = live.size
             for name, arr in zip(self._REC, old):
                 getattr(self, name)[:n] = arr
@@ -450,7 +563,7 @@ class Scene:
 
     def _kill_rows(self, slots: np.ndarray) -> None:
         n = self._rn
-        if n == 0:
+        if n == 0 or slots.size == 0:
             return
         if slots.size == 1:
             s = slots[0]
@@ -467,12 +580,8 @@ class Scene:
 
     def _rebuild_all(self) -> None:
         self._clear_records()
-        slots, A, B = self._pairs_full()
-        if slots.size:
-            _, lo, hi = self._last_bounds
-            self._lo[slots] = lo
-            self._hi[slots] = hi
-        self._store(A, B, self._evaluate(A, B, None, self._h + self._slack))
+        _, A, B = self._pairs_full()
+        self._store(A, B, self._evaluate_at_tp(A, B))
         self._grid_built = False  # rebuilt lazily when a small update needs it
         self._dirty.clear()
         self._need_full = False
@@ -530,7 +639,7 @@ class Scene:
             parts = [c[~self._gstale[c]]]
         if m:
             parts.append(np.fromiter(m, dtype=np.int64, count=len(m)))
-        return np.concatenate(parts) if parts else np.empty(0, dtype=np.int64)
+        return np.concatenate(parts) if parts else _EMPTY_I
 
     def _update_incremental(self) -> None:
         dirty = np.array(sorted(self._dirty), dtype=np.int64)
@@ -543,6 +652,7 @@ class Scene:
             self._grid_remove(s)
         live = dirty[self._alive[dirty]]
         if live.size:
+            self._Tf[live] = (self._T[live] - self._epoch).astype(np.float64) * 1e-9
             lo, hi = self._bounds(live)
             self._lo[live] = lo
             self._hi[live] = hi
@@ -564,47 +674,58 @@ class Scene:
         cap = np.int64(self._R.shape[0])
         key = np.unique(np.minimum(X, Y) * cap + np.maximum(X, Y))
         A, B = self._orient(key // cap, key % cap)
-        keep = _bp.relative_filter(self._P, self._V, self._A, self._R, self._T, A, B,
-                                   self._epoch, self._epoch + self._slack + self._h)
+        keep = _bp.relative_filter(self._P, self._V, self._A, self._R, self._Tf, A, B,
+                                   0.0, self._slack_ns * 1e-9 + self._h)
         A, B = A[keep], B[keep]
-        self._store(A, B, self._evaluate(A, B, None, self._h + self._slack))
+        self._store(A, B, self._evaluate_at_tp(A, B))
 
     def _flush(self) -> bool:
         """Bring pair records up to date; True if only a few bodies changed
-        (the last query's sorted rows can then be merged instead of re-sorted)."""
+        (the last query's sorted rows may then be merged instead of re-sorted)."""
+        epoch = self.epoch_ns
+        if epoch != self._epoch:
+            self._epoch = epoch
+            self._need_full = True
         n = len(self._slot)
         if self._need_full or len(self._dirty) > max(8, self._full_frac * n):
-            self._rebuild_all()
+            self._changed = _EMPTY_I
+            if self._epoch is None:  # empty scene
+                self._clear_records()
+                self._dirty.clear()
+                self._need_full = False
+            else:
+                self._rebuild_all()
             return False
         if self._dirty:
             self._changed = np.array(sorted(self._dirty), dtype=np.int64)
             self._update_incremental()
         else:
-            self._changed = np.empty(0, dtype=np.int64)
+            self._changed = _EMPTY_I
         return True
 
     # ------------------------------------------------------------------ query
-    def predictions(self) -> PairPredictions:
-        """Pairs touching within ``[time, time + horizon]``, soonest first, with ids.
+    def predictions(self) -> SceneContacts:
+        """Pairs touching within ``[R, R + H]`` by the rule of the module docstring.
 
-        ``i``/``j`` hold body ids (``i`` sorts before ``j``); ``ttc`` is relative to
-        :attr:`time`; the arrays are read-only (shared with the cache).  Cached
-        until the scene changes.  After a small update at
-        an unchanged time, the previous sorted rows are merged with the new ones
-        (O(K) copies, no sort); otherwise everything is re-sorted.
+        Cached until the scene changes.  After a small update that kept the
+        reference time, the previous sorted rows are merged with the new ones
+        (no sort); after a newer stamp the cached records are shifted and
+        re-sorted; pairs whose contact began before R are evaluated at R.
         """
+        self.evaluated_pairs = 0
         if self._cache is not None and self._cache[0] == self._version:
             return self._cache[1]
         small = self._flush()
         out = self._out
-        if (small and out is not None and out[0] == self._now and out[1] == self._epoch):
-            rows = self._merge(out[2], self._changed, self._new_rows)
+        key = (self.reference_ns, self._epoch, self._h)
+        if small and out is not None and out[0] == key:
+            rows = self._merge(out[1], self._changed, self._new_rows)
         else:
             rows = self._sort(self._resolve(*self._live_rows()))
         self._new_rows = []
         if self._rdead > max(1024, self._rn // 2):
             self._compact()
-        self._out = (self._now, self._epoch, rows)
+        self._out = (key, rows)
         res = self._publish(rows)
         self._cache = (self._version, res)
         return res
@@ -616,29 +737,48 @@ class Scene:
         self._new_rows = []
 
     def _resolve(self, A, B, tp, tau, pt, nm, cs):
-        """Records -> reportable rows ``(A, B, ttc, pt, nm, cs)`` at the scene time."""
-        ttc = tau - (self._now - tp)
-        past = np.flatnonzero(ttc < 0.0)
+        """Records -> reportable rows ``(A, B, ttc, contact_ns, overlapping, pt, nm, cs)`` at R."""
+        R = self.reference_ns
+        if R is None or A.size == 0:
+            e = np.empty(0)
+            return (_EMPTY_I, _EMPTY_I, e, _EMPTY_I, np.empty(0, dtype=bool),
+                    np.empty((0, self._dim)), np.empty((0, self._dim)), e)
+        dtn = R - tp
+        shifted = dtn > 0
+        d = dtn.astype(np.float64) * 1e-9
+        ttc = np.where(shifted, tau - d, tau)
+        cns = tp + np.round(tau * 1e9).astype(np.int64)
+        past = np.flatnonzero(shifted & (tau <= d))
         if past.size:
-            # contact already happened since t_p: first contact from now, evaluated at now
+            # the contact began between t_p and R: the first contact from R, evaluated at R
             Ap, Bp = A[past], B[past]
-            hit, _, tau2, pt2, nm2, cs2 = self._evaluate(Ap, Bp, np.full(past.size, self._now), self._h)
-            fut = np.flatnonzero(ttc >= 0.0)
+            hit, _, tau2, pt2, nm2, cs2 = self._evaluate(Ap, Bp, np.full(past.size, R, dtype=np.int64),
+                                                         self._h)
+            fut = np.ones(A.size, dtype=bool)
+            fut[past] = False
             A = np.concatenate([A[fut], Ap[hit]])
             B = np.concatenate([B[fut], Bp[hit]])
             ttc = np.concatenate([ttc[fut], tau2])
+            cns = np.concatenate([cns[fut], R + np.round(tau2 * 1e9).astype(np.int64)])
             pt = np.concatenate([pt[fut], pt2])
             nm = np.concatenate([nm[fut], nm2])
             cs = np.concatenate([cs[fut], cs2])
         k = np.flatnonzero(ttc <= self._h)
-        return A[k], B[k], ttc[k], pt[k], nm[k], cs[k]
+        A, B, ttc, cns, pt, nm, cs = A[k], B[k], ttc[k], cns[k], pt[k], nm[k], cs[k]
+        over = np.zeros(A.size, dtype=bool)
+        z = np.flatnonzero(ttc == 0.0)
+        if z.size:
+            Az, Bz = A[z], B[z]
+            pa, _ = _propagate_ns(self._P[Az], self._V[Az], self._A[Az], R - self._T[Az])
+            pb, _ = _propagate_ns(self._P[Bz], self._V[Bz], self._A[Bz], R - self._T[Bz])
+            over[z] = np.linalg.norm(pa - pb, axis=1) - (self._R[Az] + self._R[Bz]) < 0.0
+        return A, B, ttc, cns, over, pt, nm, cs
 
     def _pair_key(self, A, B):
         return self._rank[A] * np.int64(self._R.shape[0]) + self._rank[B]
 
     def _sort(self, rows):
-        """Sort rows by (ttc, id_a, id_b): pair-rank order, then a stable sort on
-        ttc (np.lexsort is several times slower)."""
+        """Sort rows by (ttc, id_a, id_b): pair-rank order, then a stable sort on ttc."""
         A, B, ttc = rows[0], rows[1], rows[2]
         if ttc.size == 0:
             return rows
@@ -677,20 +817,55 @@ class Scene:
                                              key_new[k])
         return tuple(np.insert(x, pos, y, axis=0) for x, y in zip(old, new))
 
-    def _publish(self, rows) -> PairPredictions:
-        A, B, ttc, pt, nm, cs = rows
-        if ttc.size == 0:
-            return PairPredictions.empty(self._dim, id_dtype=object)
+    def _publish(self, rows) -> SceneContacts:
+        A, B, ttc, cns, over, pt, nm, cs = rows
         for x in rows:
             x.flags.writeable = False  # shared with the merge cache
-        return PairPredictions(self._ids[A], self._ids[B], ttc, pt, nm, cs)
+        return SceneContacts(self.reference_ns or 0, self._ids[A], self._ids[B], ttc, cns, over,
+                             pt, nm, cs)
 
-    def full_recomputation(self) -> PairPredictions:
-        """Predictions recomputed from the stored states alone (no caches touched).
+    def full_recomputation(self) -> SceneContacts:
+        """The rule applied from scratch to the stored states (caches untouched).
 
-        Applies exactly the rule of the module docstring to every stored body;
-        used by tests to prove the incremental path is bitwise equal to it.
+        Tests use it to prove the incremental path bitwise equal to it.
         """
-        _, A, B = self._pairs_full()
-        hit, tp, tau, pt, nm, cs = self._evaluate(A, B, None, self._h + self._slack)
-        return self._publish(self._sort(self._resolve(A[hit], B[hit], tp, tau, pt, nm, cs)))
+        if self.reference_ns is None:
+            return self._publish(self._resolve(_EMPTY_I, _EMPTY_I, None, None, None, None, None))
+        saved_epoch, saved_lo, saved_hi, saved_tf = self._epoch, self._lo.copy(), self._hi.copy(), self._Tf.copy()
+        try:
+            self._epoch = self.epoch_ns
+            _, A, B = self._pairs_full()
+            hit, tp, tau, pt, nm, cs = self._evaluate_at_tp(A, B)
+            return self._publish(self._sort(self._resolve(A[hit], B[hit], tp, tau, pt, nm, cs)))
+        finally:
+            self._epoch, self._lo, self._hi, self._Tf = saved_epoch, saved_lo, saved_hi, saved_tf
+
+
+class _Capture:
+    """Stored states as of a prediction, propagated to the reference time on demand."""
+
+    def __init__(self, reference_ns, order, ids, P, V, A, R, T) -> None:
+        self._args = (reference_ns, order, ids, P, V, A, R, T)
+        self._snapshot = None
+
+    def detach(self) -> None:
+        """Take a private copy of the rows in use (the scene is about to change)."""
+        ref, order, ids, P, V, A, R, T = self._args
+        self._args = (ref, order, ids.copy(), P.copy(), V.copy(), A.copy(), R.copy(), T.copy())
+
+    def __len__(self) -> int:
+        return int(self._args[1].shape[0])
+
+    def ids(self) -> list:
+        """Body ids, sorted."""
+        ids = self._args[2]
+        return [ids[s] for s in self._args[1].tolist()]
+
+    def snapshot(self) -> SceneSnapshot:
+        if self._snapshot is None:
+            ref, order, ids, P, V, A, R, T = self._args
+            p, v = _propagate_ns(P[order], V[order], A[order], ref - T[order])
+            self._snapshot = SceneSnapshot(ref, [ids[s] for s in order.tolist()],
+                                           np.ascontiguousarray(p), np.ascontiguousarray(v),
+                                           A[order], R[order])
+        return self._snapshot

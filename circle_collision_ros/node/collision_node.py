@@ -63,7 +63,7 @@ from circle_collision_ros.pipeline.state_groups import ingest_single_states
 from circle_collision_ros.cli import TransportProfile, parse_args, spin_node
 from circle_collision_ros.node.input_loss import InputLossMonitor
 from circle_collision_ros.node.markers import MarkerPublisher
-from circle_collision_ros.pipeline.predictor import (CollisionPredictor, IntakeReport,
+from circle_collision_ros.pipeline.predictor import (RUNTIME_FIELDS, CollisionPredictor, IntakeReport,
                                                       PredictorConfig, predict_once)
 
 
@@ -386,7 +386,7 @@ class CollisionNode(Node):
             data = prediction.to_cdr()
         except Exception as exc:  # never let one bad scene stop the stream
             self.counters.errors += 1
-            self._warn("predict", f"prediction failed, scene of {len(self.predictor.registry)} "
+            self._warn("predict", f"prediction failed, scene of {self.predictor.bodies} "
                                   f"bodies skipped: {exc!r}")
             return
         self._predictions_pub.publish(data)
@@ -419,8 +419,8 @@ class CollisionNode(Node):
         if not backwards and jump.clock_change not in (ClockChange.ROS_TIME_ACTIVATED,
                                                        ClockChange.ROS_TIME_DEACTIVATED):
             return
-        bodies = len(self.predictor.registry)
-        self.predictor.registry.clear()
+        bodies = self.predictor.bodies
+        self.predictor.clear()
         self._last_drain_ns = 0
         if backwards:
             self.counters.clock_jumps_back += 1
@@ -433,7 +433,7 @@ class CollisionNode(Node):
         lat = np.array(self.latencies_s) if self.latencies_s else np.zeros(1)
         level = DiagnosticStatus.OK if c.errors == 0 else DiagnosticStatus.WARN
         values = {
-            "bodies": len(self.predictor.registry), "messages": c.messages,
+            "bodies": self.predictor.bodies, "messages": c.messages,
             "states_accepted": c.accepted, "states_rejected": c.rejected,
             "states_ignored_not_newer": c.ignored, "bodies_removed": c.removed,
             "bodies_expired": c.expired, "predictions_published": c.published,
@@ -588,8 +588,7 @@ class CollisionNode(Node):
         return SetParametersResult(successful=True)
 
     def _apply_parameters(self, params) -> None:
-        changes = {p.name: p.value for p in params
-                   if p.name in ("horizon", "stale_timeout", "report_all_pairs")}
+        changes = {p.name: p.value for p in params if p.name in RUNTIME_FIELDS}
         if changes:
             self.predictor.reconfigure(**changes)
         for param in params:

@@ -25,6 +25,7 @@ the message is rejected as a whole, never partially used.
 from __future__ import annotations
 
 import struct
+import sys
 
 import numpy as np
 from numba import njit
@@ -215,23 +216,98 @@ def encode_state_array(batch: StateBatch, stamp_ns: int, frame_id: str) -> bytes
     return bytes(w.buf)
 
 
-def encode_prediction_array(stamp: tuple[int, int], frame_id: str, horizon: float, rows) -> bytes:
-    """Serialized CollisionPredictionArray.
+@njit(cache=True)
+def _prediction_array_end(frame_len, name_len, count):
+    """End position of a CollisionPredictionArray with these string lengths (no NULs)."""
+    pos = _align(_ORIGIN + 8, 4) + 4 + frame_len + 1  # stamp, frame_id
+    pos = _align(pos, 8) + 8                           # horizon
+    pos = _align(pos, 4) + 4                           # sequence count
+    for k in range(count):
+        pos = _align(pos, 4) + 4 + name_len[2 * k] + 1
+        pos = _align(pos, 4) + 4 + name_len[2 * k + 1] + 1
+        pos = _align(pos + 1, 8) + 8                   # status, time_to_collision
+        pos += 8 + 56                                  # contact_time; point, normal, closing
+    return pos
 
-    rows : iterable of (id_a: bytes, id_b: bytes, status, ttc, (sec, nanosec),
-        point xyz, normal xyz, closing_speed), already in publication order.
+
+@njit(cache=True)
+def _put_string(buf, u32, pos, src, start, n):
+    pos = _align(pos, 4)
+    u32[(pos - _ORIGIN) // 4] = n + 1
+    pos += 4
+    for j in range(n):
+        buf[pos + j] = src[start + j]
+    buf[pos + n] = 0
+    return pos + n + 1
+
+
+@njit(cache=True)
+def _encode_predictions(buf, u32, f64, sec, nanosec, frame, horizon, names, name_start, name_len,
+                        status, ttc, contact_sec, contact_nanosec, point, normal, closing):
+    """Write a CollisionPredictionArray into zeroed `buf`; u32/f64 view it from _ORIGIN on."""
+    u32[0] = np.uint32(sec & 0xFFFFFFFF)
+    u32[1] = nanosec
+    pos = _put_string(buf, u32, _ORIGIN + 8, frame, 0, frame.shape[0])
+    pos = _align(pos, 8)
+    f64[(pos - _ORIGIN) // 8] = horizon
+    pos = _align(pos + 8, 4)
+    count = ttc.shape[0]
+    u32[(pos - _ORIGIN) // 4] = count
+    pos += 4
+    for k in range(count):
+        pos = _put_string(buf, u32, pos, names, name_start[2 * k], name_len[2 * k])
+        pos = _put_string(buf, u32, pos, names, name_start[2 * k + 1], name_len[2 * k + 1])
+        buf[pos] = status[k]
+        pos = _align(pos + 1, 8)
+        f64[(pos - _ORIGIN) // 8] = ttc[k]
+        pos += 8
+        u32[(pos - _ORIGIN) // 4] = np.uint32(contact_sec[k] & 0xFFFFFFFF)
+        u32[(pos - _ORIGIN) // 4 + 1] = np.uint32(contact_nanosec[k])
+        pos += 8
+        q = (pos - _ORIGIN) // 8
+        for j in range(3):
+            f64[q + j] = point[k, j]
+            f64[q + 3 + j] = normal[k, j]
+        f64[q + 6] = closing[k]
+        pos += 56
+    return pos
+
+
+def _encoded_names(names: list[str]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """UTF-8 bytes of all names back to back, with each name's start and length."""
+    joined = "".join(names)
+    if joined.isascii():  # byte length = character length
+        lengths = np.fromiter(map(len, names), dtype=np.int64, count=len(names))
+    else:
+        lengths = np.fromiter((len(x.encode()) for x in names), dtype=np.int64, count=len(names))
+    starts = np.zeros(len(names), dtype=np.int64)
+    np.cumsum(lengths[:-1], out=starts[1:])
+    return np.frombuffer(joined.encode(), dtype=np.uint8), starts, lengths
+
+
+def encode_prediction_array(stamp: tuple[int, int], frame_id: str, horizon: float, columns) -> bytes:
+    """Serialized CollisionPredictionArray, written by one compiled loop.
+
+    columns : a prediction_messages.PredictionColumns (id_a, id_b lists; status
+        uint8; ttc; contact_ns int64; point, normal (K, 3); closing_speed), in
+        publication order. Padding bytes are zero; int32 seconds wrap as
+        struct's "<i" would refuse, so callers keep times inside int32 range.
     """
-    w = _Writer()
-    w.time(*stamp)
-    w.string(frame_id.encode())
-    w.f64s(horizon)
-    rows = list(rows)
-    w.u32(len(rows))
-    for id_a, id_b, status, ttc, contact_time, point, normal, closing in rows:
-        w.string(id_a)
-        w.string(id_b)
-        w.u8(status)
-        w.f64s(ttc)
-        w.time(*contact_time)
-        w.f64s(*point, *normal, closing)
-    return bytes(w.buf)
+    if sys.byteorder != "little":  # the views below write native floats
+        raise NotImplementedError("the compiled CDR encoder needs a little-endian machine")
+    count = len(columns.id_a)
+    names = [None] * (2 * count)
+    names[0::2], names[1::2] = columns.id_a, columns.id_b
+    blob, starts, lengths = _encoded_names(names)
+    frame = np.frombuffer(frame_id.encode(), dtype=np.uint8)
+    end = int(_prediction_array_end(frame.shape[0], lengths, count))
+    words = -(-(end - _ORIGIN) // 8)  # whole float64 words after the header
+    buf = np.zeros(_ORIGIN + 8 * words, dtype=np.uint8)
+    buf[:_ORIGIN] = np.frombuffer(CDR_LE + b"\x00\x00", dtype=np.uint8)
+    body = buf[_ORIGIN:]
+    contact_sec, contact_nanosec = np.divmod(columns.contact_ns, 1_000_000_000)
+    _encode_predictions(buf, body.view(np.uint32), body.view(np.float64), int(stamp[0]), int(stamp[1]),
+                        frame, float(horizon), blob, starts, lengths, columns.status, columns.ttc,
+                        contact_sec, contact_nanosec, np.ascontiguousarray(columns.point),
+                        np.ascontiguousarray(columns.normal), columns.closing_speed)
+    return buf[:end].tobytes()

@@ -1,7 +1,8 @@
 """A scene's prediction as published: rows, message objects, or CDR bytes.
 
-One row generator feeds both the message builder (service, tests) and the CDR
-encoder (the node's publications), so the two can never disagree.
+One column builder (`ScenePrediction.columns`) feeds the row view and message
+builder (service, markers, tests) and the compiled CDR encoder (the node's
+publications), so they can never disagree.
 
 Guarantee: nothing published is NaN. Contacts carry finite times and details;
 NO_CONTACT entries carry time +inf and zeros elsewhere, as the message
@@ -9,9 +10,10 @@ definition documents.
 """
 from __future__ import annotations
 
-import math
 from collections.abc import Iterator
 from dataclasses import dataclass
+from functools import cached_property
+from typing import NamedTuple
 
 import numpy as np
 from builtin_interfaces.msg import Time
@@ -19,8 +21,10 @@ from geometry_msgs.msg import Point, Vector3
 from std_msgs.msg import Header
 
 from circle_collision_msgs.msg import CollisionPrediction, CollisionPredictionArray
-from circle_collision_ros.pipeline.body_registry import SceneSnapshot
+from circle_collision_ros.core.scene import SceneContacts, SceneSnapshot
 from circle_collision_ros.pipeline.cdr_codec import encode_prediction_array
+
+_NS_PER_S = 1_000_000_000
 
 
 class ReportAll:
@@ -31,72 +35,119 @@ class ReportAll:
 
 def split_ns(ns: int) -> tuple[int, int]:
     """(sec, nanosec) of a time in ns, as builtin_interfaces/Time holds it."""
-    return divmod(ns, 1_000_000_000)
+    return divmod(ns, _NS_PER_S)
 
 
-def ns_to_time(ns: int) -> Time:
-    sec, nanosec = split_ns(ns)
-    return Time(sec=sec, nanosec=nanosec)
+class PredictionRow(NamedTuple):
+    """One CollisionPrediction entry (point and normal always 3-D, z = 0 for circles)."""
+
+    id_a: str
+    id_b: str
+    status: int
+    time_to_collision: float  # s from the header stamp
+    contact_time: tuple[int, int]  # (sec, nanosec)
+    contact_point: tuple[float, float, float]
+    normal: tuple[float, float, float]
+    closing_speed: float
 
 
-_ZERO3 = (0.0, 0.0, 0.0)
+@dataclass(frozen=True)
+class PredictionColumns:
+    """The entries of one CollisionPredictionArray, column-wise, in publication order."""
+
+    id_a: list[str]
+    id_b: list[str]
+    status: np.ndarray         # (K,) uint8
+    ttc: np.ndarray            # (K,) float64
+    contact_ns: np.ndarray     # (K,) int64 (0 for NO_CONTACT)
+    point: np.ndarray          # (K, 3)
+    normal: np.ndarray         # (K, 3)
+    closing_speed: np.ndarray  # (K,)
+
+    def __len__(self) -> int:
+        return len(self.id_a)
 
 
 @dataclass(frozen=True)
 class ScenePrediction:
-    """What one prediction found: the scene snapshot and its contacts (a core PairPredictions)."""
+    """What one prediction found: the scene's contacts, and its states frozen at that moment."""
 
-    snapshot: SceneSnapshot
-    pairs: object
+    contacts: SceneContacts
+    capture: object  # core.scene._Capture: the snapshot is propagated only when asked for
     horizon: float
     frame_id: str
     report_all_pairs: bool
 
-    def rows(self) -> Iterator[tuple]:
-        """(id_a, id_b, status, ttc, (sec, nanosec), point, normal, closing_speed) per entry.
+    @property
+    def snapshot(self) -> SceneSnapshot:
+        """All bodies propagated to the reference time, ordered by id (markers)."""
+        return self.capture.snapshot()
 
-        Contacts come sorted by time as the core returns them; with
-        report_all_pairs (and at most ReportAll.MAX_BODIES bodies) every other
-        pair follows as NO_CONTACT in index order.
-        """
-        snap, pairs = self.snapshot, self.pairs
-        ids = snap.ids
-        i, j = pairs.i, pairs.j
-        gap0 = np.linalg.norm(snap.positions[i] - snap.positions[j], axis=1) - (snap.radii[i] + snap.radii[j])
-        # The core reports only finite contacts with finite details; this mask is the
-        # last line of defence behind the "never publishes NaN" guarantee.
-        finite = np.isfinite(pairs.ttc) & np.isfinite(pairs.closing_speed) \
-            & np.isfinite(pairs.point).all(axis=1) & np.isfinite(pairs.normal).all(axis=1)
-        d = snap.positions.shape[1]
-        point = np.zeros((len(pairs.ttc), 3))
-        normal = np.zeros((len(pairs.ttc), 3))
-        point[:, :d], normal[:, :d] = pairs.point, pairs.normal
-        contact_ns = snap.reference_ns + np.round(np.where(finite, pairs.ttc, 0.0) * 1e9).astype(np.int64)
-        overlapping = (pairs.ttc == 0.0) & (gap0 < 0.0)
-        for k in np.flatnonzero(finite).tolist():
-            status = CollisionPrediction.OVERLAPPING if overlapping[k] else CollisionPrediction.CONTACT
-            yield (ids[i[k]], ids[j[k]], status, float(pairs.ttc[k]), split_ns(int(contact_ns[k])),
-                   tuple(point[k].tolist()), tuple(normal[k].tolist()), float(pairs.closing_speed[k]))
-        if self.report_all_pairs and len(ids) <= ReportAll.MAX_BODIES:
-            in_contact = set(zip(i.tolist(), j.tolist()))
-            for a in range(len(ids)):
-                for b in range(a + 1, len(ids)):
-                    if (a, b) not in in_contact:
-                        yield (ids[a], ids[b], CollisionPrediction.NO_CONTACT, math.inf, (0, 0),
-                               _ZERO3, _ZERO3, 0.0)
+    @property
+    def reference_ns(self) -> int:
+        return self.contacts.reference_ns
 
     @property
     def stamp(self) -> tuple[int, int]:
-        return split_ns(self.snapshot.reference_ns)
+        return split_ns(self.contacts.reference_ns)
+
+    @cached_property
+    def columns(self) -> PredictionColumns:
+        """Contacts sorted by (time, id_a, id_b) as the scene keeps them; with
+        report_all_pairs (and at most ReportAll.MAX_BODIES bodies) every other
+        pair follows as NO_CONTACT in id order."""
+        c = self.contacts
+        # The scene reports only finite contacts with finite details; this mask is the
+        # last line of defence behind the "never publishes NaN" guarantee.
+        finite = np.isfinite(c.ttc) & np.isfinite(c.closing_speed) \
+            & np.isfinite(c.point).all(axis=1) & np.isfinite(c.normal).all(axis=1)
+        k = np.flatnonzero(finite) if not finite.all() else slice(None)
+        n = int(np.count_nonzero(finite))
+        d = c.point.shape[1]
+        point, normal = np.zeros((n, 3)), np.zeros((n, 3))
+        point[:, :d], normal[:, :d] = c.point[k], c.normal[k]
+        status = np.where(c.overlapping[k], CollisionPrediction.OVERLAPPING,
+                          CollisionPrediction.CONTACT).astype(np.uint8)
+        id_a, id_b = c.id_a[k].tolist(), c.id_b[k].tolist()
+        ttc, contact_ns, closing = c.ttc[k], c.contact_ns[k], c.closing_speed[k]
+        if self.report_all_pairs and len(self.capture) <= ReportAll.MAX_BODIES:
+            ids = self.capture.ids()
+            rank = {b: r for r, b in enumerate(ids)}
+            pairs = set(zip(map(rank.__getitem__, id_a), map(rank.__getitem__, id_b)))
+            rest = [(a, b) for a in range(len(ids)) for b in range(a + 1, len(ids)) if (a, b) not in pairs]
+            m = len(rest)
+            id_a = id_a + [ids[a] for a, _ in rest]
+            id_b = id_b + [ids[b] for _, b in rest]
+            status = np.concatenate([status, np.full(m, CollisionPrediction.NO_CONTACT, np.uint8)])
+            ttc = np.concatenate([ttc, np.full(m, np.inf)])
+            contact_ns = np.concatenate([contact_ns, np.zeros(m, np.int64)])
+            point = np.concatenate([point, np.zeros((m, 3))])
+            normal = np.concatenate([normal, np.zeros((m, 3))])
+            closing = np.concatenate([closing, np.zeros(m)])
+        return PredictionColumns(id_a, id_b, status, np.ascontiguousarray(ttc, dtype=np.float64),
+                                 np.ascontiguousarray(contact_ns, dtype=np.int64), point, normal,
+                                 np.ascontiguousarray(closing, dtype=np.float64))
+
+    def rows(self) -> Iterator[PredictionRow]:
+        """The entries one by one, in publication order (see `columns`)."""
+        c = self.columns
+        sec, nanosec = np.divmod(c.contact_ns, _NS_PER_S)
+        for k, (a, b, status, ttc, s, ns, p, n, cs) in enumerate(zip(
+                c.id_a, c.id_b, c.status.tolist(), c.ttc.tolist(), sec.tolist(), nanosec.tolist(),
+                c.point.tolist(), c.normal.tolist(), c.closing_speed.tolist())):
+            yield PredictionRow(a, b, status, ttc, (s, ns), tuple(p), tuple(n), cs)
 
     def to_message(self) -> CollisionPredictionArray:
         """As a message object (service responses, tests)."""
         predictions = [
-            CollisionPrediction(id_a=a, id_b=b, status=status, time_to_collision=ttc,
-                                contact_time=Time(sec=t[0], nanosec=t[1]),
-                                contact_point=Point(x=p[0], y=p[1], z=p[2]),
-                                normal=Vector3(x=n[0], y=n[1], z=n[2]), closing_speed=closing)
-            for a, b, status, ttc, t, p, n, closing in self.rows()]
+            CollisionPrediction(id_a=r.id_a, id_b=r.id_b, status=r.status,
+                                time_to_collision=r.time_to_collision,
+                                contact_time=Time(sec=r.contact_time[0], nanosec=r.contact_time[1]),
+                                contact_point=Point(x=r.contact_point[0], y=r.contact_point[1],
+                                                    z=r.contact_point[2]),
+                                normal=Vector3(x=r.normal[0], y=r.normal[1], z=r.normal[2]),
+                                closing_speed=r.closing_speed)
+            for r in self.rows()]
         sec, nanosec = self.stamp
         return CollisionPredictionArray(header=Header(stamp=Time(sec=sec, nanosec=nanosec),
                                                       frame_id=self.frame_id),
@@ -104,5 +155,4 @@ class ScenePrediction:
 
     def to_cdr(self) -> bytes:
         """As serialized bytes, without building message objects (the node's path)."""
-        rows = ((a.encode(), b.encode(), *rest) for a, b, *rest in self.rows())
-        return encode_prediction_array(self.stamp, self.frame_id, float(self.horizon), rows)
+        return encode_prediction_array(self.stamp, self.frame_id, float(self.horizon), self.columns)

@@ -4,11 +4,14 @@ This is the one path every prediction takes: the live node calls it from its
 callbacks with the received bytes, the `replay` tool calls it with recorded
 bytes and receive times, and the service calls its stateless variant. Given the
 same inputs and the same `now_ns` values in the same order it returns the same
-predictions, bit for bit (see body_registry for why).
+predictions, bit for bit: the scene is one `core.Scene`, whose stream and
+prediction rules (and why incremental equals full recomputation) are in
+circle_collision_ros/core/scene.py.
 
     bytes -> cdr_codec.decode_states -> StateBatch -> state_validation.check_batch
-          -> BodyRegistry.merge (latest per id) -> snapshot at the reference time
-          -> core.predict_all_pairs -> ScenePrediction (.to_cdr() / .to_message())
+          -> core.Scene.merge (removals, latest per id, max_bodies)
+          -> core.Scene.predictions (only the pairs of changed bodies re-evaluated)
+          -> ScenePrediction (.to_cdr() / .to_message())
 """
 from __future__ import annotations
 
@@ -19,8 +22,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from circle_collision_msgs.msg import CircleState
-from circle_collision_ros.pipeline.body_registry import BodyRegistry
-from circle_collision_ros.core import predict_all_pairs
+from circle_collision_ros.core.scene import Scene, SceneSnapshot
 from circle_collision_ros.pipeline.prediction_messages import ScenePrediction
 from circle_collision_ros.pipeline.state_batch import StateBatch
 from circle_collision_ros.pipeline.state_validation import Rejection, check_batch
@@ -30,8 +32,9 @@ from circle_collision_ros.pipeline.state_validation import Rejection, check_batc
 class PredictorConfig:
     """Settings of the prediction (the node's parameters of the same names).
 
-    horizon : s, finite and > 0. stale_timeout : s. dimensions : 2 (circles,
-    z ignored) or 3 (spheres). frame_id : "" adopts the first frame seen.
+    horizon : s, finite and > 0. stale_timeout : s (expiry of bodies and of
+    remembered removals). dimensions : 2 (circles, z ignored) or 3 (spheres).
+    frame_id : "" adopts the first frame seen.
     """
 
     horizon: float = 5.0
@@ -42,13 +45,18 @@ class PredictorConfig:
     max_bodies: int = 10_000
 
 
+#: The PredictorConfig fields that may change while running (node parameters
+#: applied at run time, and replayed from a recording's config records).
+RUNTIME_FIELDS = ("horizon", "stale_timeout", "report_all_pairs")
+
+
 @dataclass
 class IntakeReport:
     """Outcome of one message: counts, and the rejected states with reasons."""
 
     accepted: int = 0
     removed: int = 0
-    ignored: int = 0  # not newer than the body's current state (late or duplicated)
+    ignored: int = 0  # not newer than the body's state or its removal; unknown-id removals
     rejected: list[Rejection] = field(default_factory=list)
     expired: list[str] = field(default_factory=list)
 
@@ -64,7 +72,7 @@ class PredictionStats:
 
     bodies: int = 0
     contacts: int = 0
-    candidate_pairs: int = 0
+    candidate_pairs: int = 0  # pairs the narrow phase evaluated (only changed bodies' pairs when incremental)
     compute_s: float = 0.0
 
 
@@ -74,18 +82,47 @@ class CollisionPredictor:
     def __init__(self, config: PredictorConfig) -> None:
         self.config = config
         self.frame_id = config.frame_id
-        self.registry = BodyRegistry(config.max_bodies)
+        self._scene = Scene(config.horizon, config.dimensions, max_bodies=config.max_bodies)
         self.stats = PredictionStats()
+
+    @property
+    def bodies(self) -> int:
+        """Bodies in the scene."""
+        return len(self._scene)
+
+    def __len__(self) -> int:
+        return len(self._scene)
+
+    def __contains__(self, body_id: str) -> bool:
+        return body_id in self._scene
+
+    @property
+    def reference_ns(self) -> int | None:
+        """Newest accepted stamp since the scene was last empty (predictions count from it)."""
+        return self._scene.reference_ns
+
+    def snapshot(self) -> SceneSnapshot:
+        """Every body propagated to the reference time, ordered by id."""
+        return self._scene.snapshot()
+
+    def clear(self) -> None:
+        """Forget every body and remembered removal (e.g. after the clock jumped back)."""
+        self._scene.clear()
 
     def warm_up(self) -> None:
         """Run the core once on a tiny scene so the first real message pays no JIT/cache load."""
+        scene = Scene(self.config.horizon, self.config.dimensions)
         d = self.config.dimensions
-        z = np.zeros((2, d))
-        predict_all_pairs(np.eye(2, d), z, z, np.ones(2), self.config.horizon)
+        scene.upsert_many(["a", "b"], np.eye(2, d), np.zeros((2, d)), np.zeros((2, d)), np.ones(2), 1)
+        scene.predictions()
 
     def reconfigure(self, **changes) -> None:
-        """Apply run-time changes (horizon, stale_timeout, report_all_pairs)."""
+        """Apply run-time changes (RUNTIME_FIELDS)."""
+        unknown = set(changes) - set(RUNTIME_FIELDS)
+        if unknown:
+            raise ValueError(f"not changeable at run time: {sorted(unknown)}")
         self.config = replace(self.config, **changes)
+        self._scene.set_horizon(self.config.horizon)
 
     def ingest(self, batch: StateBatch, now_ns: int | None) -> IntakeReport:
         """Validate one message's states and merge the good ones into the scene.
@@ -95,21 +132,22 @@ class CollisionPredictor:
         """
         check = check_batch(batch, frame_id=self.frame_id, now_ns=now_ns)
         report = IntakeReport(rejected=check.rejections)
-        good = check.good
-        if good.any() and not self.frame_id:
+        good = np.flatnonzero(check.good)
+        if good.size and not self.frame_id:
             self.frame_id = check.frame_id  # adopt the first frame seen
-        updates = np.flatnonzero(good & ~batch.remove)
-        merged = self.registry.merge(batch, updates, now_ns if now_ns is not None else 0)
+        if good.size == 0:
+            return report
+        ids = [batch.ids[k] for k in good.tolist()]
+        merged = self._scene.merge(ids, batch.stamp_ns[good], batch.position[good],
+                                   batch.velocity[good], batch.acceleration[good],
+                                   batch.radius[good], batch.remove[good],
+                                   now_ns if now_ns is not None else 0)
         report.accepted = int(merged.accepted.size)
-        report.ignored = int(merged.not_newer.size)
-        report.rejected += [Rejection(int(k), batch.ids[k],
+        report.removed = int(merged.removed.size)
+        report.ignored = int(merged.not_newer.size + merged.removal_ignored.size)
+        report.rejected += [Rejection(int(good[k]), ids[k],
                                       f"scene is full (max_bodies={self.config.max_bodies})")
                             for k in merged.full.tolist()]
-        for k in np.flatnonzero(good & batch.remove).tolist():
-            if self.registry.remove(batch.ids[k], int(batch.stamp_ns[k])):
-                report.removed += 1
-            else:
-                report.ignored += 1  # unknown id, or older than the body's state
         return report
 
     def receive_batch(self, batch: StateBatch, now_ns: int) -> IntakeReport:
@@ -118,26 +156,26 @@ class CollisionPredictor:
         report.expired = self.expire(now_ns)
         return report
 
-    def receive(self, states: Sequence[CircleState], now_ns: int, array_frame: str = "") -> IntakeReport:
-        """receive_batch for message objects (array_frame: the enclosing array's frame)."""
-        return self.receive_batch(StateBatch.from_messages(states, array_frame), now_ns)
-
     def expire(self, now_ns: int) -> list[str]:
-        """Drop bodies not received within stale_timeout of `now_ns`."""
-        return self.registry.expire(now_ns, self.config.stale_timeout)
+        """Drop bodies (and remembered removals) not received within stale_timeout of `now_ns`."""
+        return self._scene.expire(now_ns, int(round(self.config.stale_timeout * 1e9)))
 
     def predict(self, horizon: float | None = None) -> ScenePrediction:
-        """Predictions for the current scene, counted from the reference time."""
+        """Predictions for the current scene, counted from the reference time.
+
+        A horizon other than the configured one becomes the scene's horizon
+        (replay passes the recorded one); changing it rebuilds every pair.
+        """
         started = time.perf_counter()
-        horizon = self.config.horizon if horizon is None else horizon
-        snapshot = self.registry.snapshot(self.config.dimensions)
-        pairs, core_stats = predict_all_pairs(snapshot.positions, snapshot.velocities,
-                                              snapshot.accelerations, snapshot.radii, horizon,
-                                              return_stats=True)
-        self.stats = PredictionStats(bodies=len(snapshot.ids), contacts=len(pairs.ttc),
-                                     candidate_pairs=core_stats["n_candidates"],
+        horizon = self.config.horizon if horizon is None else float(horizon)
+        self._scene.set_horizon(horizon)
+        contacts = self._scene.predictions()
+        prediction = ScenePrediction(contacts, self._scene.capture(), horizon, self.frame_id,
+                                     self.config.report_all_pairs)
+        self.stats = PredictionStats(bodies=len(self._scene), contacts=len(contacts),
+                                     candidate_pairs=self._scene.evaluated_pairs,
                                      compute_s=time.perf_counter() - started)
-        return ScenePrediction(snapshot, pairs, horizon, self.frame_id, self.config.report_all_pairs)
+        return prediction
 
 
 class HorizonLimits:
@@ -163,7 +201,7 @@ def predict_once(states: Sequence[CircleState], config: PredictorConfig,
     - a circle with a zero header.stamp is taken as stamped at `request_time_ns`
       (`ros2 service call` cannot fill in the time); if that is 0 too it is refused;
     - `remove: true` is refused (nothing persists between requests);
-    - all states are propagated to the newest stamp among them.
+    - times count from the newest stamp among them (the rule of core/scene.py).
     Returns (success, message, prediction); a refusal names every bad circle
     with every reason ("circles[k] (id 'x'): reason; reason | circles[j] ...").
     """
@@ -178,7 +216,7 @@ def predict_once(states: Sequence[CircleState], config: PredictorConfig,
     unstamped = batch.stamp_ns == 0
     if unstamped.any() and request_time_ns > 0:
         batch = replace(batch, stamp_ns=np.where(unstamped, np.int64(request_time_ns), batch.stamp_ns))
-    predictor = CollisionPredictor(replace(config, max_bodies=len(states)))
+    predictor = CollisionPredictor(replace(config, max_bodies=len(states), horizon=horizon))
     report = predictor.ingest(batch, now_ns=None)
     reasons: dict[int, list[str]] = {r.index: [r.reason] for r in report.rejected}
     for k, s in enumerate(states):

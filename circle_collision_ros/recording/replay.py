@@ -29,7 +29,7 @@ from circle_collision_ros.pipeline.cdr_codec import CdrError, decode_states
 from circle_collision_ros.pipeline.odometry import (ODOMETRY_TYPE, OdometrySource,
                                                    odometry_batch)
 from circle_collision_ros.pipeline.state_batch import StateBatch
-from circle_collision_ros.pipeline.predictor import CollisionPredictor, PredictorConfig
+from circle_collision_ros.pipeline.predictor import RUNTIME_FIELDS, CollisionPredictor, PredictorConfig
 from circle_collision_ros.pipeline.state_groups import ingest_single_states
 
 
@@ -58,9 +58,6 @@ def decode_input(record: BagRecord, odometry: dict[str, OdometrySource]) -> Stat
         return decode_states(record.data, RecordedTypes.INPUTS[record.type_name])
     except CdrError:
         return None  # the node rejected it the same way; nothing entered the scene
-
-
-RUNTIME_FIELDS = ("horizon", "stale_timeout", "report_all_pairs")
 
 
 def config_from_json(text: str) -> PredictorConfig:

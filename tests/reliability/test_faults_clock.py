@@ -16,10 +16,10 @@ import time
 
 from rosgraph_msgs.msg import Clock
 
-from circle_collision_ros.pipeline.prediction_messages import ns_to_time
 from tests.reliability.conftest import fact
 from tests.reliability.node_process import Client, NodeProcess, stamp_of
 from tests.reliability.test_faults_node import _pair, _ttcs
+from tests.ros.node_helpers import ns_time
 from tests.reliability.wire import encode_array
 
 
@@ -66,7 +66,7 @@ def test_sim_time_clock_jumps(tmp_path) -> None:
         end = time.monotonic() + seconds
         while time.monotonic() < end:
             sim["ns"] += step_ns
-            clock.publish(Clock(clock=ns_to_time(sim["ns"])))
+            clock.publish(Clock(clock=ns_time(sim["ns"])))
             client.spin(0.01)
             for k, prefix in enumerate(ids):
                 client.pub.publish(encode_array(_pair(prefix, sim["ns"], x0=100.0 * k), sim["ns"]))

@@ -73,7 +73,7 @@ def test_bad_states_rejected_exactly_and_without_effect(seq) -> None:
         twin_rows, twin_data = _rows(twin)
         assert rows == twin_rows
         assert data == twin_data  # the published bytes too
-        assert mixed.registry.reference_ns == twin.registry.reference_ns
+        assert mixed.reference_ns == twin.reference_ns
         tally("contacts_compared", len(rows))
 
 

@@ -10,7 +10,7 @@ from geometry_msgs.msg import Point, Vector3
 from std_msgs.msg import Header
 
 from circle_collision_msgs.msg import CircleState, CircleStateArray, CollisionPredictionArray
-from circle_collision_ros.core import time_to_collision
+from tests.scene_rule import rule_contacts
 
 BASE_NS = 1_700_000_000 * 1_000_000_000
 
@@ -48,34 +48,16 @@ def random_states(n: int, seed: int, stamp_ns: int = BASE_NS, spread: float = 20
 
 def expected_contacts(states: Sequence[CircleState], horizon: float,
                       dimensions: int = 2) -> dict[tuple[str, str], float]:
-    """Ground truth the node must match: every pair through the core narrow phase.
-
-    States are propagated to the newest stamp (the node's documented reference
-    time) with the same exact formula, then each pair is solved on its own.
-    """
-    ref = max(s.header.stamp.sec * 10**9 + s.header.stamp.nanosec for s in states)
-    ids = sorted(s.id for s in states)
-    by_id = {s.id: s for s in states}
-    P, V, A, R = [], [], [], []
-    for body in ids:
-        s = by_id[body]
-        dt = float(ref - (s.header.stamp.sec * 10**9 + s.header.stamp.nanosec)) * 1e-9
-        p = np.array([s.position.x, s.position.y, s.position.z])
-        v = np.array([s.velocity.x, s.velocity.y, s.velocity.z])
-        a = np.array([s.acceleration.x, s.acceleration.y, s.acceleration.z])
-        P.append(p + dt * (v + (0.5 * dt) * a))
-        V.append(v + dt * a)
-        A.append(a)
-        R.append(s.radius)
-    P, V, A, R = (np.array(x) for x in (P, V, A, R))
-    P, V, A = P[:, :dimensions], V[:, :dimensions], A[:, :dimensions]
-    out = {}
-    for i in range(len(ids)):
-        for j in range(i + 1, len(ids)):
-            t = float(time_to_collision(P[i], V[i], A[i], R[i], P[j], V[j], A[j], R[j], horizon))
-            if math.isfinite(t):
-                out[(ids[i], ids[j])] = t
-    return out
+    """Ground truth the node must match: the scene's published rule on every pair
+    (tests/scene_rule.py; states with the newest stamp are propagated to it, pairs
+    with older stamps are evaluated at their pair time and shifted)."""
+    T = np.array([s.header.stamp.sec * 10**9 + s.header.stamp.nanosec for s in states], dtype=np.int64)
+    P = np.array([[s.position.x, s.position.y, s.position.z] for s in states]).reshape(-1, 3)
+    V = np.array([[s.velocity.x, s.velocity.y, s.velocity.z] for s in states]).reshape(-1, 3)
+    A = np.array([[s.acceleration.x, s.acceleration.y, s.acceleration.z] for s in states]).reshape(-1, 3)
+    R = np.array([s.radius for s in states])
+    d = dimensions
+    return rule_contacts([s.id for s in states], P[:, :d], V[:, :d], A[:, :d], R, T, horizon)
 
 
 def contacts_of(msg: CollisionPredictionArray) -> dict[tuple[str, str], float]:

@@ -141,7 +141,7 @@ def test_in_process_merges_topics_by_id(in_process, ros_node) -> None:
     out = harness.predictions[-1]
     assert contacts_of(out) == expected_contacts(states + c + d, 5.0)
     assert {("a", "c"), ("a", "d")} <= set(contacts_of(out))
-    assert all(body in node.predictor.registry for body in "abcd")
+    assert all(body in node.predictor for body in "abcd")
 
 
 def test_markers_and_diagnostics_are_published(in_process, ros_node) -> None:
@@ -211,7 +211,7 @@ def test_bad_input_rejected_rest_predicted(in_process, ros_node, field, value, r
     assert contacts_of(out) == {("a", "b"): pytest.approx(2.0)}
     assert_no_nan(out)
     assert node.counters.rejected > rejected_before
-    assert "bad" not in node.predictor.registry
+    assert "bad" not in node.predictor
 
 
 def test_empty_array_does_not_break_the_node(in_process, ros_node) -> None:
@@ -232,7 +232,7 @@ def test_huge_array_is_survived(in_process, ros_node) -> None:
     huge = random_states(50_000, seed=2, spread=5_000.0)
     harness.send(state_array(_stamped_now(huge, ros_node)), timeout=120.0)
     out = harness.predictions[-1]
-    assert len(node.predictor.registry) == 10_000  # max_bodies
+    assert node.predictor.bodies == 10_000  # max_bodies
     assert node.counters.rejected >= 40_000
     assert_no_nan(out)
     # Still alive and predicting: two known bodies (new ids would be refused, the scene is full).

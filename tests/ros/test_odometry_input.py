@@ -87,8 +87,8 @@ def test_two_robots_collision_bad_orientations_and_replay(ros_context, ros_node,
         pub1.publish(_odometry(later, (0.0, 0.0), (0.0, 0.0, 0.0, 1.0), (1.0, 0.0), frame="odom"))
         assert spin_until(ros_node, lambda: node.counters.rejected >= rejected + 4, 20.0, (node,)), \
             node.counters
-        assert len(node.predictor.registry) == 2
-        snapshot = node.predictor.registry.snapshot(2)
+        assert node.predictor.bodies == 2
+        snapshot = node.predictor.snapshot()
         assert snapshot.velocities.tolist()[1] == pytest.approx([0.0, 1.0], abs=1e-15)  # unchanged
         # Still predicting: a good, newer state of robot_1 is used.
         count = len(predictions)

@@ -1,0 +1,153 @@
+"""Node-side cost of one input: a one-body update vs a whole tracker array, incremental vs full.
+
+    .venv/bin/python bench/bench_scene_updates.py [--bodies 10000] [--updates 300] [--quick]
+
+"Node-side work" is what the node's subscription callback does with one
+message, without DDS: decode the received CDR bytes (pipeline/cdr_codec),
+CollisionPredictor.receive_batch (validate, merge into the scene, expire),
+CollisionPredictor.predict (incremental scene query) and ScenePrediction.to_cdr
+(compiled encoder) -- the bytes the node publishes.
+
+Printed figures (same run, so ratios are comparable on a busy machine):
+1. one-body update in an N-body scene (issue 14 target: <= 0.3 ms at N = 10,000),
+   as a per-body stream sends it: a CircleState with a newer stamp (the
+   reference time moves, the cached pair times shift); also split by stage;
+2. the same update answered by a full recomputation of the scene
+   (Scene.full_recomputation, the rule from scratch) -- checked bit-identical;
+3. a whole N-body CircleStateArray (every body moves, newer stamp): the
+   full-scene path the scene chooses by itself;
+4. the epoch roll (every slack = horizon/4 of stamp time every pair is
+   re-evaluated once): one update crossing it.
+"""
+from __future__ import annotations
+
+import argparse
+import os
+import statistics
+import sys
+import time
+
+import numpy as np
+
+import _common  # noqa: F401  (puts the repository root on sys.path)
+from rclpy.serialization import serialize_message
+
+from circle_collision_msgs.msg import CircleState, CircleStateArray
+from circle_collision_ros.demo.demo_scene import SyntheticScene
+from circle_collision_ros.pipeline.cdr_codec import decode_states
+from circle_collision_ros.pipeline.predictor import CollisionPredictor, PredictorConfig
+from bench_node import scene_bytes  # the same CircleStateArray bytes the node benchmark sends
+
+MS = 1_000_000
+
+
+def _state_bytes(scene: SyntheticScene, k: int, stamp_ns: int) -> bytes:
+    msg = CircleState(id=f"b{k:05d}", radius=float(scene.radii[k]))
+    msg.header.frame_id = "map"
+    msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(stamp_ns, 1_000_000_000)
+    msg.position.x, msg.position.y = scene.p[k, :2].tolist()
+    msg.velocity.x, msg.velocity.y = scene.v[k, :2].tolist()
+    msg.acceleration.x, msg.acceleration.y = scene.a[k, :2].tolist()
+    return serialize_message(msg)
+
+
+def node_side(predictor: CollisionPredictor, data: bytes, msg_type: type, now_ns: int) -> tuple:
+    """The callback's work on one message; (seconds per stage, output bytes)."""
+    t0 = time.perf_counter()
+    batch = decode_states(data, msg_type)
+    t1 = time.perf_counter()
+    predictor.receive_batch(batch, now_ns)
+    t2 = time.perf_counter()
+    prediction = predictor.predict()
+    t3 = time.perf_counter()
+    out = prediction.to_cdr()
+    t4 = time.perf_counter()
+    return (t1 - t0, t2 - t1, t3 - t2, t4 - t3, t4 - t0), prediction, out
+
+
+def _ms(values) -> str:
+    a = np.array(values) * 1e3
+    return f"median {np.median(a):.3f} ms, p90 {np.percentile(a, 90):.3f} ms, p99 {np.percentile(a, 99):.3f} ms"
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--bodies", type=int, default=10_000)
+    parser.add_argument("--updates", type=int, default=300)
+    parser.add_argument("--arrays", type=int, default=10)
+    parser.add_argument("--quick", action="store_true", help="2,000 bodies, fewer repetitions")
+    opts = parser.parse_args()
+    n, updates, arrays = (2000, 60, 3) if opts.quick else (opts.bodies, opts.updates, opts.arrays)
+    load = os.getloadavg()[0]
+    print(f"machine: {os.cpu_count()} cores, load average {load:.2f} at start (noisy if > 0.5)")
+    scene = SyntheticScene(n, size=float(np.sqrt(n * 333.0)), dimensions=2, seed=n)
+    config = PredictorConfig(horizon=5.0, max_bodies=max(n, 10_000), stale_timeout=60.0)
+    predictor = CollisionPredictor(config)
+    predictor.warm_up()
+    slack_ns = int(round(config.horizon / 4 * 1e9))
+    start = (1_700_000_000 * 1_000_000_000 // slack_ns + 1) * slack_ns + 10 * MS  # just after an epoch start
+    stamp = start
+    node_side(predictor, scene_bytes(scene, stamp), CircleStateArray, stamp)  # fill the scene
+    first = node_side(predictor, scene_bytes(scene, stamp + 1), CircleStateArray, stamp + 1)[1]
+    stamp += 1
+    print(f"scene: {n} bodies, {len(first.contacts)} contacts within {config.horizon:g} s, "
+          f"{predictor.stats.candidate_pairs} pairs evaluated on the full path")
+
+    # 1 + 2: one-body updates (newer stamps, inside one epoch), then the same via full recomputation.
+    rng = np.random.default_rng(1)
+    bodies = rng.integers(0, n, updates)
+    stages, full_s = [], []
+    evaluated = []
+    for k, body in enumerate(bodies.tolist()):
+        stamp += MS  # a per-body stream: every state newer than the last
+        scene.p[body] += scene.v[body] * 1e-3
+        data = _state_bytes(scene, body, stamp)
+        times, prediction, _ = node_side(predictor, data, CircleState, stamp)
+        inc = prediction.contacts
+        del prediction  # the node drops it after publishing (a kept one is copied at the next change)
+        stages.append(times)
+        evaluated.append(predictor.stats.candidate_pairs)
+        if k % max(1, updates // 30) == 0:
+            t0 = time.perf_counter()
+            full = predictor._scene.full_recomputation()
+            full_s.append(time.perf_counter() - t0)
+            assert inc.id_a.tolist() == full.id_a.tolist() and inc.id_b.tolist() == full.id_b.tolist()
+            assert np.array_equal(inc.ttc, full.ttc) and np.array_equal(inc.contact_ns, full.contact_ns)
+    assert stamp < start + slack_ns, "the one-body runs must stay inside one epoch"
+    st = np.array(stages)
+    print(f"\n1. one-body update, N = {n} (CircleState, newer stamp): decode + receive_batch + predict + to_cdr")
+    print(f"   total:        {_ms(st[:, 4])}   (target <= 0.3 ms at N = 10,000)")
+    for name, col in (("decode", 0), ("receive_batch", 1), ("predict", 2), ("to_cdr", 3)):
+        print(f"   {name:13s} {_ms(st[:, col])}")
+    print(f"   narrow-phase pairs per update: median {statistics.median(evaluated):.0f}")
+    print(f"\n2. the same scene recomputed from scratch (Scene.full_recomputation): {_ms(full_s)}")
+    print(f"   full / incremental (medians): {np.median(full_s) / np.median(st[:, 4]):.0f}x; "
+          f"results bit-identical: yes ({len(full_s)} checks)")
+
+    # 3: whole tracker arrays.
+    arr = []
+    for _ in range(arrays):
+        stamp += 33 * MS
+        scene.step(0.033)
+        data = scene_bytes(scene, stamp)
+        arr.append(node_side(predictor, data, CircleStateArray, stamp)[0])
+    at = np.array(arr)
+    print(f"\n3. whole {n}-body CircleStateArray (every body moved): {_ms(at[:, 4])}")
+    for name, col in (("decode", 0), ("receive_batch", 1), ("predict", 2), ("to_cdr", 3)):
+        print(f"   {name:13s} {_ms(at[:, col])}")
+    print(f"   one-body update / whole array (medians): {np.median(st[:, 4]) / np.median(at[:, 4]):.4f}")
+
+    # 4: the epoch roll.
+    roll = []
+    for _ in range(3):
+        stamp = (stamp // slack_ns + 1) * slack_ns + MS
+        body = int(rng.integers(0, n))
+        roll.append(node_side(predictor, _state_bytes(scene, body, stamp), CircleState, stamp)[0][4])
+    print(f"\n4. one-body update crossing an epoch boundary (every {slack_ns / 1e9:g} s of stamp time): "
+          f"median {np.median(roll) * 1e3:.1f} ms")
+    print(f"\nload average at end {os.getloadavg()[0]:.2f}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
