@@ -134,9 +134,12 @@ def test_in_process_merges_topics_by_id(in_process, ros_node) -> None:
     single = ros_node.create_publisher(CircleState, "robot_1/circle_state", 10)
     assert spin_until(ros_node, lambda: lidar.get_subscription_count() and single.get_subscription_count(),
                       15.0, (node,))
-    c = _stamped_now([state("c", (3, 0), (-1, 0, 0))], ros_node)
+    # Stamped like a and b: waiting for the new subscriptions to match can take seconds on a
+    # loaded machine, and states stamped "now" after that would meet a and b after they passed.
+    c, d = [state("c", (3, 0), (-1, 0, 0))], [state("d", (0, 4), (1, -1, 0))]
+    for s in c + d:
+        s.header.stamp = states[0].header.stamp
     harness.send(state_array(c), pub=lidar)
-    d = _stamped_now([state("d", (0, 4), (1, -1, 0))], ros_node)
     harness.send(d[0], pub=single)
     out = harness.predictions[-1]
     assert contacts_of(out) == expected_contacts(states + c + d, 5.0)
