@@ -77,7 +77,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit, prange, types
+from numba import njit, objmode, prange, types
 from numba.extending import overload
 
 from circle_collision_ros.core.narrow_dd import (
@@ -86,11 +86,13 @@ from circle_collision_ros.core.narrow_dd import (
     dd_sqr,
 )
 from circle_collision_ros.core.narrow_eval import (
+    _DD_ERR,
     _EPS,
     _F_ERR,
     _INF,
     _NAN,
     _c,
+    _c_err,
     _cross2,
     _dot,
     _entry_step,
@@ -98,15 +100,16 @@ from circle_collision_ros.core.narrow_eval import (
     _g,
     _gd,
     _model_err,
-    _q,
     _rel2,
     _rel3,
+    _scale,
+    _turning_points,
     _valid,
 )
+from circle_collision_ros.core.narrow_exact import exact_first_contact
 from circle_collision_ros.core.narrow_fast import UNDECIDED, fast_rows
 
-__all__ = ["time_to_collision", "_ttc_scalar", "_ttc_kernel", "_ttc_kernel_par",
-           "_ttc_kernel_h", "_ttc_kernel_par_h"]
+__all__ = ["time_to_collision", "_ttc_scalar", "_ttc_kernel", "_ttc_kernel_h"]
 
 
 @njit(cache=True, error_model="numpy")
@@ -429,8 +432,11 @@ def _straight(Ph, Pl, Vh, Vl, Ah, Al, Rh, Rl, f0, H):
         a, b = dd_mul(Ph[k], Pl[k], Vh[k], Vl[k])
         ch, cl = dd_add(ch, cl, a, b)
     c0 = ch + cl
-    if c0 >= 0.0:
-        return _INF  # separating (or tangent at t=0): |g| never decreases
+    # dd_mul / dd_add: error <= ~8u^2 |dp||dv|; closer to 0 the exact path decides
+    if abs(c0) <= _DD_ERR * math.sqrt(_dot(Ph, Ph) * V2):
+        return UNDECIDED
+    if c0 > 0.0:
+        return _INF  # separating: |g| never decreases
     # squared miss distance d^2 = |dp x dv|^2 / |dv|^2, cross product in dd
     # (no cancellation for near-collinear head-on pairs either)
     cr2 = 0.0
@@ -444,9 +450,12 @@ def _straight(Ph, Pl, Vh, Vl, Ah, Al, Rh, Rl, f0, H):
         cr2 += x * x
     d = math.sqrt(cr2 / V2)
     R = Rh + Rl
-    if d > R:
-        return _INF  # passes by (exact up to rounding of d, ~u relative)
-    s = math.sqrt(V2 * (R - d) * (R + d))
+    # d carries <= ~4u relative error (rounded dd cross product, division,
+    # sqrt), R = r_a + r_b rounded u: a miss is proved beyond R (1 + 8 eps).
+    # Closer, the closed form is only a start: the caller certifies the time.
+    if d > R * (1.0 + 8.0 * _EPS):
+        return _INF
+    s = math.sqrt(V2 * max(R - d, 0.0) * (R + d))
     # f0 / (-c0 + s): both denominator terms are >= 0, no cancellation
     t = f0 / (s - c0)
     tm = -c0 / V2  # closest approach; the entry root lies in [0, tm]
@@ -458,8 +467,12 @@ def _straight(Ph, Pl, Vh, Vl, Ah, Al, Rh, Rl, f0, H):
         # horizon; else f decreases on [0, H] and the dd sign of f(H) decides.
         if H < tm:
             fH, _g_unused = _f_dd(Ph, Pl, Vh, Vl, Ah, Al, Rh, Rl, H)
-            if fH > 0.0:
+            SH = math.sqrt(_dot(Ph, Ph)) + H * math.sqrt(V2)
+            eH = _DD_ERR * (SH * SH + R * R)
+            if fH > eH:
                 return _INF
+            if not (fH < -eH):
+                return UNDECIDED
             hi = H
         t = min(t, hi)
     fx, g = _f_dd(Ph, Pl, Vh, Vl, Ah, Al, Rh, Rl, t)  # da == 0 (hi and lo)
@@ -519,10 +532,20 @@ def _axis_reject(Ph, Vh, Ah, Rp, H):
 
 @njit(cache=True, error_model="numpy")
 def _ttc_rel(Ph, Pl, Vh, Vl, Ah, Al, Rh, Rl, H):
-    """Core on exact (double-double) relative quantities; see module doc."""
-    # f(0) = |dp|^2 - R^2 in dd: decides overlap robustly (exact touch -> 0)
-    # float64 first; its error is below 4u(|dp|^2 + R^2) + 2|dp||dp_lo| + ...,
-    # so the dd value is only needed when |f0| is within 8u of that scale
+    """Core on exact (double-double) relative quantities; see module doc.
+
+    Returns UNDECIDED where a decision it needs is not certain in float64 /
+    double-double arithmetic (the callers then decide the row exactly,
+    ``narrow_exact``): f(0) within its error bound of 0 (touching, where the
+    order of contact decides), dp.dv within its bound of 0, an uncertain
+    structure of c, and every contact time that ``_certified`` rejects.
+    """
+    # f(0) = |dp|^2 - R^2: float64 first; its error is below
+    # 4u(|dp|^2 + R^2) + 2|dp||dp_lo| + ..., so the dd value is only needed
+    # when |f0| is within 8 eps of that scale.  The dd value (dd_sqr, dd_add:
+    # a few u^2 of the scale each) is certain beyond 16 eps^2 of the scale;
+    # closer (an exact touch in particular) the sign is left to the exact
+    # path, which applies the order-of-contact rule.
     P2 = _dot(Ph, Ph)
     f0 = P2 - Rh * Rh
     if abs(f0) <= 8.0 * _EPS * (P2 + Rh * Rh):
@@ -532,26 +555,63 @@ def _ttc_rel(Ph, Pl, Vh, Vl, Ah, Al, Rh, Rl, H):
             a, b = dd_sqr(Ph[k], Pl[k])
             f0h, f0l = dd_add(f0h, f0l, a, b)
         f0 = f0h + f0l
+        if abs(f0) <= 16.0 * _EPS * _EPS * (P2 + Rh * Rh):
+            return UNDECIDED
     if f0 < 0.0:
         return 0.0
-    touching = f0 == 0.0
-    if touching:
-        ch, cl = 0.0, 0.0
-        for k in range(len(Ph)):
-            a, b = dd_mul(Ph[k], Pl[k], Vh[k], Vl[k])
-            ch, cl = dd_add(ch, cl, a, b)
-        c0 = ch + cl
-        if c0 < 0.0:
-            return 0.0
-        if c0 == 0.0 and _q(Ph, Vh, Ah, 0.0) < 0.0:
-            return 0.0
-    if H < _INF and not touching and _axis_reject(Ph, Vh, Ah, (Rh + Rl) * (1.0 + 4.0 * _EPS), H):
-        return _INF
+    t = _ttc_walk(Ph, Pl, Vh, Vl, Ah, Al, Rh, Rl, H, f0, P2)
+    if t == _INF or t == UNDECIDED:
+        return t
+    return t if _certified(Ph, Pl, Vh, Vl, Ah, Al, Rh, Rl, H, t) else UNDECIDED
+
+
+@njit(cache=True, error_model="numpy")
+def _certified(Ph, Pl, Vh, Vl, Ah, Al, Rh, Rl, H, t):
+    """True if t in (0, H] is within one ulp of the first root of f.
+
+    The walk in ``_ttc_walk`` puts t in a run of f that decreases from a
+    point with f > 0 (0, or the end of an increasing run after a proved
+    miss) to a local minimum, followed at most by an increasing part.  In it
+    f(pred(t)) > 0 proves no root up to pred(t) (pred(t) lies in the
+    decreasing part: past the minimum f(t) >= f(pred(t))), and f(t) < 0 or
+    f(succ(t)) < 0 (succ(t) <= H) a root in (pred(t), succ(t)).  Signs come
+    from the dd residual, certain beyond its error bound 16 eps^2 (S^2 + R^2)
+    (_f_dd: ~u^2 (S^2 + R^2), 64x margin).  Grazes whose f never gets below
+    that bound, and any wrong time (class C/D of issue 17), fail the test.
+    """
+    if not (t > 0.0 and t <= H):
+        return False
+    nP = math.sqrt(_dot(Ph, Ph))
+    nV = math.sqrt(_dot(Vh, Vh))
+    nA = math.sqrt(_dot(Ah, Ah))
+    R2 = Rh * Rh
+    tp = np.nextafter(t, 0.0)
+    if tp > 0.0:
+        S = _scale(nP, nV, nA, tp)
+        fp, _g_unused = _f_dd(Ph, Pl, Vh, Vl, Ah, Al, Rh, Rl, tp)
+        if not (fp > _DD_ERR * (S * S + R2)):
+            return False
+    S = _scale(nP, nV, nA, t)
+    ft, _g_unused = _f_dd(Ph, Pl, Vh, Vl, Ah, Al, Rh, Rl, t)
+    if ft < -_DD_ERR * (S * S + R2):
+        return True
+    tn = np.nextafter(t, _INF)
+    if not (tn <= H):
+        return False
+    S = _scale(nP, nV, nA, tn)
+    fn, _g_unused = _f_dd(Ph, Pl, Vh, Vl, Ah, Al, Rh, Rl, tn)
+    return fn < -_DD_ERR * (S * S + R2)
+
+
+@njit(cache=True, error_model="numpy")
+def _ttc_walk(Ph, Pl, Vh, Vl, Ah, Al, Rh, Rl, H, f0, P2):
+    """Given f(0) = f0 > 0 certainly: the first contact time (to be
+    certified by the caller), inf (proved) or UNDECIDED."""
     A2 = _dot(Ah, Ah)
     nP = math.sqrt(P2)
     nV = math.sqrt(_dot(Vh, Vh))
     nA = math.sqrt(A2)
-    if H < _INF and not touching:
+    if H < _INF:
         # Cheap exact-safe rejection: for t in [0, H] the triangle inequality
         # gives |g(t)| >= |dp| - t|dv| - t^2|da|/2 >= nP - reach.  The norms
         # of the high parts differ from the exact ones by <= ~3u relative
@@ -562,27 +622,22 @@ def _ttc_rel(Ph, Pl, Vh, Vl, Ah, Al, Rh, Rl, H):
         if nP - reach > (Rh + Rl) * (1.0 + 4.0 * _EPS) + 8.0 * _EPS * (nP + reach):
             return _INF
     if A2 == 0.0:
-        if touching:
-            return _INF  # straight line leaving a touch never returns
         return _straight(Ph, Pl, Vh, Vl, Ah, Al, Rh, Rl, f0, H)
-    # Turning points of c: q is a quadratic with known leading coefficient
-    # 1.5|da|^2 and vertex t0 = -(da.dv)/|da|^2, so its roots are
-    # t0 -+ sqrt(-q(t0) / (1.5|da|^2)).  q(t0) is evaluated geometrically
-    # (no power coefficients).  These roots only split [0, H] into pieces on
-    # which c is monotone; an error in them can only matter if c has a
-    # near-double root there, i.e. f has a near-inflection with zero slope,
-    # where f is too flat for a sign change to be missed outside the slack.
+    # Turning points of c (roots of the quadratic q = c', closed form about
+    # its vertex t0, _turning_points): they split [0, inf) into pieces on
+    # which c is monotone.  Where q(t0) is within its error bound of 0 the
+    # number of pieces is uncertain: undecided.  Each turning point is within
+    # dl of exact, which moves c there by at most Dl: the sign of c at a cut
+    # (and at 0) is used only when it exceeds its float64 error bound plus
+    # Dl, so the run structure of f below is proved.
     R2 = Rh * Rh
-    t0 = -_dot(Ah, Vh) / A2
-    g_t0 = _g(Ph, Vh, Ah, t0)
-    gd_t0 = _gd(Vh, Ah, t0)
-    q0 = _dot(gd_t0, gd_t0) + _dot(g_t0, Ah)  # = _q(t0)
-    c_t0 = _dot(g_t0, gd_t0)  # = _c(t0), for the closed-form guesses in _root_c
+    t0, q0, c_t0, eq0, cuts, r, dl, Dl = _turning_points(Ph, Vh, Ah, nP, nV, nA, A2)
+    if not (cuts or q0 > eq0):
+        return UNDECIDED
     n_cut = 0
     cut1 = 0.0
     cut2 = 0.0
-    if q0 < 0.0:
-        r = math.sqrt(-q0 / (1.5 * A2))
+    if cuts:
         cut1 = t0 - r
         cut2 = t0 + r
         n_cut = 2
@@ -591,10 +646,9 @@ def _ttc_rel(Ph, Pl, Vh, Vl, Ah, Al, Rh, Rl, H):
     # a contact can only start in a decreasing run of f, which ends at a
     # local minimum (c crossing - to + on an increasing piece of c) or at H.
     a = 0.0
-    if touching:
-        ca = 0.0  # separating touch (checked above): f increasing at 0
-    else:
-        ca = _c(Ph, Vh, Ah, 0.0)
+    ca = _c(Ph, Vh, Ah, 0.0)
+    if not (abs(ca) > _c_err(nP, nV, nA, 0.0) + Dl):
+        return UNDECIDED  # f(0) > 0 but (nearly) stationary: order decided exactly
     dec_start = 0.0 if ca < 0.0 else -1.0
     for piece in range(3):
         increasing = True
@@ -642,6 +696,8 @@ def _ttc_rel(Ph, Pl, Vh, Vl, Ah, Al, Rh, Rl, H):
             res = _at_minimum(Ph, Pl, Vh, Vl, Ah, Al, Rh, Rl, dec_start, s, nP, nV, nA)
             return res if res >= 0.0 else _INF
         cb = _c(Ph, Vh, Ah, b)
+        if not last and not (abs(cb) > _c_err(nP, nV, nA, b) + Dl):
+            return UNDECIDED
         if increasing:
             if ca < 0.0 and cb >= 0.0:
                 s, hit = _root_c(Ph, Vh, Ah, a, b, ca, R2, nP, nV, nA, t0, q0, c_t0, which)
@@ -670,8 +726,10 @@ def _ttc_rel(Ph, Pl, Vh, Vl, Ah, Al, Rh, Rl, H):
         if fH < -eH:
             return _solve_entry(Ph, Pl, Vh, Vl, Ah, Al, Rh, Rl, dec_start, H, H)
         fH, _g_unused = _f_dd(Ph, Pl, Vh, Vl, Ah, Al, Rh, Rl, H)
-        if fH <= 0.0:
+        if fH < -_DD_ERR * (SH * SH + R2):
             return _solve_entry(Ph, Pl, Vh, Vl, Ah, Al, Rh, Rl, dec_start, H, H)
+        if not (fH > _DD_ERR * (SH * SH + R2)):
+            return UNDECIDED
     return _INF
 
 
@@ -794,16 +852,21 @@ def _ov_robust_row(pa, va, aa, ra, pb, vb, ab, rb, H, i, Z):
 def _block(pa, va, aa, ra, pb, vb, ab, rb, H, out, i0, i1, hb, Z):
     """Rows [i0, i1) of a batch with vectors (n, D), D = len(Z) (a tuple of D
     zeros, so each dimension compiles its own chain); hb: scratch of
-    >= i1 - i0 floats."""
+    >= i1 - i0 floats.  Returns how many rows the robust solver, too, left
+    UNDECIDED (``_resolve`` decides them exactly)."""
+    n_und = 0
     if _any_finite(H, i0, i1):
         Hs, hofs = _h_rows(H, hb, i0, i1 - i0)
         fast_rows(pa, va, aa, ra, pb, vb, ab, rb, Hs, hofs, out, i0, i1 - i0, Z)
         for i in range(i0, i1):
             if out[i] == UNDECIDED:
                 out[i] = _robust_row(pa, va, aa, ra, pb, vb, ab, rb, _h_at(H, i), i, Z)
+                n_und += out[i] == UNDECIDED
     else:
         for i in range(i0, i1):
             out[i] = _robust_row(pa, va, aa, ra, pb, vb, ab, rb, _h_at(H, i), i, Z)
+            n_und += out[i] == UNDECIDED
+    return n_und
 
 
 _Z2 = (0.0, 0.0)
@@ -814,16 +877,20 @@ _Z3 = (0.0, 0.0, 0.0)
 def _k2(pa, va, aa, ra, pb, vb, ab, rb, H, out):
     n = out.shape[0]
     hb = np.empty(_BLOCK)
+    n_und = 0
     for i0 in range(0, n, _BLOCK):
-        _block(pa, va, aa, ra, pb, vb, ab, rb, H, out, i0, min(n, i0 + _BLOCK), hb, _Z2)
+        n_und += _block(pa, va, aa, ra, pb, vb, ab, rb, H, out, i0, min(n, i0 + _BLOCK), hb, _Z2)
+    return n_und
 
 
 @njit(cache=True, error_model="numpy")
 def _k3(pa, va, aa, ra, pb, vb, ab, rb, H, out):
     n = out.shape[0]
     hb = np.empty(_BLOCK)
+    n_und = 0
     for i0 in range(0, n, _BLOCK):
-        _block(pa, va, aa, ra, pb, vb, ab, rb, H, out, i0, min(n, i0 + _BLOCK), hb, _Z3)
+        n_und += _block(pa, va, aa, ra, pb, vb, ab, rb, H, out, i0, min(n, i0 + _BLOCK), hb, _Z3)
+    return n_und
 
 
 # Threaded kernels spread every thread's rows over the whole batch.  A plain
@@ -866,18 +933,40 @@ def _block_rows(k, bits, size, n):
 def _k2p(pa, va, aa, ra, pb, vb, ab, rb, H, out):
     n = out.shape[0]
     nb, bits, size = _blocks(n)
+    n_und = 0
     for k in prange(nb):
         i0, i1 = _block_rows(k, bits, size, n)
-        _block(pa, va, aa, ra, pb, vb, ab, rb, H, out, i0, i1, np.empty(_BLOCK), _Z2)
+        n_und += _block(pa, va, aa, ra, pb, vb, ab, rb, H, out, i0, i1, np.empty(_BLOCK), _Z2)
+    return n_und
 
 
 @njit(cache=True, error_model="numpy", parallel=True)
 def _k3p(pa, va, aa, ra, pb, vb, ab, rb, H, out):
     n = out.shape[0]
     nb, bits, size = _blocks(n)
+    n_und = 0
     for k in prange(nb):
         i0, i1 = _block_rows(k, bits, size, n)
-        _block(pa, va, aa, ra, pb, vb, ab, rb, H, out, i0, i1, np.empty(_BLOCK), _Z3)
+        n_und += _block(pa, va, aa, ra, pb, vb, ab, rb, H, out, i0, i1, np.empty(_BLOCK), _Z3)
+    return n_und
+
+
+def _exact_flat(r, D, horizon):
+    """Exact answer of the one-row batch packed by _ttc_scalar / _ttc_scalar2."""
+    v = r[:6 * D].reshape((6, D))
+    return exact_first_contact(v[0], v[1], v[2], r[6 * D], v[3], v[4], v[5], r[6 * D + 1], horizon)
+
+
+def _resolve(n_und, pa, va, aa, ra, pb, vb, ab, rb, H, out):
+    """Decide exactly (narrow_exact) the rows the kernels left UNDECIDED.
+
+    n_und: the kernels' count of such rows (0: nothing to do, no scan)."""
+    if not n_und:
+        return
+    arr = isinstance(H, np.ndarray)
+    for i in np.flatnonzero(out == UNDECIDED):
+        out[i] = exact_first_contact(pa[i], va[i], aa[i], ra[i], pb[i], vb[i], ab[i], rb[i],
+                                     H[i] if arr else H)
 
 
 @njit(cache=True, error_model="numpy")
@@ -893,8 +982,11 @@ def _ttc_scalar(pax, pay, paz, vax, vay, vaz, aax, aay, aaz, r_a,
     r[12], r[13], r[14], r[15], r[16], r[17] = vbx, vby, vbz, abx, aby, abz
     r[18], r[19] = r_a, r_b
     v = r[:18].reshape((6, 1, 3))
-    _block(v[0], v[1], v[2], r[18:19], v[3], v[4], v[5], r[19:20], float(horizon),
-           r[20:21], 0, 1, r[21:], _Z3)
+    if _block(v[0], v[1], v[2], r[18:19], v[3], v[4], v[5], r[19:20], float(horizon),
+              r[20:21], 0, 1, r[21:], _Z3):
+        with objmode(t="float64"):
+            t = _exact_flat(r, 3, horizon)
+        return t
     return r[20]
 
 
@@ -906,19 +998,24 @@ def _ttc_scalar2(pax, pay, vax, vay, aax, aay, r_a, pbx, pby, vbx, vby, abx, aby
     r[6], r[7], r[8], r[9], r[10], r[11] = pbx, pby, vbx, vby, abx, aby
     r[12], r[13] = r_a, r_b
     v = r[:12].reshape((6, 1, 2))
-    _block(v[0], v[1], v[2], r[12:13], v[3], v[4], v[5], r[13:14], float(horizon),
-           r[14:15], 0, 1, r[15:], _Z2)
+    if _block(v[0], v[1], v[2], r[12:13], v[3], v[4], v[5], r[13:14], float(horizon),
+              r[14:15], 0, 1, r[15:], _Z2):
+        with objmode(t="float64"):
+            t = _exact_flat(r, 2, horizon)
+        return t
     return r[14]
 
 
-# (D, threaded, scalar horizon) -> kernel (the same dispatcher compiles once
-# per horizon type); inputs C-contiguous (see _contiguous)
-_KERNELS = {
-    (2, False, False): _k2, (3, False, False): _k3,
-    (2, False, True): _k2, (3, False, True): _k3,
-    (2, True, False): _k2p, (3, True, False): _k3p,
-    (2, True, True): _k2p, (3, True, True): _k3p,
-}
+# (D, threaded) -> kernel (each compiles once per horizon type: an array
+# or one float); inputs C-contiguous (see _contiguous)
+_KERNELS = {(2, False): _k2, (3, False): _k3, (2, True): _k2p, (3, True): _k3p}
+
+
+def _run(threaded, pa, va, aa, ra, pb, vb, ab, rb, H, out):
+    """A batch kernel over C-contiguous rows, then the exact decision of the
+    rows it leaves undecided: out holds the final answers."""
+    n_und = _KERNELS[(pa.shape[1], threaded)](pa, va, aa, ra, pb, vb, ab, rb, H, out)
+    _resolve(n_und, pa, va, aa, ra, pb, vb, ab, rb, H, out)
 
 
 def _contiguous(*arrays):
@@ -929,22 +1026,12 @@ def _contiguous(*arrays):
 def _ttc_kernel(pa, va, aa, ra, pb, vb, ab, rb, H, out):
     """Serial loop over rows: vectors (n, D) with D in {2, 3}, radii and
     horizons H (n,), results into out (n,)."""
-    _KERNELS[(pa.shape[1], False, False)](*_contiguous(pa, va, aa, ra, pb, vb, ab, rb, H), out)
-
-
-def _ttc_kernel_par(pa, va, aa, ra, pb, vb, ab, rb, H, out):
-    """Multi-threaded twin of ``_ttc_kernel`` (rows are independent)."""
-    _KERNELS[(pa.shape[1], True, False)](*_contiguous(pa, va, aa, ra, pb, vb, ab, rb, H), out)
+    _run(False, *_contiguous(pa, va, aa, ra, pb, vb, ab, rb, H), out)
 
 
 def _ttc_kernel_h(pa, va, aa, ra, pb, vb, ab, rb, H, out):
     """``_ttc_kernel`` with one float horizon H for all rows."""
-    _KERNELS[(pa.shape[1], False, True)](*_contiguous(pa, va, aa, ra, pb, vb, ab, rb), float(H), out)
-
-
-def _ttc_kernel_par_h(pa, va, aa, ra, pb, vb, ab, rb, H, out):
-    """``_ttc_kernel_par`` with one float horizon H for all rows."""
-    _KERNELS[(pa.shape[1], True, True)](*_contiguous(pa, va, aa, ra, pb, vb, ab, rb), float(H), out)
+    _run(False, *_contiguous(pa, va, aa, ra, pb, vb, ab, rb), float(H), out)
 
 
 # Rows from which the threaded kernels are used.  On an idle 2-core VM with a
@@ -1034,8 +1121,7 @@ def time_to_collision(p_a, v_a, a_a, r_a, p_b, v_b, a_b, r_b, horizon=math.inf) 
             p_a, v_a, a_a, r_a, p_b, v_b, a_b, r_b):
         n = r_a.shape[0]
         out = np.empty(n)
-        _KERNELS[(p_a.shape[1], n >= PARALLEL_MIN_ROWS, True)](
-            p_a, v_a, a_a, r_a, p_b, v_b, a_b, r_b, float(horizon), out)
+        _run(n >= PARALLEL_MIN_ROWS, p_a, v_a, a_a, r_a, p_b, v_b, a_b, r_b, float(horizon), out)
         return out
     vecs = [np.asarray(x, dtype=np.float64) for x in (p_a, v_a, a_a, p_b, v_b, a_b)]
     D = vecs[0].shape[-1] if vecs[0].ndim else 0
@@ -1054,5 +1140,5 @@ def time_to_collision(p_a, v_a, a_a, r_a, p_b, v_b, a_b, r_b, horizon=math.inf) 
         hz = float(sc[2])
     else:
         hz = _as_rows(sc[2], batch, n, 0)
-    _KERNELS[(D, n >= PARALLEL_MIN_ROWS, sc[2].ndim == 0)](pa, va, aa, ra, pb, vb, ab, rb, hz, out)
+    _run(n >= PARALLEL_MIN_ROWS, pa, va, aa, ra, pb, vb, ab, rb, hz, out)
     return out.reshape(batch)
