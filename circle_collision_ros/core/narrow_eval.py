@@ -4,7 +4,7 @@ Everything here is evaluated *geometrically* from ``g(t) = dp + t (dv + t da/2)`
 (never from power-basis coefficients of the quartic), on relative quantities
 given as tuples of length D = 2 or 3 (high parts ``Ph, Vh, Ah``; the low parts
 ``Pl, Vl, Al`` of the exact double-double relative state where a residual
-must be exact).  Used by the robust solver (``narrow_phase``) and the
+must be exact).  Used by the robust solver (``narrow_robust``) and the
 branch-free fast path (``narrow_fast``), so both decide with the same
 evaluations and the same error bounds.
 
@@ -454,3 +454,20 @@ def _model_err(step, s, gd, A, A2):
         return _INF
     ad = abs(step)
     return ad * ad * ad * (abs(_dot(gd, A)) + 0.25 * A2 * ad) / (2.0 * s)
+
+
+@register_jitable(error_model="numpy")
+def _polish_done(ast, at, rel, merr):
+    """The "done" test of a double-double polishing step (robust and fast path).
+
+    A step of size ast to a root t of magnitude at is final when its own
+    rounding ast * rel (large at grazing incidence) is < 1e-4 ulp and either
+    the step is <= 64 ulp (then the truncation error, ~step^2 x curvature, is
+    far below an ulp) or the model truncation estimate merr (``_model_err``)
+    is < 1e-4 ulp (so the final rounding of t + step is the correct rounding
+    unless the root lies within 1e-4 ulp of a rounding boundary).  Selects
+    only, for the fast path's SIMD loop.  Only an estimate: the robust path
+    certifies its result by signs (``narrow_robust._certified``).
+    """
+    return (ast * rel <= 1e-4 * _EPS * at) & ((ast <= 64.0 * _EPS * at) | (merr <= 1e-4 * _EPS * at))
+

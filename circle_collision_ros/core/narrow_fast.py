@@ -7,12 +7,12 @@ branches, so the batch kernels' loop over rows compiles to SIMD code (LLVM
 vectorises it: 4 or 8 rows per instruction), and it certifies each answer:
 every claim is checked against a rigorous rounding-error bound, and a row
 whose certificate fails is returned as ``UNDECIDED``; the kernels then hand
-that row to the robust solver (``narrow_phase._ttc_rel``).  A decided row's
+that row to the robust solver (``narrow_robust._ttc_rel``).  A decided row's
 answer therefore carries the robust solver's guarantees: a no-contact is
 proved; a contact time comes from the same double-double polishing step and
-the same "done" test as ``narrow_phase._solve_entry``.
+the same "done" test as ``narrow_robust._solve_entry``.
 
-The sequence (f = |g|^2 - R^2, c = g.g' = f'/2, q = c', see narrow_phase):
+The sequence (f = |g|^2 - R^2, c = g.g' = f'/2, q = c', see narrow_robust):
 
 0. t = 0: f(0) certainly < 0 -> 0.0 (overlap; the robust solver's own
    float test); certainly > 0 is needed for everything below.
@@ -34,7 +34,7 @@ The sequence (f = |g|^2 - R^2, c = g.g' = f'/2, q = c', see narrow_phase):
 
 Measured on bench_core.py's mix (half aimed, half random, H = 10 s): 1.1 %
 of rows undecided (tests/core/test_narrow_fast.py holds it under 3 %); on
-those rows the robust solver runs as before.  Long horizons are left to the
+those rows the robust solver runs.  Long horizons are left to the
 robust solver no more often (H = 1e3 s: 98.6 % decided).
 Each numerical decision is commented where it is made.
 
@@ -79,6 +79,7 @@ from circle_collision_ros.core.narrow_eval import (
     _min,
     _model_err,
     _model_root,
+    _polish_done,
     _rel2,
     _rel3,
     _scale,
@@ -193,7 +194,7 @@ def _model_step(Ph, Vh, Ah, R2, A2, t, lo, hi, conv):
 def _fast_rel(Ph, Pl, Vh, Vl, Ah, Al, Rh, Rl, H):
     """First-contact time on the exact (dd) relative state, or UNDECIDED.
 
-    Same contract as ``narrow_phase._ttc_rel`` for a finite H >= 0 on the rows
+    Same contract as ``narrow_robust._ttc_rel`` for a finite H >= 0 on the rows
     it decides; H must be NaN for a row with invalid input (then UNDECIDED).
     """
     R2 = Rh * Rh
@@ -344,8 +345,8 @@ def _fast_rel(Ph, Pl, Vh, Vl, Ah, Al, Rh, Rl, H):
     # a model root step exactly as _entry_step would take it (its fallbacks
     # are left to _solve_entry)
     root = (disc > 0.0) & ((c <= 0.0) | (a2 > 0.0))
-    done = ((tn >= 0.0) & (tn <= hi) & root & (ast * rel <= 1e-4 * _EPS * at)
-            & ((ast <= 64.0 * _EPS * at) | (_model_err(step, s, gd, Ah, A2) <= 1e-4 * _EPS * at)))
+    done = ((tn >= 0.0) & (tn <= hi) & root
+            & _polish_done(ast, at, rel, _model_err(step, s, gd, Ah, A2)))
     done = done | (f == 0.0)
     tn = t if f == 0.0 else tn
     res = tn if (contact & conv & done) else UNDECIDED
