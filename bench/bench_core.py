@@ -138,6 +138,26 @@ def main() -> None:
     t_small = per_call(small)
     t_small_b = per_call(small_b)
 
+    # one pair from Python (issue 17: <= 0.8 us): 1-D arrays, lists, tuples
+    # take the scalar entry point; a 0-d array horizon forces the general
+    # (broadcasting) path on the same rows, for the same-run comparison
+    one = tuple(x[0] for x in P)
+    one_list = tuple(x.tolist() if np.ndim(x) else float(x) for x in one)
+    one_tuple = tuple(tuple(x) if isinstance(x, list) else x for x in one_list)
+
+    def per_pair(args, h=H):
+        time_to_collision(*args, horizon=h)
+        best = math.inf
+        for _ in range(5):
+            t0 = time.perf_counter()
+            for _ in range(reps):
+                time_to_collision(*args, horizon=h)
+            best = min(best, (time.perf_counter() - t0) / reps)
+        return best
+    t_one = {"1-D arrays": per_pair(one), "lists": per_pair(one_list), "tuples": per_pair(one_tuple),
+             "(1, D) arrays": per_pair(tuple(x[:1] for x in P)),
+             "1-D arrays, general path": per_pair(one, np.array(H))}
+
     ns = lambda t, m: 1e9 * t / m  # noqa: E731
     rows = [
         (f"ours (numba, {numba.get_num_threads()} threads)", ns(t_ours, n)),
@@ -154,6 +174,7 @@ def main() -> None:
         print(f"{name:36s} {v:12.1f} {v / rows[0][1]:15.1f} {v / rows[1][1]:17.1f}")
     print(f"small batch (10 pairs) per call: {t_small * 1e6:.1f} us (row arrays, fast path), "
           f"{t_small_b * 1e6:.1f} us (scalar radii, general path)")
+    print("one pair per call: " + ", ".join(f"{k} {v * 1e6:.2f} us" for k, v in t_one.items()))
     print(f"numba start (import + first call): cold compile {cold:.2f} s, cached {cached:.3f} s")
 
 

@@ -378,6 +378,43 @@ def _rows_ok(p_a, v_a, a_a, r_a, p_b, v_b, a_b, r_b) -> bool:
             and a_b.flags.c_contiguous and r_b.flags.c_contiguous)
 
 
+_SCALARS = frozenset((float, int, np.float64))
+_SEQS = frozenset((list, tuple, np.ndarray))
+
+
+def _one_pair(p_a, v_a, a_a, r_a, p_b, v_b, a_b, r_b, horizon):
+    """The answer for one pair given as 1-D vectors of length 2 or 3, or None
+    when the arguments are not of that form (the general path then decides
+    or raises its message)."""
+    D = len(p_a) if type(p_a) in _SEQS else 0
+    if D != 2 and D != 3:
+        return None
+    for x in (p_a, v_a, a_a, p_b, v_b, a_b):
+        if type(x) not in _SEQS or len(x) != D or (type(x) is _ND and (x.ndim != 1 or x.dtype != _F8)):
+            return None
+    fn = _scalar_entry(D)
+    try:
+        return fn(*p_a, *v_a, *a_a, r_a, *p_b, *v_b, *a_b, r_b, horizon)
+    except TypeError:  # e.g. elements that are not numbers: the general path reports it
+        return None
+
+
+def _scalar_entry(D):
+    """``_ttc_scalar2`` / ``_ttc_scalar`` with its all-float64 signature only:
+    compiled (or loaded from the cache) on first use, then no further
+    specialisation -- ints and numpy floats are cast to float64, as the
+    general path's np.asarray(..., float64) does."""
+    fn = _ttc_scalar2 if D == 2 else _ttc_scalar
+    if D not in _SCALAR_READY:
+        fn.compile((types.float64,) * (15 if D == 2 else 21))
+        fn.disable_compile()
+        _SCALAR_READY.add(D)
+    return fn
+
+
+_SCALAR_READY: set = set()
+
+
 def time_to_collision(p_a, v_a, a_a, r_a, p_b, v_b, a_b, r_b, horizon=math.inf) -> np.ndarray:
     """Earliest time at which two uniformly accelerated discs/spheres touch.
 
@@ -413,6 +450,13 @@ def time_to_collision(p_a, v_a, a_a, r_a, p_b, v_b, a_b, r_b, horizon=math.inf) 
         If the vector shapes disagree in D, D is not 2 or 3, or the shapes
         do not broadcast.
     """
+    # One pair as 1-D sequences (lists, tuples, 1-D arrays) and scalars: the
+    # one-row scalar entry points (the same kernel code, bitwise the batch
+    # answer) without the array conversions of the general path.
+    if type(r_a) in _SCALARS and type(r_b) in _SCALARS and type(horizon) in _SCALARS:
+        t = _one_pair(p_a, v_a, a_a, r_a, p_b, v_b, a_b, r_b, horizon)
+        if t is not None:
+            return np.array(t)
     # Fast path (Scene / node hot path): inputs already in kernel layout and
     # a scalar horizon -- no conversions, no temporaries besides the output.
     th = type(horizon)
