@@ -56,9 +56,9 @@ import numpy as np
 from numba import njit, objmode, prange, types
 from numba.extending import overload
 
-from circle_collision_ros.core.narrow_eval import _INF
+from circle_collision_ros.core.narrow_eval import _INF, _NAN, _rel2, _rel3, _valid
 from circle_collision_ros.core.narrow_exact import exact_first_contact
-from circle_collision_ros.core.narrow_fast import UNDECIDED, fast_rows
+from circle_collision_ros.core.narrow_fast import UNDECIDED, _fast_rel, fast_rows
 from circle_collision_ros.core.narrow_robust import _robust_pair2, _robust_pair3
 
 __all__ = ["time_to_collision", "_ttc_scalar", "_ttc_kernel", "_ttc_kernel_h"]
@@ -250,10 +250,11 @@ def _k3p(pa, va, aa, ra, pb, vb, ab, rb, H, out):
     return n_und
 
 
-def _exact_flat(r, D, horizon):
-    """Exact answer of the one-row batch packed by _ttc_scalar / _ttc_scalar2."""
-    v = r[:6 * D].reshape((6, D))
-    return exact_first_contact(v[0], v[1], v[2], r[6 * D], v[3], v[4], v[5], r[6 * D + 1], horizon)
+def _exact_pair(pax, pay, paz, vax, vay, vaz, aax, aay, aaz, r_a,
+                pbx, pby, pbz, vbx, vby, vbz, abx, aby, abz, r_b, horizon):
+    """Exact answer of one pair (the scalar entry points' fallback; 0.0 for z in 2-D)."""
+    return exact_first_contact((pax, pay, paz), (vax, vay, vaz), (aax, aay, aaz), r_a,
+                               (pbx, pby, pbz), (vbx, vby, vbz), (abx, aby, abz), r_b, horizon)
 
 
 def _resolve(n_und, pa, va, aa, ra, pb, vb, ab, rb, H, out):
@@ -268,41 +269,53 @@ def _resolve(n_und, pa, va, aa, ra, pb, vb, ab, rb, H, out):
                                      H[i] if arr else H)
 
 
+# The scalar entry points run a batch row's steps on one row without the
+# batch loop (no scratch arrays, no vector-loop set-up, ~0.5 us): the fast
+# path's _fast_rel (finite horizon), the robust solver for what it leaves
+# undecided, the exact decision for the rest.  The arithmetic per row is the
+# same IEEE operations as in the (vectorised) loop, so the result is bitwise
+# the batch answer (tests/core/test_narrow_fast.py checks it).
 @njit(cache=True, error_model="numpy")
 def _ttc_scalar(pax, pay, paz, vax, vay, vaz, aax, aay, aaz, r_a,
                 pbx, pby, pbz, vbx, vby, vbz, abx, aby, abz, r_b, horizon):
     """First-contact time of one pair (numba-callable, same contract and
     bitwise the same result as ``time_to_collision``; pass 0.0 for z in
-    2-D).  NaN for invalid input.  It runs the 3-D batch kernel on a one-row
-    batch (~1 us); batches should go through the kernels directly."""
-    r = np.empty(22)  # one row each of pa, va, aa, pb, vb, ab (3), ra, rb; out; horizon
-    r[0], r[1], r[2], r[3], r[4], r[5] = pax, pay, paz, vax, vay, vaz
-    r[6], r[7], r[8], r[9], r[10], r[11] = aax, aay, aaz, pbx, pby, pbz
-    r[12], r[13], r[14], r[15], r[16], r[17] = vbx, vby, vbz, abx, aby, abz
-    r[18], r[19] = r_a, r_b
-    v = r[:18].reshape((6, 1, 3))
-    if _block(v[0], v[1], v[2], r[18:19], v[3], v[4], v[5], r[19:20], float(horizon),
-              r[20:21], 0, 1, r[21:], _Z3):
+    2-D).  NaN for invalid input."""
+    t = UNDECIDED
+    if horizon < _INF:
+        chk = (pax + pay + paz + vax + vay + vaz + aax + aay + aaz + r_a
+               + pbx + pby + pbz + vbx + vby + vbz + abx + aby + abz + r_b)
+        h = horizon if _valid(chk, r_a, r_b, horizon) else _NAN
+        Ph, Pl, Vh, Vl, Ah, Al, Rh, Rl = _rel3(pax, pay, paz, vax, vay, vaz, aax, aay, aaz, r_a,
+                                               pbx, pby, pbz, vbx, vby, vbz, abx, aby, abz, r_b)
+        t = _fast_rel(Ph, Pl, Vh, Vl, Ah, Al, Rh, Rl, h)
+    if t == UNDECIDED:
+        t = _robust_pair3(pax, pay, paz, vax, vay, vaz, aax, aay, aaz, r_a,
+                          pbx, pby, pbz, vbx, vby, vbz, abx, aby, abz, r_b, horizon)
+    if t == UNDECIDED:
         with objmode(t="float64"):
-            t = _exact_flat(r, 3, horizon)
-        return t
-    return r[20]
+            t = _exact_pair(pax, pay, paz, vax, vay, vaz, aax, aay, aaz, r_a,
+                            pbx, pby, pbz, vbx, vby, vbz, abx, aby, abz, r_b, horizon)
+    return t
 
 
 @njit(cache=True, error_model="numpy")
 def _ttc_scalar2(pax, pay, vax, vay, aax, aay, r_a, pbx, pby, vbx, vby, abx, aby, r_b, horizon):
     """Planar twin of ``_ttc_scalar`` (bitwise the same result with z = 0)."""
-    r = np.empty(16)  # one row each of pa, va, aa, pb, vb, ab (2), ra, rb; out; horizon
-    r[0], r[1], r[2], r[3], r[4], r[5] = pax, pay, vax, vay, aax, aay
-    r[6], r[7], r[8], r[9], r[10], r[11] = pbx, pby, vbx, vby, abx, aby
-    r[12], r[13] = r_a, r_b
-    v = r[:12].reshape((6, 1, 2))
-    if _block(v[0], v[1], v[2], r[12:13], v[3], v[4], v[5], r[13:14], float(horizon),
-              r[14:15], 0, 1, r[15:], _Z2):
+    t = UNDECIDED
+    if horizon < _INF:
+        chk = (pax + pay + vax + vay + aax + aay + r_a + pbx + pby + vbx + vby + abx + aby + r_b)
+        h = horizon if _valid(chk, r_a, r_b, horizon) else _NAN
+        Ph, Pl, Vh, Vl, Ah, Al, Rh, Rl = _rel2(pax, pay, vax, vay, aax, aay, r_a,
+                                               pbx, pby, vbx, vby, abx, aby, r_b)
+        t = _fast_rel(Ph, Pl, Vh, Vl, Ah, Al, Rh, Rl, h)
+    if t == UNDECIDED:
+        t = _robust_pair2(pax, pay, vax, vay, aax, aay, r_a, pbx, pby, vbx, vby, abx, aby, r_b, horizon)
+    if t == UNDECIDED:
         with objmode(t="float64"):
-            t = _exact_flat(r, 2, horizon)
-        return t
-    return r[14]
+            t = _exact_pair(pax, pay, 0.0, vax, vay, 0.0, aax, aay, 0.0, r_a,
+                            pbx, pby, 0.0, vbx, vby, 0.0, abx, aby, 0.0, r_b, horizon)
+    return t
 
 
 # (D, threaded) -> kernel (each compiles once per horizon type: an array
@@ -392,6 +405,9 @@ def _one_pair(p_a, v_a, a_a, r_a, p_b, v_b, a_b, r_b, horizon):
     for x in (p_a, v_a, a_a, p_b, v_b, a_b):
         if type(x) not in _SEQS or len(x) != D or (type(x) is _ND and (x.ndim != 1 or x.dtype != _F8)):
             return None
+    if type(p_a) is _ND:  # Python floats unpack and type-check faster than numpy scalars
+        p_a, v_a, a_a, p_b, v_b, a_b = (x.tolist() if type(x) is _ND else x
+                                        for x in (p_a, v_a, a_a, p_b, v_b, a_b))
     fn = _scalar_entry(D)
     try:
         return fn(*p_a, *v_a, *a_a, r_a, *p_b, *v_b, *a_b, r_b, horizon)
