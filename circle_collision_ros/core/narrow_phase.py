@@ -455,10 +455,17 @@ def time_to_collision(p_a, v_a, a_a, r_a, p_b, v_b, a_b, r_b, horizon=math.inf) 
         input range, also where a relative quantity (p_a - p_b, ...)
         overflows.
 
-    Guarantees (proved in tests/core/test_narrow_phase*.py): error <= 4 ulp of
-    the exact time for the inputs as given, scaled by |cos| of the contact
-    angle for grazes; no missed/spurious contact unless the exact minimum of
-    |g|^2 - R^2 is within 1e-9 R^2 of zero.
+    Touching at t = 0: the lowest-order nonzero term of |g(t)|^2 - R^2
+    decides (approaching -> 0.0, separating -> the next contact; touching
+    for all time without approaching -> inf); see the module docstring.
+
+    Guarantees (for the inputs exactly as given; proved in
+    tests/core/test_narrow_phase_exact.py against an exact-rational
+    reference, and tests/core/test_narrow_phase*.py): 0.0 and inf are exact
+    decisions -- no missed or spurious contact, tangent grazes included --
+    and a finite time is within one ulp of the exact first contact time
+    (correctly rounded where the exact fallback decides), never negative and
+    never beyond the horizon.
 
     Raises
     ------
