@@ -27,9 +27,11 @@ solvers are:
 * ``narrow_exact``: exact rational arithmetic (Sturm sequences on the exact
   quartic) for the rest, in plain Python, called after the kernels.
 
-So every answer is either certified within one ulp of the exact first
-contact time (fast and robust paths; tests/core/test_narrow_phase_exact.py)
-or correctly rounded (exact path), and every inf is proved.  A row's result
+So every 0.0 and inf is proved; a finite time is within one ulp of the
+exact first contact time by sign checks (robust path), correctly rounded
+(exact path), or within the polishing step's error estimate inside a proved
+bracket (fast path; tests/core/test_narrow_phase_exact.py and the accuracy
+tests check all three).  A row's result
 depends only on the row, never on the batch it comes in.
 
 Public entry points
