@@ -126,15 +126,16 @@ def main() -> None:
     small_b = small[:3] + (1.0,) + small[4:7] + (1.0,)
     reps = 2000
 
-    def per_call(args):
+    def per_call(args, h=H, runs=3):
+        """Best over `runs` of the mean time of one call (after a warm-up call)."""
+        time_to_collision(*args, horizon=h)
         best = math.inf
-        for _ in range(3):
+        for _ in range(runs):
             t0 = time.perf_counter()
             for _ in range(reps):
-                time_to_collision(*args, horizon=H)
+                time_to_collision(*args, horizon=h)
             best = min(best, (time.perf_counter() - t0) / reps)
         return best
-    time_to_collision(*small_b, horizon=H)
     t_small = per_call(small)
     t_small_b = per_call(small_b)
 
@@ -145,18 +146,9 @@ def main() -> None:
     one_list = tuple(x.tolist() if np.ndim(x) else float(x) for x in one)
     one_tuple = tuple(tuple(x) if isinstance(x, list) else x for x in one_list)
 
-    def per_pair(args, h=H):
-        time_to_collision(*args, horizon=h)
-        best = math.inf
-        for _ in range(5):
-            t0 = time.perf_counter()
-            for _ in range(reps):
-                time_to_collision(*args, horizon=h)
-            best = min(best, (time.perf_counter() - t0) / reps)
-        return best
-    t_one = {"1-D arrays": per_pair(one), "lists": per_pair(one_list), "tuples": per_pair(one_tuple),
-             "(1, D) arrays": per_pair(tuple(x[:1] for x in P)),
-             "1-D arrays, general path": per_pair(one, np.array(H))}
+    t_one = {"1-D arrays": per_call(one, runs=5), "lists": per_call(one_list, runs=5),
+             "tuples": per_call(one_tuple, runs=5), "(1, D) arrays": per_call(tuple(x[:1] for x in P), runs=5),
+             "1-D arrays, general path": per_call(one, np.array(H), runs=5)}
 
     ns = lambda t, m: 1e9 * t / m  # noqa: E731
     rows = [
