@@ -12,7 +12,7 @@ by ``core.narrow_exact``), their share, and the slowest single fallback row
 2-D mix (H = 10 s and H = inf), the accuracy families of
 tests/core/test_narrow_phase_accuracy.py (also run by scripts/bench.sh), and
 the issue 17 defect-class generators of tests/core/test_narrow_phase_exact.py
-(which exist to hit the fallback).
+(which exist to hit the fallback), and all pairs of two scale-bench scenes.
 """
 from __future__ import annotations
 
@@ -33,6 +33,9 @@ from circle_collision_ros.core.narrow_exact import exact_first_contact  # noqa: 
 from circle_collision_ros.core.narrow_fast import UNDECIDED  # noqa: E402
 from tests.core.test_narrow_phase_accuracy import FAMILIES, family_cases, mixed_pairs  # noqa: E402
 from tests.core.test_narrow_phase_exact import GENS  # noqa: E402
+
+sys.path.insert(0, HERE)
+from bench_scene import make_scene  # noqa: E402
 
 
 def fallback_stats(args, H):
@@ -69,6 +72,13 @@ def main() -> None:
     for name in FAMILIES:
         args, H, _known = family_cases(name, n_fam)
         mixes.append((f"family {name}", args, H))
+    # scale-bench scenes (bench/scale.py: uniform, |v| <= 3 m/s, |a| <= 0.5 m/s^2): every pair
+    # of a 1000-body scene at its dense and sparse density, horizon 5 s
+    for side in (100.0, 1000.0):
+        p, v, acc, r = make_scene(1000, side, np.random.default_rng(3))
+        i, j = np.triu_indices(1000, 1)
+        mixes.append((f"scene 1000 bodies, {side:g} m side", (p[i], v[i], acc[i], r[i], p[j], v[j], acc[j], r[j]),
+                      5.0))
     rng = np.random.default_rng(17)
     for cls, gen in GENS.items():
         rows = gen(rng, 100, 2)
