@@ -105,7 +105,8 @@ def test_issue_repros(case):
 
 
 # ---------------------------------------------------------------- generators
-_TRIPLES2 = [(3, 4, 5), (5, 12, 13), (8, 15, 17), (7, 24, 25), (20, 21, 29), (9, 40, 41)]
+# integer |dp| = R with a power-of-two component (so -|dv|^2 / dp_k is dyadic)
+_TRIPLES2 = [(3, 4, 5), (8, 15, 17), (16, 63, 65), (4, 3, 5)]
 _TRIPLES3 = [(1, 2, 2, 3), (2, 3, 6, 7), (1, 4, 8, 9), (4, 4, 7, 9), (2, 6, 9, 11)]
 
 
@@ -136,6 +137,15 @@ def _touch_state(rng, D):
     return dp, float(c) * s, perp
 
 
+def _radial(dp, q):
+    """A dyadic vector u with dp.u = q exactly: along the axis where dp's
+    component is a power of two."""
+    k = next(i for i, x in enumerate(dp) if x != 0 and math.frexp(abs(x))[0] == 0.5)
+    u = np.zeros(len(dp))
+    u[k] = q / dp[k]
+    return u
+
+
 def _absolute(rng, dp, dv, da, R):
     """Split the relative state into two bodies with dyadic absolute states
     (all sums exact: short mantissas, nearby exponents)."""
@@ -160,7 +170,8 @@ def gen_class_a(rng, n, D):
         s = 2.0 ** int(rng.integers(-3, 3)) * rng.choice([-1, 1])
         w = 0.0 if rng.random() < 0.15 else _dyadic(rng, 8, -4, 2)
         dv = s * perp
-        da = -(s * s) * dp * (np.dot(perp, perp) / np.dot(dp, dp)) + w * perp
+        da = _radial(dp, -np.dot(dv, dv)) + w * perp
+        assert np.dot(dv, dv) + np.dot(dp, da) == 0.0 and np.dot(dp, dv) == 0.0
         rows.append(_absolute(rng, dp, dv, da, R))
     return rows
 
@@ -175,7 +186,7 @@ def gen_class_b(rng, n, D):
         dv = s * perp
         k = float(rng.integers(-64, 65)) * 2.0 ** -int(rng.integers(30, 50))
         w = _dyadic(rng, 8, -6, 2)
-        da = -(s * s) * dp * (np.dot(perp, perp) / np.dot(dp, dp)) * (1.0 + k) + w * perp
+        da = _radial(dp, -np.dot(dv, dv)) * (1.0 + k) + w * perp
         rows.append(((tuple(dp), tuple(dv), tuple(da), R) + (tuple(np.zeros(D)),) * 3 + (0.0,)))
     return rows
 
