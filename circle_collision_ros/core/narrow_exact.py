@@ -190,12 +190,32 @@ def exact_first_contact(p_a: Sequence[float], v_a: Sequence[float], a_a: Sequenc
     if not roots.any_upto(Fraction(_float(hi))):
         return math.inf
     lo = 0  # invariant: no root in (0, float(lo)], a root in (0, float(hi)]
+    # Sturm counts until (lo, hi] isolates the first root; from then on the
+    # sign of the square-free part (every root simple, so a sign change at
+    # each) decides, one polynomial evaluation per step instead of a sequence
+    s_lo = _sign(_eval(roots.p, Fraction(0)))
+    v_lo, v_hi = roots.v0, roots.v(Fraction(_float(hi)))
+    single = _eval(roots.p, Fraction(_float(hi))) != 0 and v_lo - v_hi == 1
     while hi - lo > 1:
         mid = (lo + hi) // 2
-        if roots.any_upto(Fraction(_float(mid))):
+        x = Fraction(_float(mid))
+        if single:
+            s_mid = _sign(_eval(roots.p, x))
+            if s_mid == s_lo:
+                lo = mid
+            else:
+                hi = mid
+            continue
+        v_mid = roots.v(x)
+        if _eval(roots.p, x) == 0 or v_lo - v_mid > 0:
             hi = mid
+            single = _eval(roots.p, x) != 0 and v_lo - v_mid == 1
+            v_hi = v_mid
         else:
             lo = mid
+            v_lo = v_mid
+            s_lo = _sign(_eval(roots.p, x))
+            single = v_lo - v_hi == 1 and _eval(roots.p, Fraction(_float(hi))) != 0
     # first root r in (x_lo, x_hi]: round to nearest (never to 0)
     x_lo, x_hi = _float(lo), _float(hi)
     if lo == 0:
