@@ -241,7 +241,9 @@ def _c_bound(Ph, Vh, Ah, nP, nV, nA, t):
     return _c(Ph, Vh, Ah, t), _c_err(nP, nV, nA, t)
 
 
-@register_jitable(error_model="numpy")
+# numba IR inlining (not a register_jitable call): the fast path's SIMD loop
+# must not contain a call, and LLVM does not inline a function of this size
+@njit(cache=True, error_model="numpy", inline="always")
 def _turning_points(Ph, Vh, Ah, nP, nV, nA, A2):
     """Turning points of c (roots of q = c') with certified location error.
 
