@@ -3,8 +3,6 @@ from __future__ import annotations
 
 import numpy as np
 
-from circle_collision_ros.core.kinematics import arc_position, arc_velocity
-
 
 def contact_details(p_a, v_a, a_a, r_a, p_b, v_b, a_b, r_b, t):
     """Contact point, unit normal and closing speed of a pair at time ``t``.
@@ -42,17 +40,18 @@ def contact_details(p_a, v_a, a_a, r_a, p_b, v_b, a_b, r_b, t):
     np.asarray(r_b, dtype=np.float64)
     t = np.asarray(t, dtype=np.float64)[..., None]
     with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
+        h = 0.5 * t
         # relative centre b - a at t, from relative quantities (no cancellation
         # of large absolute coordinates)
-        g = arc_position(p_b - p_a, v_b - v_a, a_b - a_a, t)
-        w = arc_velocity(v_a - v_b, a_a - a_b, t)  # relative velocity of a w.r.t. b
+        g = (p_b - p_a) + t * ((v_b - v_a) + h * (a_b - a_a))
+        w = (v_a - v_b) + t * (a_a - a_b)  # relative velocity of a w.r.t. b
         ng = np.sqrt(np.sum(g * g, axis=-1, keepdims=True))
         nw = np.sqrt(np.sum(w * w, axis=-1, keepdims=True))
         ex = np.zeros_like(g)
         ex[..., 0] = 1.0
         fallback = np.where(nw > 0, w / np.where(nw > 0, nw, 1.0), ex)
         n = np.where(ng > 0, g / np.where(ng > 0, ng, 1.0), fallback)
-        pa_t = arc_position(p_a, v_a, a_a, t)
+        pa_t = p_a + t * (v_a + h * a_a)
         point = pa_t + r_a * n
         closing = np.sum(w * n, axis=-1)
         bad = ~np.isfinite(t[..., 0]) | ~np.isfinite(closing) | ~np.all(np.isfinite(point), axis=-1)

@@ -34,6 +34,7 @@ from typing import Sequence
 __all__ = ["exact_first_contact"]
 
 _MAX_BITS = 0x7FEFFFFFFFFFFFFF  # bit pattern of the largest finite float64
+_MAX_INPUT = 1e150  # the narrow phase's documented input range
 
 
 def _bits(x: float) -> int:
@@ -158,6 +159,11 @@ def exact_first_contact(p_a: Sequence[float], v_a: Sequence[float], a_a: Sequenc
     t = 0 (order-of-contact rule in the module docstring); else the first
     contact time in (0, horizon] rounded to nearest float64; inf if none.
     """
+    vals = [float(x) for x in (*p_a, *v_a, *a_a, r_a, *p_b, *v_b, *a_b, r_b)]
+    if max(abs(x) for x in vals) > _MAX_INPUT:
+        # beyond the documented input range: exact rationals with ~2000-bit
+        # parts make the exact path arbitrarily slow (NaN, like an overflow)
+        return math.nan
     dp, dv, da = _rel(p_a, p_b), _rel(v_a, v_b), _rel(a_a, a_b)
     R = Fraction(float(r_a)) + Fraction(float(r_b))
 
