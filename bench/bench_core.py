@@ -126,17 +126,29 @@ def main() -> None:
     small_b = small[:3] + (1.0,) + small[4:7] + (1.0,)
     reps = 2000
 
-    def per_call(args):
+    def per_call(args, h=H, runs=3):
+        """Best over `runs` of the mean time of one call (after a warm-up call)."""
+        time_to_collision(*args, horizon=h)
         best = math.inf
-        for _ in range(3):
+        for _ in range(runs):
             t0 = time.perf_counter()
             for _ in range(reps):
-                time_to_collision(*args, horizon=H)
+                time_to_collision(*args, horizon=h)
             best = min(best, (time.perf_counter() - t0) / reps)
         return best
-    time_to_collision(*small_b, horizon=H)
     t_small = per_call(small)
     t_small_b = per_call(small_b)
+
+    # one pair from Python (issue 17: <= 0.8 us): 1-D arrays, lists, tuples
+    # take the scalar entry point; a 0-d array horizon forces the general
+    # (broadcasting) path on the same rows, for the same-run comparison
+    one = tuple(x[0] for x in P)
+    one_list = tuple(x.tolist() if np.ndim(x) else float(x) for x in one)
+    one_tuple = tuple(tuple(x) if isinstance(x, list) else x for x in one_list)
+
+    t_one = {"1-D arrays": per_call(one, runs=5), "lists": per_call(one_list, runs=5),
+             "tuples": per_call(one_tuple, runs=5), "(1, D) arrays": per_call(tuple(x[:1] for x in P), runs=5),
+             "1-D arrays, general path": per_call(one, np.array(H), runs=5)}
 
     ns = lambda t, m: 1e9 * t / m  # noqa: E731
     rows = [
@@ -154,6 +166,7 @@ def main() -> None:
         print(f"{name:36s} {v:12.1f} {v / rows[0][1]:15.1f} {v / rows[1][1]:17.1f}")
     print(f"small batch (10 pairs) per call: {t_small * 1e6:.1f} us (row arrays, fast path), "
           f"{t_small_b * 1e6:.1f} us (scalar radii, general path)")
+    print("one pair per call: " + ", ".join(f"{k} {v * 1e6:.2f} us" for k, v in t_one.items()))
     print(f"numba start (import + first call): cold compile {cold:.2f} s, cached {cached:.3f} s")
 
 

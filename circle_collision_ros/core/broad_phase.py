@@ -15,12 +15,12 @@ Guarantee (the "never lose a contact" property): a pair is dropped only if its
 exact centre distance stays above ``r_a + r_b`` by more than a safety margin
 over the whole window.  The margin (``_REL_MARGIN`` times the pair's motion
 scale, plus ``_COORD_MARGIN`` times the absolute coordinates, plus
-``_ABS_MARGIN``) absorbs rounding both here and in any narrow phase whose
-squared-distance polynomial is accurate to ~1e4 ulps of its own scale: a
-spurious grazing root needs the true clearance to be below about
-``sqrt(err) * scale`` ~ 1e-6 * scale, which the margin exceeds.  The margin
-enlarges bounds by micrometres per metre of motion, which costs nothing in
-cull rate.
+``_ABS_MARGIN``) absorbs the rounding of the float64 box arithmetic here
+(propagation to the window start, the per-axis extremes, the sums: a few
+ulps of the motion scale and of the coordinates) many times over; the narrow
+phase decides the surviving pairs exactly, so the margin need not cover any
+narrow-phase error.  It enlarges bounds by micrometres per metre of motion,
+which costs nothing in cull rate.
 
 Two pair generators are provided, both producing exactly the set of pairs with
 overlapping bounds that pass the relative test: sort-and-sweep along the axis
@@ -37,6 +37,8 @@ import math
 
 import numpy as np
 from numba import njit
+
+from circle_collision_ros.core.kinematics import arc_position, arc_velocity
 
 __all__ = [
     "swept_bounds",
@@ -66,8 +68,8 @@ def propagate(p: np.ndarray, v: np.ndarray, a: np.ndarray, dt) -> tuple[np.ndarr
     a = np.asarray(a, dtype=np.float64)
     dt = np.asarray(dt, dtype=np.float64)
     dtc = dt[..., None] if dt.ndim else dt
-    p2 = p + v * dtc + 0.5 * a * dtc * dtc
-    v2 = v + a * dtc
+    p2 = arc_position(p, v, a, dtc)
+    v2 = arc_velocity(v, a, dtc)
     same = np.broadcast_to(dtc == 0.0, p2.shape)
     return np.where(same, p, p2), np.where(same, v, v2)
 
@@ -93,18 +95,15 @@ def swept_bounds(p: np.ndarray, v: np.ndarray, a: np.ndarray, r: np.ndarray,
     t0 = np.broadcast_to(np.asarray(t0, dtype=np.float64), r.shape)[:, None]
     t1 = np.broadcast_to(np.asarray(t1, dtype=np.float64), r.shape)[:, None]
 
-    def at(t):
-        return p + v * t + 0.5 * a * t * t
-
-    x0 = at(t0)
-    x1 = at(t1)
+    x0 = arc_position(p, v, a, t0)
+    x1 = arc_position(p, v, a, t1)
     lo = np.minimum(x0, x1)
     hi = np.maximum(x0, x1)
     with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
         ts = -v / a
     inside = (a != 0.0) & (ts > t0) & (ts < t1)
     if inside.any():
-        xs = at(np.where(inside, ts, t0))
+        xs = arc_position(p, v, a, np.where(inside, ts, t0))
         lo = np.where(inside, np.minimum(lo, xs), lo)
         hi = np.where(inside, np.maximum(hi, xs), hi)
     tm = np.maximum(np.abs(t0), np.abs(t1))
@@ -136,23 +135,23 @@ def _rel_keep(p, v, a, r, tref, i, j, t_start, t_end):
         pi = p[i, k]
         vi = v[i, k]
         if dti != 0.0:
-            pi = p[i, k] + v[i, k] * dti + 0.5 * a[i, k] * dti * dti
-            vi = v[i, k] + a[i, k] * dti
+            pi = arc_position(p[i, k], v[i, k], a[i, k], dti)
+            vi = arc_velocity(v[i, k], a[i, k], dti)
         pj = p[j, k]
         vj = v[j, k]
         if dtj != 0.0:
-            pj = p[j, k] + v[j, k] * dtj + 0.5 * a[j, k] * dtj * dtj
-            vj = v[j, k] + a[j, k] * dtj
+            pj = arc_position(p[j, k], v[j, k], a[j, k], dtj)
+            vj = arc_velocity(v[j, k], a[j, k], dtj)
         dp = pj - pi
         dv = vj - vi
         da = a[j, k] - a[i, k]
-        x1 = dp + dv * W + 0.5 * da * W * W
+        x1 = arc_position(dp, dv, da, W)
         lo = min(dp, x1)
         hi = max(dp, x1)
         if da != 0.0:
             ts = -dv / da
             if ts > 0.0 and ts < W:
-                xs = dp + dv * ts + 0.5 * da * ts * ts
+                xs = arc_position(dp, dv, da, ts)
                 lo = min(lo, xs)
                 hi = max(hi, xs)
         if lo > 0.0:
@@ -161,7 +160,7 @@ def _rel_keep(p, v, a, r, tref, i, j, t_start, t_end):
             dist2 += hi * hi
         scale += abs(dp) + abs(dv) * W + 0.5 * abs(da) * W * W
         coord = max(coord, max(abs(pi), abs(pj)))
-    m = 4e-6 * scale + 1e-12 * coord + 1e-12  # _REL_MARGIN, _COORD_MARGIN, _ABS_MARGIN
+    m = _REL_MARGIN * scale + _COORD_MARGIN * coord + _ABS_MARGIN
     lim = R + m
     return dist2 <= lim * lim
 
@@ -241,7 +240,6 @@ def _grid_kernel(lo, hi, cell, origin, p, v, a, r, tref, t_start, t_end, use_rel
     n, D = lo.shape
     clo = np.empty((n, D), dtype=np.int64)
     chi = np.empty((n, D), dtype=np.int64)
-    ncell = np.empty(n, dtype=np.int64)
     span = np.zeros(D, dtype=np.int64)
     big = np.zeros(n, dtype=np.bool_)
     total = 0
@@ -256,7 +254,6 @@ def _grid_kernel(lo, hi, cell, origin, p, v, a, r, tref, t_start, t_end, use_rel
             if c > max_cells:
                 c = max_cells + 1
             span[k] = max(span[k], h_ + 1)
-        ncell[i] = c
         if c > max_cells:
             big[i] = True
         else:

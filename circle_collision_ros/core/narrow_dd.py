@@ -142,14 +142,6 @@ def dd_add(ah: float, al: float, bh: float, bl: float):
 
 
 @njit(cache=True, error_model="numpy", inline="always")
-def dd_mul_d(ah: float, al: float, b: float):
-    """dd * float64, relative error ~2u^2."""
-    p, e = two_prod(ah, b)
-    e = _fma(al, b, e)
-    return fast_two_sum(p, e)
-
-
-@njit(cache=True, error_model="numpy", inline="always")
 def dd_mul(ah: float, al: float, bh: float, bl: float):
     """dd * dd, relative error ~4u^2 (the lo*lo term is below that)."""
     p, e = two_prod(ah, bh)

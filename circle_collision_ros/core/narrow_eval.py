@@ -4,7 +4,7 @@ Everything here is evaluated *geometrically* from ``g(t) = dp + t (dv + t da/2)`
 (never from power-basis coefficients of the quartic), on relative quantities
 given as tuples of length D = 2 or 3 (high parts ``Ph, Vh, Ah``; the low parts
 ``Pl, Vl, Al`` of the exact double-double relative state where a residual
-must be exact).  Used by the robust solver (``narrow_phase``) and the
+must be exact).  Used by the robust solver (``narrow_robust``) and the
 branch-free fast path (``narrow_fast``), so both decide with the same
 evaluations and the same error bounds.
 
@@ -33,6 +33,10 @@ _EPS = 2.220446049250313e-16  # float64 machine epsilon (2u)
 # high part of R = r_a + r_b and its rounding ~3u R^2, the subtraction u.
 # Total < 17u (S^2 + R^2) = 8.5 eps (S^2 + R^2); 16 eps gives ~2x margin.
 _F_ERR = 16.0 * _EPS
+# Error bound of the double-double f (_f_dd): ~u^2 (S^2 + R^2) (compensated
+# Horner g to u^2 S, exact squares and sums, O(u^2) cross terms); signs are
+# taken from it only beyond 16 eps^2 (S^2 + R^2) = 64 u^2 (S^2 + R^2).
+_DD_ERR = 16.0 * _EPS * _EPS
 _INF = math.inf
 _NAN = math.nan
 
@@ -216,6 +220,70 @@ def _q(P, V, A, t):
     return _dot(gd, gd) + _dot(_g(P, V, A, t), A)
 
 
+@register_jitable(error_model="numpy")
+def _scale(nP, nV, nA, t):
+    """S(t) = |dp| + |t| (|dv| + |t| |da| / 2): the scale of the terms of g(t)."""
+    at = abs(t)
+    return nP + at * (nV + 0.5 * at * nA)
+
+
+@register_jitable(error_model="numpy")
+def _c_err(nP, nV, nA, t):
+    """Bound of the float64 error of c(t) = g.g': |dg| <= 6u S, |dg'| <= 3u S',
+    the dot product 2u S S' -> 11u S S'; 16 eps = 32u gives ~3x margin."""
+    at = abs(t)
+    return 16.0 * _EPS * _scale(nP, nV, nA, t) * (nV + at * nA)
+
+
+@register_jitable(error_model="numpy")
+def _c_bound(Ph, Vh, Ah, nP, nV, nA, t):
+    """(c(t), a bound of its float64 error): see _c_err."""
+    return _c(Ph, Vh, Ah, t), _c_err(nP, nV, nA, t)
+
+
+# numba IR inlining (not a register_jitable call): the fast path's SIMD loop
+# must not contain a call, and LLVM does not inline a function of this size
+@njit(cache=True, error_model="numpy", inline="always")
+def _turning_points(Ph, Vh, Ah, nP, nV, nA, A2):
+    """Turning points of c (roots of q = c') with certified location error.
+
+    c is a cubic with leading coefficient A2/2 > 0: c'' = 3 A2 (t - t0) with
+    t0 = -(da.dv)/A2 (c concave left of t0, convex right of it) and
+    q = c' = q(t0) + 1.5 A2 (t - t0)^2; q0 = q(t0) is evaluated geometrically.
+    t0 is within dt0 of exact: the dot product da.dv (its rounding and the
+    dropped dd low parts) is good to 4u |da||dv| absolutely -- it may cancel,
+    so no relative bound -- i.e. t0 to 4u |dv|/|da|, and A2 and the division
+    add 5u |t0|; dt0 takes 4x that.  Evaluating q at t0 + dt0 instead raises
+    q0 by at most 1.5 A2 dt0^2 (q is stationary at t0).  With eq0 bounding
+    the error of q0, ``cuts`` (q0 < -eq0) means two turning points
+    t0 -+ r, r = sqrt(-q0 / (1.5 A2)), each within dl of exact; q0 > eq0
+    means none (c increasing everywhere); in between the structure of c is
+    not certain.  Dl bounds how much c changes when a turning point moves by
+    dl.  Returns (t0, q0, c(t0), eq0, cuts, r, dl, Dl).
+    """
+    t0 = -_dot(Ah, Vh) / A2
+    at0 = abs(t0)
+    g = _g(Ph, Vh, Ah, t0)
+    gd = _gd(Vh, Ah, t0)
+    q0 = _dot(gd, gd) + _dot(g, Ah)
+    ct0 = _dot(g, gd)
+    S0 = _scale(nP, nV, nA, t0)
+    Sd0 = nV + at0 * nA
+    dt0 = 8.0 * _EPS * (at0 + nV / nA)
+    eq0 = 16.0 * _EPS * (Sd0 * Sd0 + S0 * nA) + 1.5 * A2 * dt0 * dt0
+    cuts = q0 < -eq0
+    r = math.sqrt(_max(-q0, 0.0) / (1.5 * A2))
+    # location error: dt0, the effect of eq0 on r -- r'^2 - r^2 = d / (1.5 A2)
+    # with |d| <= eq0 < -q0, so |r' - r| = |d| / (1.5 A2 (r + r')) <=
+    # eq0 / (1.5 A2 r) -- and the rounding of sqrt, the division and
+    # t0 -+ r (8 eps (|t0| + r) covers them twice over)
+    dl = (dt0 + 8.0 * _EPS * (at0 + r) + eq0 / (1.5 * A2 * r)) if cuts else 0.0
+    # c is stationary at a turning point: moving it by dl changes c by at
+    # most |c''| dl^2 / 2 + A2 |dl|^3 / 2 = 1.5 A2 r dl^2 + A2 dl^3 / 2 <= Dl
+    Dl = 1.5 * A2 * dl * dl * (2.0 * r + dl)
+    return t0, q0, ct0, eq0, cuts, r, dl, Dl
+
+
 # --------------------------------------------------------------------------
 # double-double evaluations
 # --------------------------------------------------------------------------
@@ -388,3 +456,20 @@ def _model_err(step, s, gd, A, A2):
         return _INF
     ad = abs(step)
     return ad * ad * ad * (abs(_dot(gd, A)) + 0.25 * A2 * ad) / (2.0 * s)
+
+
+@register_jitable(error_model="numpy")
+def _polish_done(ast, at, rel, merr):
+    """The "done" test of a double-double polishing step (robust and fast path).
+
+    A step of size ast to a root t of magnitude at is final when its own
+    rounding ast * rel (large at grazing incidence) is < 1e-4 ulp and either
+    the step is <= 64 ulp (then the truncation error, ~step^2 x curvature, is
+    far below an ulp) or the model truncation estimate merr (``_model_err``)
+    is < 1e-4 ulp (so the final rounding of t + step is the correct rounding
+    unless the root lies within 1e-4 ulp of a rounding boundary).  Selects
+    only, for the fast path's SIMD loop.  Only an estimate: the robust path
+    certifies its result by signs (``narrow_robust._certified``).
+    """
+    return (ast * rel <= 1e-4 * _EPS * at) & ((ast <= 64.0 * _EPS * at) | (merr <= 1e-4 * _EPS * at))
+

@@ -7,12 +7,12 @@ branches, so the batch kernels' loop over rows compiles to SIMD code (LLVM
 vectorises it: 4 or 8 rows per instruction), and it certifies each answer:
 every claim is checked against a rigorous rounding-error bound, and a row
 whose certificate fails is returned as ``UNDECIDED``; the kernels then hand
-that row to the robust solver (``narrow_phase._ttc_rel``).  A decided row's
+that row to the robust solver (``narrow_robust._ttc_rel``).  A decided row's
 answer therefore carries the robust solver's guarantees: a no-contact is
 proved; a contact time comes from the same double-double polishing step and
-the same "done" test as ``narrow_phase._solve_entry``.
+the same "done" test as ``narrow_robust._solve_entry``.
 
-The sequence (f = |g|^2 - R^2, c = g.g' = f'/2, q = c', see narrow_phase):
+The sequence (f = |g|^2 - R^2, c = g.g' = f'/2, q = c', see narrow_robust):
 
 0. t = 0: f(0) certainly < 0 -> 0.0 (overlap; the robust solver's own
    float test); certainly > 0 is needed for everything below.
@@ -34,7 +34,7 @@ The sequence (f = |g|^2 - R^2, c = g.g' = f'/2, q = c', see narrow_phase):
 
 Measured on bench_core.py's mix (half aimed, half random, H = 10 s): 1.1 %
 of rows undecided (tests/core/test_narrow_fast.py holds it under 3 %); on
-those rows the robust solver runs as before.  Long horizons are left to the
+those rows the robust solver runs.  Long horizons are left to the
 robust solver no more often (H = 1e3 s: 98.6 % decided).
 Each numerical decision is commented where it is made.
 
@@ -69,7 +69,8 @@ from circle_collision_ros.core.narrow_eval import (
     _F_ERR,
     _INF,
     _NAN,
-    _c,
+    _c_bound,
+    _c_err,
     _dot,
     _f_dd_inline,
     _g,
@@ -78,8 +79,11 @@ from circle_collision_ros.core.narrow_eval import (
     _min,
     _model_err,
     _model_root,
+    _polish_done,
     _rel2,
     _rel3,
+    _scale,
+    _turning_points,
     _valid,
 )
 
@@ -144,27 +148,6 @@ def _cbrt_up(y):
 
 
 @register_jitable(error_model="numpy")
-def _scale(nP, nV, nA, t):
-    """S(t) = |dp| + |t| (|dv| + |t| |da| / 2): the scale of the terms of g(t)."""
-    at = abs(t)
-    return nP + at * (nV + 0.5 * at * nA)
-
-
-@register_jitable(error_model="numpy")
-def _c_err(nP, nV, nA, t):
-    """Bound of the float64 error of c(t) = g.g': |dg| <= 6u S, |dg'| <= 3u S',
-    the dot product 2u S S' -> 11u S S'; 16 eps = 32u gives ~3x margin."""
-    at = abs(t)
-    return 16.0 * _EPS * _scale(nP, nV, nA, t) * (nV + at * nA)
-
-
-@register_jitable(error_model="numpy")
-def _c_bound(Ph, Vh, Ah, nP, nV, nA, t):
-    """(c(t), a bound of its float64 error): see _c_err."""
-    return _c(Ph, Vh, Ah, t), _c_err(nP, nV, nA, t)
-
-
-@register_jitable(error_model="numpy")
 def _newton_c(Ph, Vh, Ah, R2, nP, nV, nA, ea, eb, x, hit, hitx):
     """One Newton step on c, clamped to [ea, eb]; records a certain f < 0.
 
@@ -211,7 +194,7 @@ def _model_step(Ph, Vh, Ah, R2, A2, t, lo, hi, conv):
 def _fast_rel(Ph, Pl, Vh, Vl, Ah, Al, Rh, Rl, H):
     """First-contact time on the exact (dd) relative state, or UNDECIDED.
 
-    Same contract as ``narrow_phase._ttc_rel`` for a finite H >= 0 on the rows
+    Same contract as ``narrow_robust._ttc_rel`` for a finite H >= 0 on the rows
     it decides; H must be NaN for a row with invalid input (then UNDECIDED).
     """
     R2 = Rh * Rh
@@ -240,43 +223,17 @@ def _fast_rel(Ph, Pl, Vh, Vl, Ah, Al, Rh, Rl, H):
     culled = ((H < _INF) & (f0 > e0)
               & (_box_gap2(Ph, Vh, Ah, 0.0, h2) > lim) & (_box_gap2(Ph, Vh, Ah, h2, H) > lim))
 
-    # ---- 2. structure of c (cubic, leading coefficient A2/2 > 0): c'' =
-    # 3 A2 (t - t0) with t0 = -(da.dv)/A2 (c concave left of t0, convex right
-    # of it), q = c' = q(t0) + 1.5 A2 (t - t0)^2.  q0 = q(t0) is evaluated
-    # geometrically.  t0 is within dt0 of exact: the dot product da.dv (its
-    # rounding and the dropped dd low parts) is good to 4u |da||dv|
-    # absolutely -- it may cancel, so no relative bound -- i.e. t0 to
-    # 4u |dv|/|da|, and A2 and the division add 5u |t0|; dt0 takes 4x that.
-    # Evaluating q at t0 + dt0 instead raises q0 by at most 1.5 A2 dt0^2 (q is
-    # stationary at t0).  With eq0 bounding the error of q0, "cuts"
-    # (q0 < -eq0) means two turning points cut1,2 = t0 -+ r,
-    # r = sqrt(-q0 / (1.5 A2)), each within dl of exact; q0 > eq0 means none
-    # (c increasing everywhere); in between: undecided.
+    # ---- 2. structure of c (cubic, leading coefficient A2/2 > 0) from its
+    # turning points with certified location error (_turning_points): "cuts"
+    # (q0 < -eq0) means two turning points cut1,2 = t0 -+ r, each within dl
+    # of exact; q0 > eq0 means none (c increasing everywhere); in between:
+    # undecided.
     c0 = _dot(Ph, Vh)
     ec0 = 16.0 * _EPS * nP * nV
-    t0 = -_dot(Ah, Vh) / A2
-    at0 = abs(t0)
-    g = _g(Ph, Vh, Ah, t0)
-    gd = _gd(Vh, Ah, t0)
-    q0 = _dot(gd, gd) + _dot(g, Ah)
-    ct0 = _dot(g, gd)  # c(t0), for Newton's start below
-    S0 = _scale(nP, nV, nA, t0)
-    Sd0 = nV + at0 * nA
-    dt0 = 8.0 * _EPS * (at0 + nV / nA)
-    eq0 = 16.0 * _EPS * (Sd0 * Sd0 + S0 * nA) + 1.5 * A2 * dt0 * dt0
-    cuts = q0 < -eq0
+    t0, q0, ct0, eq0, cuts, r, dl, Dl = _turning_points(Ph, Vh, Ah, nP, nV, nA, A2)
     ok = ok & ((q0 > eq0) | cuts)
-    r = math.sqrt(_max(-q0, 0.0) / (1.5 * A2))
     cut1 = t0 - r
     cut2 = t0 + r
-    # location error: dt0, the effect of eq0 on r -- r'^2 - r^2 = d / (1.5 A2)
-    # with |d| <= eq0 < -q0, so |r' - r| = |d| / (1.5 A2 (r + r')) <=
-    # eq0 / (1.5 A2 r) -- and the rounding of sqrt, the division and
-    # t0 -+ r (8 eps (|t0| + r) covers them twice over)
-    dl = (dt0 + 8.0 * _EPS * (at0 + r) + eq0 / (1.5 * A2 * r)) if cuts else 0.0
-    # c is stationary at a turning point: moving it by dl changes c by at
-    # most |c''| dl^2 / 2 + A2 |dl|^3 / 2 = 1.5 A2 r dl^2 + A2 dl^3 / 2 <= Dl
-    Dl = 1.5 * A2 * dl * dl * (2.0 * r + dl)
     c1, ec1 = _c_bound(Ph, Vh, Ah, nP, nV, nA, cut1)
     c2, ec2 = _c_bound(Ph, Vh, Ah, nP, nV, nA, cut2)
     # Without cuts r = dl = 0 and cut1 = cut2 = t0, so the same tests read
@@ -388,8 +345,8 @@ def _fast_rel(Ph, Pl, Vh, Vl, Ah, Al, Rh, Rl, H):
     # a model root step exactly as _entry_step would take it (its fallbacks
     # are left to _solve_entry)
     root = (disc > 0.0) & ((c <= 0.0) | (a2 > 0.0))
-    done = ((tn >= 0.0) & (tn <= hi) & root & (ast * rel <= 1e-4 * _EPS * at)
-            & ((ast <= 64.0 * _EPS * at) | (_model_err(step, s, gd, Ah, A2) <= 1e-4 * _EPS * at)))
+    done = ((tn >= 0.0) & (tn <= hi) & root
+            & _polish_done(ast, at, rel, _model_err(step, s, gd, Ah, A2)))
     done = done | (f == 0.0)
     tn = t if f == 0.0 else tn
     res = tn if (contact & conv & done) else UNDECIDED

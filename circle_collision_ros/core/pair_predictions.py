@@ -23,7 +23,8 @@ from circle_collision_ros.core.narrow_phase import time_to_collision
 
 __all__ = ["PairPredictions", "predict_all_pairs"]
 
-#: Pairs per narrow-phase call; bounds the temporaries of a vectorised narrow phase.
+#: Pairs per call of the narrow phase and of contact_details: bounds the numpy
+#: temporaries of contact_details (about a dozen (rows, D) arrays per call).
 _CHUNK = 1 << 15
 
 

@@ -137,3 +137,151 @@ def reference(p_a, v_a, a_a, r_a, p_b, v_b, a_b, r_b, horizon=math.inf) -> Ref:
         else:
             cos = float(abs(dot(g, gd)) / (ng * ngd))
         return Ref(float(t), t, cos, ambiguous, fmin)
+
+
+# --------------------------------------------------------------------------
+# Exact-rational reference (issue 17): no rounding before the final one.
+# Independent of circle_collision_ros.core.narrow_exact (which counts roots
+# with Sturm sequences and bisects over float bit patterns): here real roots
+# of the square-free part are isolated with Descartes' rule of signs on
+# Moebius-transformed intervals (Vincent-Collins-Akritas bisection), the
+# first one refined by sign bisection until both ends round to the same
+# float64 (Python's float(Fraction) rounds correctly).
+# --------------------------------------------------------------------------
+from fractions import Fraction  # noqa: E402
+
+
+@dataclass
+class ExactRef:
+    t: float  # first contact time correctly rounded (0.0 / inf allowed)
+    lo: Fraction  # the exact time lies in [lo, hi] (lo == hi when known exactly)
+    hi: Fraction
+
+
+def _p_trim(p):
+    p = list(p)
+    while p and p[-1] == 0:
+        p.pop()
+    return p
+
+
+def _p_divmod(a, b):
+    a = [Fraction(x) for x in a]
+    q = [Fraction(0)] * max(len(a) - len(b) + 1, 1)
+    while len(a) >= len(b) and a:
+        k = a[-1] / b[-1]
+        sh = len(a) - len(b)
+        q[sh] = k
+        for i, c in enumerate(b):
+            a[sh + i] -= k * c
+        a = _p_trim(a[:-1])
+    return q, a
+
+
+def _p_eval(p, x):
+    r = Fraction(0)
+    for c in reversed(p):
+        r = r * x + c
+    return r
+
+
+def _squarefree(p):
+    d = [i * c for i, c in enumerate(p)][1:]
+    a, b = p, d
+    while b:
+        a, b = b, _p_divmod(a, b)[1]
+    if len(a) <= 1:
+        return p
+    return _p_divmod(p, a)[0]
+
+
+def _descartes(p, a, b):
+    """Sign variations of (1+x)^n p((a + b x)/(1+x)): bounds the number of
+    roots of p in (a, b) (exact when 0 or 1)."""
+    n = len(p) - 1
+    # q(x) = sum c_i (a + b x)^i (1 + x)^(n - i)
+    q = [Fraction(0)] * (n + 1)
+    for i, c in enumerate(p):
+        # (a + b x)^i (1 + x)^(n - i), by repeated multiplication
+        term = [Fraction(1)]
+        for _ in range(i):
+            term = [Fraction(0)] + term  # * x
+            term = [term[j] * b + (term[j + 1] * a if j + 1 < len(term) else 0) for j in range(len(term))]
+        for _ in range(n - i):
+            term = [(term[j] if j < len(term) else 0) + (term[j - 1] if j >= 1 else 0)
+                    for j in range(len(term) + 1)]
+        for j, t in enumerate(term):
+            q[j] += c * t
+    signs = [x > 0 for x in q if x != 0]
+    return sum(1 for u, v in zip(signs, signs[1:]) if u != v)
+
+
+def _isolate_first(p, a, b):
+    """Isolating interval (lo, hi) of the smallest root of square-free p in
+    (a, b], or None.  Endpoints are checked exactly."""
+    stack = [(a, b)]
+    while stack:
+        lo, hi = stack.pop()
+        if _p_eval(p, hi) == 0:
+            # a root at hi: the first one unless one lies in (lo, hi)
+            v = _descartes(p, lo, hi)
+            if v == 0:
+                return hi, hi
+        else:
+            v = _descartes(p, lo, hi)
+            if v == 0:
+                continue
+            if v == 1:
+                return lo, hi
+        mid = (lo + hi) / 2
+        stack.append((mid, hi))
+        stack.append((lo, mid))  # left half first
+    return None
+
+
+def exact_reference(p_a, v_a, a_a, r_a, p_b, v_b, a_b, r_b, horizon=math.inf) -> ExactRef:
+    """First contact from the binary64 inputs as given, decided exactly."""
+    F = lambda x: Fraction(float(x))  # noqa: E731
+    dp = [F(x) - F(y) for x, y in zip(p_a, p_b)]
+    dv = [F(x) - F(y) for x, y in zip(v_a, v_b)]
+    da = [F(x) - F(y) for x, y in zip(a_a, a_b)]
+    R = F(r_a) + F(r_b)
+    dot = lambda x, y: sum((i * j for i, j in zip(x, y)), Fraction(0))  # noqa: E731
+    c = [dot(dp, dp) - R * R, 2 * dot(dp, dv), dot(dv, dv) + dot(da, dp), dot(da, dv), dot(da, da) / 4]
+    zero = ExactRef(0.0, Fraction(0), Fraction(0))
+    never = ExactRef(math.inf, Fraction(0), Fraction(0))
+    if c[0] < 0:
+        return zero
+    k = 0
+    while k < 5 and c[k] == 0:
+        k += 1
+    if k == 5:
+        return never  # f == 0: touching for all time without approaching
+    if k > 0 and c[k] < 0:
+        return zero
+    p = _p_trim(c[k:])
+    if len(p) <= 1 or float(horizon) <= 0:
+        return never
+    if math.isfinite(horizon):
+        B = F(horizon)
+    else:  # Cauchy bound on the roots
+        B = 1 + max(abs(x / p[-1]) for x in p[:-1])
+    p = _squarefree(p)
+    iso = _isolate_first(p, Fraction(0), B)
+    if iso is None:
+        return never
+    lo, hi = iso
+    pos_lo = _p_eval(p, lo) > 0  # p(lo) != 0: a root at lo would be found first
+    while lo != hi and float(lo) != float(hi):
+        mid = (lo + hi) / 2
+        fm = _p_eval(p, mid)
+        if fm == 0:
+            lo = hi = mid
+        elif (fm > 0) == pos_lo:
+            lo = mid
+        else:
+            hi = mid
+    t = float(lo)
+    if t == 0.0:  # a positive root is never reported as 0 (that means overlap)
+        t = 5e-324
+    return ExactRef(t, lo, hi)

@@ -25,6 +25,7 @@ from numba import njit
 from circle_collision_ros.core import narrow_fast as nf
 from circle_collision_ros.core import narrow_phase as npz
 from circle_collision_ros.core.narrow_dd import pow2_scales
+from circle_collision_ros.core.narrow_exact import exact_first_contact
 from circle_collision_ros.core.narrow_fast import UNDECIDED, fast_rows
 from tests.core.test_narrow_phase_accuracy import mixed_pairs
 
@@ -41,8 +42,12 @@ def _robust(args, H):
     robust = npz._robust_pair2 if args[0].shape[1] == 2 else npz._robust_pair3
     Hs = np.broadcast_to(np.asarray(H, float), (args[3].shape[0],))
     pa, va, aa, ra, pb, vb, ab, rb = args
-    return np.array([robust(*pa[i], *va[i], *aa[i], ra[i], *pb[i], *vb[i], *ab[i], rb[i], float(Hs[i]))
-                     for i in range(ra.shape[0])])
+    out = np.array([robust(*pa[i], *va[i], *aa[i], ra[i], *pb[i], *vb[i], *ab[i], rb[i], float(Hs[i]))
+                    for i in range(ra.shape[0])])
+    # rows the robust solver cannot certify are decided exactly (as in the kernels)
+    for i in np.flatnonzero(out == UNDECIDED):
+        out[i] = exact_first_contact(pa[i], va[i], aa[i], ra[i], pb[i], vb[i], ab[i], rb[i], float(Hs[i]))
+    return out
 
 
 @pytest.mark.parametrize("D", [2, 3])

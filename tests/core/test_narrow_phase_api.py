@@ -234,3 +234,28 @@ def test_contact_details_inf_and_coincident():
     pt, n, vc = contact_details(np.zeros((3, 3)), np.zeros(3), np.zeros(3), 1.0,
                                 np.ones(3), np.zeros(3), np.zeros(3), 1.0, np.zeros(3))
     assert pt.shape == (3, 3) and n.shape == (3, 3) and vc.shape == (3,)
+
+
+def test_one_pair_from_sequences_is_the_batch_answer():
+    """One pair as lists, tuples or 1-D arrays (the scalar entry point) gives
+    the batch answer bit for bit, as a 0-d array; ints are cast like floats;
+    invalid rows give NaN; non-numbers get the general path's error."""
+    for D in (2, 3):
+        P = mixed_pairs(200, D, seed=5)
+        for H in (10.0, math.inf):
+            batch = time_to_collision(*P, horizon=H)
+            for i in range(0, 200, 7):
+                row = tuple(x[i] for x in P)
+                as_list = tuple(x.tolist() if np.ndim(x) else float(x) for x in row)
+                as_tuple = tuple(tuple(x) if isinstance(x, list) else x for x in as_list)
+                for args in (row, as_list, as_tuple):
+                    t = time_to_collision(*args, horizon=H)
+                    assert t.shape == () and t.dtype == np.float64
+                    assert t.tobytes() == batch[i].tobytes(), (D, H, i)
+    ints = ([3, 4], [-4, 3], [0, 0], 1, [0, 0], [0, 0], [0, 0], 1)
+    assert float(time_to_collision(*ints, horizon=10)) == float(
+        time_to_collision(*(np.asarray(x, float) for x in ints), horizon=10.0))
+    assert math.isnan(time_to_collision([0.0, 0.0], [0.0, 0.0], [0.0, 0.0], -1.0,
+                                        [1.0, 0.0], [0.0, 0.0], [0.0, 0.0], 0.0))
+    with pytest.raises(ValueError):
+        time_to_collision(["a", 0.0], [0.0, 0.0], [0.0, 0.0], 1.0, [1.0, 0.0], [0.0, 0.0], [0.0, 0.0], 0.0)

@@ -42,12 +42,11 @@ def test_fast_general_and_kernels_agree(D, H):
         assert _same(fast, time_to_collision(*args, horizon=int(H)))
     # every kernel variant, serial and threaded
     out = np.empty(3000)
-    for (d, par, scal), k in npz._KERNELS.items():
-        if d != D:
-            continue
-        out[:] = -1.0
-        k(*args, H if scal else np.full(3000, H), out)
-        assert _same(fast, out), (d, par, scal)
+    for par in (False, True):
+        for scal in (False, True):
+            out[:] = -1.0
+            npz._run(par, *args, H if scal else np.full(3000, H), out)
+            assert _same(fast, out), (D, par, scal)
 
 
 def test_planar_chain_equals_3d_with_zero_z():
@@ -112,13 +111,13 @@ def test_threaded_blocks_cover_every_row_once(n):
     args = _pairs(max(n, 1))
     args = tuple(np.ascontiguousarray(x[:n]) for x in args)
     ser = np.empty(n)
-    npz._KERNELS[(2, False, True)](*args, 10.0, ser)
+    npz._run(False, *args, 10.0, ser)
     for scal in (True, False):
         par = np.full(n, -1.0)
-        npz._KERNELS[(2, True, scal)](*args, 10.0 if scal else np.full(n, 10.0), par)
+        npz._run(True, *args, 10.0 if scal else np.full(n, 10.0), par)
         assert _same(ser, par), (n, scal)
     # 3-D chain with z = 0 through the threaded kernels too
     z = tuple(np.concatenate([x, np.zeros((n, 1))], axis=1) if x.ndim == 2 else x for x in args)
     par3 = np.full(n, -1.0)
-    npz._KERNELS[(3, True, True)](*z, 10.0, par3)
+    npz._run(True, *z, 10.0, par3)
     assert _same(ser, par3)
