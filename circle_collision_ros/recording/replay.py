@@ -15,8 +15,10 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import os
 import sys
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field, fields
 
 from nav_msgs.msg import Odometry
@@ -24,7 +26,8 @@ from rclpy.serialization import deserialize_message
 from std_msgs.msg import String
 
 from circle_collision_msgs.msg import CircleState, CircleStateArray, CollisionPredictionArray
-from circle_collision_ros.recording.bag_reader import RECORDED_TYPES, BagError, BagRecord, open_bag
+from circle_collision_ros.recording.bag_reader import (RECORDED_TYPES, BagContents, BagError, BagRecord,
+                                                      open_bag)
 from circle_collision_ros.pipeline.cdr_codec import CdrError, decode_states
 from circle_collision_ros.pipeline.odometry import (ODOMETRY_TYPE, OdometrySource,
                                                    odometry_batch)
@@ -78,6 +81,7 @@ class ReplayReport:
     pairs_compared: int = 0
     max_time_difference: float = 0.0
     mismatches: list[str] = field(default_factory=list)
+    truncated: str | None = None  # what cut the bag short (tolerant reading), else None
 
     @property
     def ok(self) -> bool:
@@ -110,7 +114,12 @@ def compare_predictions(recorded: CollisionPredictionArray, replayed: CollisionP
         report.mismatches.append(f"{where}: prediction order differs")
 
 
-def replay_offline(records, config: PredictorConfig | None = None) -> ReplayReport:
+PredictionHook = Callable[[int, CollisionPredictionArray, CollisionPredictionArray], None]
+"""on_prediction(log_time_ns, recorded, replayed), called once per compared prediction."""
+
+
+def replay_offline(records, config: PredictorConfig | None = None,
+                   on_prediction: PredictionHook | None = None) -> ReplayReport:
     """Re-run recorded records (BagRecord iterable, recorded order) through CollisionPredictor.
 
     Each input is received at its recorded log time; each recorded prediction is
@@ -145,6 +154,32 @@ def replay_offline(records, config: PredictorConfig | None = None) -> ReplayRepo
                                            CollisionPredictionArray)
             report.predictions += 1
             compare_predictions(recorded, replayed, f"prediction #{report.predictions}", report)
+            if on_prediction is not None:
+                on_prediction(record.log_time_ns, recorded, replayed)
+    return report
+
+
+def load_bag(path: str | os.PathLike[str], tolerant: bool = False) -> tuple[BagContents, list[BagRecord]]:
+    """Open a recording and read its records; BagError if it holds no circle states to replay."""
+    bag = open_bag(path, tolerant=tolerant, message_types=RECORDED_TYPES | {RecordedTypes.CONFIG})
+    records = list(bag.records())
+    if not any(r.type_name in RecordedTypes.INPUTS for r in records):
+        # One line, also when truncated (tests/reliability/test_fuzz_replay.py).
+        note = f" (truncated: {bag.problem})" if bag.truncated else ""
+        raise BagError(f"{bag.path}: no recorded circle states to replay{note}")
+    return bag, records
+
+
+def replay_bag(path: str | os.PathLike[str], *, tolerant: bool = False,
+               on_prediction: PredictionHook | None = None) -> ReplayReport:
+    """Replay one recording offline (the single-bag engine the corpus runner and pytest plugin call).
+
+    Raises BagError when the bag cannot be read; a message that does not
+    decode as its recorded type raises as its decoder does.
+    """
+    bag, records = load_bag(path, tolerant)
+    report = replay_offline(records, on_prediction=on_prediction)
+    report.truncated = bag.problem if bag.truncated else None
     return report
 
 
@@ -184,25 +219,29 @@ def republish(records: list[BagRecord], rate: float) -> int:
 
 
 def main(args: list[str] | None = None) -> int:
+    from circle_collision_ros.recording import corpus  # imports this module
+
     parser = argparse.ArgumentParser(prog="replay", description=__doc__.splitlines()[0])
-    parser.add_argument("bag", help="bag directory (metadata.yaml + .mcap) or .mcap file")
+    parser.add_argument("bag", nargs="+",
+                        help="bag directory (metadata.yaml + .mcap) or .mcap file; several, parent "
+                             "folders (searched recursively) or globs replay a corpus")
     parser.add_argument("--publish", action="store_true",
                         help="republish the recorded inputs on their topics instead of comparing")
     parser.add_argument("--rate", type=float, default=1.0,
                         help="pace factor for --publish (2 = twice as fast; default 1)")
     parser.add_argument("--tolerant", action="store_true",
                         help="read a truncated bag (e.g. after a hard kill) up to its last chunk")
+    corpus.add_arguments(parser)
     opts = parser.parse_args(sys.argv[1:] if args is None else args)
     if not (opts.rate > 0 and math.isfinite(opts.rate)):
         parser.error("--rate must be a positive number")
+    if corpus.is_corpus_run(opts):
+        if opts.publish:
+            parser.error("--publish takes one bag")
+        return corpus.run(opts)
+    opts.bag = opts.bag[0]
     try:
-        bag = open_bag(opts.bag, tolerant=opts.tolerant,
-                       message_types=RECORDED_TYPES | {RecordedTypes.CONFIG})
-        records = list(bag.records())
-        if not any(r.type_name in RecordedTypes.INPUTS for r in records):
-            # One line, also when truncated (tests/reliability/test_fuzz_replay.py).
-            note = f" (truncated: {bag.problem})" if bag.truncated else ""
-            raise BagError(f"{bag.path}: no recorded circle states to replay{note}")
+        bag, records = load_bag(opts.bag, opts.tolerant)
         truncated_note = (f"replay: {opts.bag}: truncated ({bag.problem}); using what was complete"
                           if bag.truncated else "")
         if opts.publish:
