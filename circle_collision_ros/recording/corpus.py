@@ -338,8 +338,9 @@ def run_on_dask(bags: list[str], address: str, results: Results, progress: Progr
 
     attempts = dict.fromkeys(bags, 1)
     with Client(address, timeout="30s") as client:
-        futures = {client.submit(replay_outcome, bag, tolerant, pure=False, key=f"replay-{i}-1"): bag
-                   for i, bag in enumerate(bags)}
+        # Absolute paths: a worker's working directory is not ours.
+        futures = {client.submit(replay_outcome, os.path.abspath(bag), tolerant, pure=False,
+                                 key=f"replay-{i}-1"): bag for i, bag in enumerate(bags)}
         index = {bag: i for i, bag in enumerate(bags)}
         pending = as_completed(futures)
         try:
@@ -352,7 +353,7 @@ def run_on_dask(bags: list[str], address: str, results: Results, progress: Progr
                     if attempts[bag] < MAX_ATTEMPTS:
                         attempts[bag] += 1
                         progress.retrying(bag, why)
-                        retry = client.submit(replay_outcome, bag, tolerant, pure=False,
+                        retry = client.submit(replay_outcome, os.path.abspath(bag), tolerant, pure=False,
                                               key=f"replay-{index[bag]}-{attempts[bag]}")
                         futures[retry] = bag
                         pending.add(retry)
@@ -361,7 +362,7 @@ def run_on_dask(bags: list[str], address: str, results: Results, progress: Progr
                 except Exception as exc:  # e.g. the package is missing on a worker
                     outcome = BagOutcome(bag, Verdict.FAILED, detail=f"{bag}: task failed: {exc!r}",
                                          attempts=attempts[bag])
-                outcome.attempts = attempts[bag]
+                outcome.path, outcome.attempts = bag, attempts[bag]
                 results[bag] = outcome
                 progress.finished(outcome)
         finally:
