@@ -19,26 +19,16 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 import pytest
 
 from circle_collision_ros.recording.corpus import BagOutcome, find_bags
 
+if TYPE_CHECKING:  # the decoder imports numba and the message package: only when replaying
+    from circle_collision_ros.recording.prediction_cdr import PairPrediction, PredictionArray
+
 MAX_DETAIL_LINES = 20
-
-
-@dataclass(frozen=True)
-class PairPrediction:
-    """One pair's entry in a replayed CollisionPredictionArray (units: s, m, m/s)."""
-
-    id_a: str
-    id_b: str
-    status: int                 # CollisionPrediction.NO_CONTACT / CONTACT / OVERLAPPING
-    time_to_collision: float    # s after the array's stamp; +inf when no contact
-    contact_time_ns: int
-    contact_point: tuple[float, float, float]
-    normal: tuple[float, float, float]
-    closing_speed: float
 
 
 @dataclass(frozen=True)
@@ -87,16 +77,10 @@ def replay_bag_result(path: str, tolerant: bool = False) -> ReplayResult:
 
     predictions: list[ReplayedPrediction] = []
 
-    def keep(log_time_ns: int, recorded, replayed) -> None:
-        stamp = replayed.header.stamp
-        predictions.append(ReplayedPrediction(
-            log_time_ns, stamp.sec * 1_000_000_000 + stamp.nanosec, replayed.horizon,
-            tuple(PairPrediction(p.id_a, p.id_b, p.status, p.time_to_collision,
-                                 p.contact_time.sec * 1_000_000_000 + p.contact_time.nanosec,
-                                 (p.contact_point.x, p.contact_point.y, p.contact_point.z),
-                                 (p.normal.x, p.normal.y, p.normal.z), p.closing_speed)
-                  for p in replayed.predictions),
-            recorded == replayed))
+    def keep(log_time_ns: int, recorded: PredictionArray, replayed: PredictionArray) -> None:
+        sec, nanosec, _ = replayed.header
+        predictions.append(ReplayedPrediction(log_time_ns, sec * 1_000_000_000 + nanosec, replayed.horizon,
+                                              replayed.predictions, recorded == replayed))
 
     report = replay_bag(path, tolerant=tolerant, on_prediction=keep)
     return ReplayResult(str(path), report.inputs, report.pairs_compared, report.max_time_difference,
