@@ -47,11 +47,13 @@ class RunSpec(NamedTuple):
 
 
 def plan(count: int) -> list[RunSpec]:
-    """Sizes spread over the range: bodies 25-70 and 4-10 s, every 4th run 3-D, every 5th with bad inputs."""
+    """Sizes spread over the range: bodies 25-70 and 4-10 s (3-D, every 4th run, 2 s longer: fewer
+    contacts), every 5th run with bad inputs."""
     specs = []
     for k in range(count):
         specs.append(RunSpec(name=f"run_{k:03d}", seed=100 + k, count=25 + (k * 7) % 46,
-                             duration=4.0 + (k * 5) % 7, dimensions=3 if k % 4 == 3 else 2,
+                             duration=4.0 + (k * 5) % 7 + (2 if k % 4 == 3 else 0),
+                             dimensions=3 if k % 4 == 3 else 2,
                              bad_fraction=0.03 if k % 5 == 4 else 0.0))
     return specs
 

@@ -14,6 +14,8 @@ Guarantees proved here:
 from __future__ import annotations
 
 import importlib.metadata
+import subprocess
+import sys
 
 import pytest
 
@@ -88,3 +90,12 @@ def test_replay_bag_fixture_gives_per_prediction_access(pytester: pytest.Pyteste
     ''')
     result = pytester.runpytest_subprocess("-p", "no:cacheprovider")
     result.assert_outcomes(passed=2)
+
+
+def test_loading_the_plugin_imports_no_ros_or_numba() -> None:
+    """pytest loads it in every run of every project in the environment: it must stay cheap."""
+    code = ("import sys, circle_collision_ros.recording.pytest_plugin; "
+            "print(sorted({m.split('.')[0] for m in sys.modules} & {'rclpy', 'numba', 'numpy', "
+            "'circle_collision_msgs', 'distributed', 'tqdm'}))")
+    run = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
+    assert run.returncode == 0 and run.stdout.strip() == "[]", run.stdout + run.stderr
