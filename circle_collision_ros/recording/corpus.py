@@ -72,9 +72,12 @@ class BagOutcome:
 
 def replay_outcome(path: str, tolerant: bool = False) -> BagOutcome:
     """Replay one bag in this process; never raises (a worker's task)."""
+    import numba
+
     from circle_collision_ros.recording.bag_reader import BagError
     from circle_collision_ros.recording.replay import replay_bag
 
+    numba.set_num_threads(1)  # one process per core: the solver's threaded kernels would oversubscribe
     started = time.perf_counter()
     try:
         report = replay_bag(path, tolerant=tolerant)
@@ -155,8 +158,13 @@ def find_bags(specs: Iterable[str]) -> tuple[list[str], list[BagOutcome]]:
 
 def _search(root: Path) -> list[Path]:
     found: list[Path] = []
-    for directory, subdirs, files in os.walk(root, followlinks=False):
+    visited: set[str] = set()
+    for directory, subdirs, files in os.walk(root, followlinks=True):  # corpora of symlinks are common
         here = Path(directory)
+        if os.path.realpath(here) in visited:  # a link loop or a second link to the same folder
+            subdirs.clear()
+            continue
+        visited.add(os.path.realpath(here))
         subdirs.sort()
         if BAG_METADATA in files:
             found.append(here)

@@ -98,6 +98,16 @@ def decode_prediction_array(data: bytes) -> PredictionArray:
     return PredictionArray(header, horizon, tuple(predictions))
 
 
+def peek_prediction_array(data: bytes) -> tuple[float, int]:
+    """(horizon, number of entries) of CollisionPredictionArray bytes, without decoding the entries."""
+    r = _Reader(data)
+    r.unpack(_TIME, 4)
+    r.string()
+    (horizon,) = r.unpack(_F64, 8)
+    (count,) = r.unpack(_U32, 4)
+    return horizon, count
+
+
 def decode_string(data: bytes) -> str:
     """std_msgs/String bytes -> its text; CdrError if malformed."""
     return _Reader(data).string()

@@ -6,6 +6,9 @@ compares every recorded prediction with the recomputed one, field by field
 (floats must be bit-identical). It prints messages replayed, pairs compared and
 the largest time difference, and exits 1 on any mismatch.
 
+`replay DIR...` (several bags, parent folders, globs) replays a whole corpus in
+parallel, locally or on a Dask cluster, and prints one summary (corpus.py).
+
 `replay BAG --publish` instead republishes the recorded inputs on their topics
 at the recorded pace (scaled by --rate), so a live node can be tested against
 a recording.
@@ -31,7 +34,8 @@ from circle_collision_ros.pipeline.odometry import (ODOMETRY_TYPE, OdometrySourc
                                                    odometry_batch)
 from circle_collision_ros.pipeline.state_batch import StateBatch
 from circle_collision_ros.pipeline.predictor import CollisionPredictor, PredictorConfig
-from circle_collision_ros.recording.prediction_cdr import PredictionArray, decode_prediction_array, decode_string
+from circle_collision_ros.recording.prediction_cdr import (PredictionArray, decode_prediction_array, decode_string,
+                                                           peek_prediction_array)
 
 
 class RecordedTypes:
@@ -142,21 +146,25 @@ def replay_offline(records, config: PredictorConfig | None = None,
                 predictor.receive_batch(batch, record.log_time_ns)
             report.inputs += 1
         elif record.type_name == RecordedTypes.PREDICTIONS:
-            recorded = decode_prediction_array(record.data)  # untrusted: never rclpy's deserializer
+            # Untrusted bytes: decoded by prediction_cdr, never by rclpy's deserializer.
+            horizon, entries = peek_prediction_array(record.data)
             predictor.expire(record.log_time_ns)
-            # The same bytes the node publishes: equal bytes are equal fields (the node
-            # records its own encoder's output, padding included), and only a difference
-            # needs the field-by-field comparison that says what differs.
-            replayed_bytes = predictor.predict(horizon=recorded.horizon).to_cdr()
+            # The same bytes the node publishes. Equal bytes are equal fields (the node
+            # records its own encoder's output, padding included); only a difference
+            # needs decoding and the field-by-field comparison that says what differs.
+            replayed_bytes = predictor.predict(horizon=horizon).to_cdr()
             report.predictions += 1
             if replayed_bytes == record.data:
-                replayed = recorded
-                report.pairs_compared += len({(p.id_a, p.id_b) for p in recorded.predictions})
+                report.pairs_compared += entries
+                if on_prediction is not None:
+                    recorded = decode_prediction_array(record.data)
+                    on_prediction(record.log_time_ns, recorded, recorded)
             else:
+                recorded = decode_prediction_array(record.data)
                 replayed = decode_prediction_array(replayed_bytes)
                 compare_predictions(recorded, replayed, f"prediction #{report.predictions}", report)
-            if on_prediction is not None:
-                on_prediction(record.log_time_ns, recorded, replayed)
+                if on_prediction is not None:
+                    on_prediction(record.log_time_ns, recorded, replayed)
     return report
 
 

@@ -226,3 +226,16 @@ def test_dask_workers_killed_mid_run_lose_no_bag(good_corpus: Path, dask_cluster
     assert len(rows) == 6 and all(v.startswith("identical") for v in rows.values())
     assert re.search(r"^retry \S+: worker died", out, re.M)
     assert any("attempts: 2" in v for v in rows.values())
+
+
+def test_find_bags_follows_symlinks_once(small_corpus, tmp_path: Path) -> None:
+    from circle_collision_ros.recording.corpus import find_bags
+
+    links = tmp_path / "links"
+    (links / "nested").mkdir(parents=True)
+    (links / "a").symlink_to(small_corpus.identical[0])
+    (links / "nested" / "b").symlink_to(small_corpus.identical[1])
+    (links / "nested" / "again").symlink_to(small_corpus.identical[0])  # same bag twice
+    (links / "nested" / "loop").symlink_to(links)                       # a cycle
+    bags, problems = find_bags([str(links)])
+    assert bags == [str(links / "a"), str(links / "nested" / "b")] and problems == []
