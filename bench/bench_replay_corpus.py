@@ -24,6 +24,7 @@ import cProfile
 import os
 import pstats
 import re
+import resource
 import subprocess
 import sys
 import tempfile
@@ -37,11 +38,33 @@ REPLAY = [sys.executable, "-m", "circle_collision_ros.recording.replay"]
 DEFAULT_CORPUS = ROOT / "bench" / ".cache" / "corpus"
 
 
+def _cpu_seconds() -> tuple[float, float]:
+    """(CPU s used by our finished children, CPU s used by the whole machine) so far."""
+    children = resource.getrusage(resource.RUSAGE_CHILDREN)
+    with open("/proc/stat") as f:
+        fields = [int(x) for x in f.readline().split()[1:]]
+    busy = sum(fields) - fields[3] - fields[4]  # all but idle and iowait
+    return children.ru_utime + children.ru_stime, busy / os.sysconf("SC_CLK_TCK")
+
+
 def replay_wall(args: list[str]) -> tuple[float, float, int]:
-    """(wall s from replay's summary, sum of per-bag worker seconds, bags) of one corpus run."""
+    """(wall s from replay's summary, sum of per-bag worker seconds, bags) of one corpus run.
+
+    Also prints the CPU time the run used and what the rest of the machine used
+    meanwhile (local runs: the workers are the command's children).
+    """
     with tempfile.TemporaryDirectory() as tmp:
         junit = Path(tmp) / "r.xml"
+        ours0, machine0 = _cpu_seconds()
+        t0 = time.monotonic()
         run = subprocess.run(REPLAY + args + ["--junit-xml", str(junit)], capture_output=True, text=True)
+        ours1, machine1 = _cpu_seconds()
+        elapsed = time.monotonic() - t0
+        if "--cluster" not in args:  # Dask workers are not the command's children
+            print(f"  replay {' '.join(a for a in args if not a.startswith('/'))}: {elapsed:.1f} s, "
+                  f"CPU used by it {ours1 - ours0:.1f} s, by other processes "
+                  f"{machine1 - machine0 - (ours1 - ours0):.1f} s, of {os.cpu_count() * elapsed:.1f} s",
+                  flush=True)
         if run.returncode not in (0, 2) or "wall time" not in run.stdout:
             raise SystemExit(f"replay failed ({run.returncode}): {run.stdout[-2000:]}{run.stderr[-2000:]}")
         wall = float(re.search(r"^wall time: ([\d.]+) s", run.stdout, re.M).group(1))
