@@ -47,8 +47,8 @@ def _cpu_seconds() -> tuple[float, float]:
     return children.ru_utime + children.ru_stime, busy / os.sysconf("SC_CLK_TCK")
 
 
-def replay_wall(args: list[str]) -> tuple[float, float, int]:
-    """(wall s from replay's summary, sum of per-bag worker seconds, bags) of one corpus run.
+def replay_wall(args: list[str]) -> tuple[float, float, int, float | None]:
+    """(wall s from replay's summary, sum of per-bag worker seconds, bags, CPU cores used) of one run.
 
     Also prints the CPU time the run used and what the rest of the machine used
     meanwhile (local runs: the workers are the command's children).
@@ -69,10 +69,11 @@ def replay_wall(args: list[str]) -> tuple[float, float, int]:
             raise SystemExit(f"replay failed ({run.returncode}): {run.stdout[-2000:]}{run.stderr[-2000:]}")
         wall = float(re.search(r"^wall time: ([\d.]+) s", run.stdout, re.M).group(1))
         cases = list(ET.parse(junit).getroot().iter("testcase"))
-        return wall, sum(float(c.get("time")) for c in cases), len(cases)
+        cores = None if "--cluster" in args else (ours1 - ours0) / elapsed
+        return wall, sum(float(c.get("time")) for c in cases), len(cases), cores
 
 
-def best(args: list[str], repeat: int) -> tuple[float, float, int]:
+def best(args: list[str], repeat: int) -> tuple[float, float, int, float | None]:
     return min((replay_wall(args) for _ in range(repeat)), key=lambda r: r[0])
 
 
@@ -86,6 +87,12 @@ def compare(label: str, target: float, runs: dict[int, list[tuple[float, float, 
     print(f"{label}, {one[2]} bags: 1 worker {one[0]:.2f} s, 2 workers {two[0]:.2f} s -> speedup "
           f"{one[0] / two[0]:.2f}x (target >= {target}x); replay time summed over bags "
           f"{one[1]:.1f} s vs {two[1]:.1f} s   [{load()}]", flush=True)
+    if one[3] is not None:
+        autogroup = Path("/proc/sys/kernel/sched_autogroup_enabled")
+        print(f"  CPU the run got: {one[3]:.2f} cores with 1 worker, {two[3]:.2f} cores with 2 workers"
+              + ("; the kernel shares CPU fairly between sessions (sched_autogroup_enabled=1), so on a "
+                 "machine busy with other sessions more workers in one session get no more CPU"
+                 if autogroup.exists() and autogroup.read_text().strip() == "1" else ""), flush=True)
 
 
 def local_speedup(corpus: Path, repeat: int) -> None:
@@ -110,10 +117,10 @@ def dask_runs(corpus: Path, tiny: Path, repeat: int) -> None:
                 address = cluster.scheduler_address
                 walls[workers] = best([str(corpus), "--cluster", address], repeat)
                 if workers == 1:
-                    wall, worked, bags = walls[1]
+                    wall, worked, bags, _ = walls[1]
                     print(f"Dask engine overhead per bag (1 worker, recorded bags): "
                           f"{(wall - worked) / bags * 1e3:.1f} ms", flush=True)
-                    wall, worked, bags = best([str(tiny), "--cluster", address], repeat)
+                    wall, worked, bags, _ = best([str(tiny), "--cluster", address], repeat)
                     print(f"Dask engine overhead per bag (1 worker, {bags} tiny tasks): "
                           f"{(wall - worked) / bags * 1e3:.1f} ms; per tiny task end to end "
                           f"{wall / bags * 1e3:.1f} ms", flush=True)
