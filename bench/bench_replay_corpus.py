@@ -111,7 +111,7 @@ def dask_runs(corpus: Path, tiny: Path, repeat: int) -> None:
     with dask.config.set({"distributed.scheduler.allowed-failures": 0}):
         for workers in (1, 2):
             with LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
-                              dashboard_address=None, host="127.0.0.1") as cluster, \
+                              dashboard_address=":0", host="127.0.0.1") as cluster, \
                     Client(cluster.scheduler_address) as client:
                 client.run(lambda: __import__("circle_collision_ros.recording.replay"))  # warm workers
                 address = cluster.scheduler_address
