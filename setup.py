@@ -31,5 +31,9 @@ setup(
     description="Predicts when moving circles and spheres will first touch.",
     license="Apache-2.0",
     python_requires=">=3.10",
-    entry_points={"console_scripts": CONSOLE_SCRIPTS},
+    entry_points={
+        "console_scripts": CONSOLE_SCRIPTS,
+        # pytest loads it in every run (cheap: no ROS import until a bag is replayed).
+        "pytest11": ["circle_collision_replay = circle_collision_ros.recording.pytest_plugin"],
+    },
 )

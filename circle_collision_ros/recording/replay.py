@@ -6,6 +6,9 @@ compares every recorded prediction with the recomputed one, field by field
 (floats must be bit-identical). It prints messages replayed, pairs compared and
 the largest time difference, and exits 1 on any mismatch.
 
+`replay DIR...` (several bags, parent folders, globs) replays a whole corpus in
+parallel, locally or on a Dask cluster, and prints one summary (corpus.py).
+
 `replay BAG --publish` instead republishes the recorded inputs on their topics
 at the recorded pace (scaled by --rate), so a live node can be tested against
 a recording.
@@ -15,22 +18,25 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import os
 import sys
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field, fields
 
 from nav_msgs.msg import Odometry
-from rclpy.serialization import deserialize_message
-from std_msgs.msg import String
 
-from circle_collision_msgs.msg import CircleState, CircleStateArray, CollisionPredictionArray
-from circle_collision_ros.recording.bag_reader import RECORDED_TYPES, BagError, BagRecord, open_bag
+from circle_collision_msgs.msg import CircleState, CircleStateArray
+from circle_collision_ros.recording.bag_reader import (RECORDED_TYPES, BagContents, BagError, BagRecord,
+                                                      open_bag)
 from circle_collision_ros.pipeline.cdr_codec import CdrError, decode_states
 from circle_collision_ros.pipeline.odometry import (ODOMETRY_TYPE, OdometrySource,
                                                    odometry_batch)
 from circle_collision_ros.pipeline.state_batch import StateBatch
 from circle_collision_ros.pipeline.predictor import RUNTIME_FIELDS, CollisionPredictor, PredictorConfig
 from circle_collision_ros.pipeline.state_groups import ingest_single_states
+from circle_collision_ros.recording.prediction_cdr import (PredictionArray, decode_prediction_array, decode_string,
+                                                           peek_prediction_array)
 
 
 class RecordedTypes:
@@ -77,19 +83,16 @@ class ReplayReport:
     pairs_compared: int = 0
     max_time_difference: float = 0.0
     mismatches: list[str] = field(default_factory=list)
+    truncated: str | None = None  # what cut the bag short (tolerant reading), else None
 
     @property
     def ok(self) -> bool:
         return not self.mismatches
 
 
-def compare_predictions(recorded: CollisionPredictionArray, replayed: CollisionPredictionArray,
+def compare_predictions(recorded: PredictionArray, replayed: PredictionArray,
                         where: str, report: ReplayReport) -> None:
-    """Field-by-field comparison; exact, because replay must be bit-identical.
-
-    Serialized bytes are not compared: Fast CDR leaves alignment padding
-    uninitialised, so equal messages need not have equal bytes.
-    """
+    """Field-by-field comparison; exact, because replay must be bit-identical."""
     if (recorded.header, recorded.horizon) != (replayed.header, replayed.horizon):
         report.mismatches.append(f"{where}: header/horizon differ")
     a = {(p.id_a, p.id_b): p for p in recorded.predictions}
@@ -109,7 +112,12 @@ def compare_predictions(recorded: CollisionPredictionArray, replayed: CollisionP
         report.mismatches.append(f"{where}: prediction order differs")
 
 
-def replay_offline(records, config: PredictorConfig | None = None) -> ReplayReport:
+PredictionHook = Callable[[int, PredictionArray, PredictionArray], None]
+"""on_prediction(log_time_ns, recorded, replayed), called once per compared prediction."""
+
+
+def replay_offline(records, config: PredictorConfig | None = None,
+                   on_prediction: PredictionHook | None = None) -> ReplayReport:
     """Re-run recorded records (BagRecord iterable, recorded order) through CollisionPredictor.
 
     Each input is received at its recorded log time; each recorded prediction is
@@ -140,7 +148,7 @@ def replay_offline(records, config: PredictorConfig | None = None) -> ReplayRepo
         if run and not (record.type_name == RecordedTypes.STATE and record.log_time_ns == run_time):
             flush()
         if record.type_name == RecordedTypes.CONFIG:
-            text = deserialize_message(record.data, String).data
+            text = decode_string(record.data)
             recorded = config_from_json(text)
             odometry = odometry_from_json(text) or odometry
             if predictor is None:
@@ -164,14 +172,50 @@ def replay_offline(records, config: PredictorConfig | None = None) -> ReplayRepo
         elif record.type_name == RecordedTypes.PREDICTIONS:
             report.coalesced += max(0, unanswered - 1)
             unanswered = 0
-            recorded = deserialize_message(record.data, CollisionPredictionArray)
+            # Untrusted bytes: decoded by prediction_cdr, never by rclpy's deserializer.
+            horizon, entries = peek_prediction_array(record.data)
             predictor.expire(record.log_time_ns)
-            # The same bytes the node publishes, decoded the same way as the recording.
-            replayed = deserialize_message(predictor.predict(horizon=recorded.horizon).to_cdr(),
-                                           CollisionPredictionArray)
+            # The same bytes the node publishes. Equal bytes are equal fields (the node
+            # records its own encoder's output, padding included); only a difference
+            # needs decoding and the field-by-field comparison that says what differs.
+            replayed_bytes = predictor.predict(horizon=horizon).to_cdr()
             report.predictions += 1
-            compare_predictions(recorded, replayed, f"prediction #{report.predictions}", report)
+            if replayed_bytes == record.data:
+                report.pairs_compared += entries
+                if on_prediction is not None:
+                    recorded = decode_prediction_array(record.data)
+                    on_prediction(record.log_time_ns, recorded, recorded)
+            else:
+                recorded = decode_prediction_array(record.data)
+                replayed = decode_prediction_array(replayed_bytes)
+                compare_predictions(recorded, replayed, f"prediction #{report.predictions}", report)
+                if on_prediction is not None:
+                    on_prediction(record.log_time_ns, recorded, replayed)
     flush()
+    return report
+
+
+def load_bag(path: str | os.PathLike[str], tolerant: bool = False) -> tuple[BagContents, list[BagRecord]]:
+    """Open a recording and read its records; BagError if it holds no circle states to replay."""
+    bag = open_bag(path, tolerant=tolerant, message_types=RECORDED_TYPES | {RecordedTypes.CONFIG})
+    records = list(bag.records())
+    if not any(r.type_name in RecordedTypes.INPUTS for r in records):
+        # One line, also when truncated (tests/reliability/test_fuzz_replay.py).
+        note = f" (truncated: {bag.problem})" if bag.truncated else ""
+        raise BagError(f"{bag.path}: no recorded circle states to replay{note}")
+    return bag, records
+
+
+def replay_bag(path: str | os.PathLike[str], *, tolerant: bool = False,
+               on_prediction: PredictionHook | None = None) -> ReplayReport:
+    """Replay one recording offline (the single-bag engine the corpus runner and pytest plugin call).
+
+    Raises BagError when the bag cannot be read; a message that does not
+    decode as its recorded type raises as its decoder does.
+    """
+    bag, records = load_bag(path, tolerant)
+    report = replay_offline(records, on_prediction=on_prediction)
+    report.truncated = bag.problem if bag.truncated else None
     return report
 
 
@@ -211,25 +255,29 @@ def republish(records: list[BagRecord], rate: float) -> int:
 
 
 def main(args: list[str] | None = None) -> int:
+    from circle_collision_ros.recording import corpus  # imports this module
+
     parser = argparse.ArgumentParser(prog="replay", description=__doc__.splitlines()[0])
-    parser.add_argument("bag", help="bag directory (metadata.yaml + .mcap) or .mcap file")
+    parser.add_argument("bag", nargs="+",
+                        help="bag directory (metadata.yaml + .mcap) or .mcap file; several, parent "
+                             "folders (searched recursively) or globs replay a corpus")
     parser.add_argument("--publish", action="store_true",
                         help="republish the recorded inputs on their topics instead of comparing")
     parser.add_argument("--rate", type=float, default=1.0,
                         help="pace factor for --publish (2 = twice as fast; default 1)")
     parser.add_argument("--tolerant", action="store_true",
                         help="read a truncated bag (e.g. after a hard kill) up to its last chunk")
+    corpus.add_arguments(parser)
     opts = parser.parse_args(sys.argv[1:] if args is None else args)
     if not (opts.rate > 0 and math.isfinite(opts.rate)):
         parser.error("--rate must be a positive number")
+    if corpus.is_corpus_run(opts):
+        if opts.publish:
+            parser.error("--publish takes one bag")
+        return corpus.run(opts)
+    opts.bag = opts.bag[0]
     try:
-        bag = open_bag(opts.bag, tolerant=opts.tolerant,
-                       message_types=RECORDED_TYPES | {RecordedTypes.CONFIG})
-        records = list(bag.records())
-        if not any(r.type_name in RecordedTypes.INPUTS for r in records):
-            # One line, also when truncated (tests/reliability/test_fuzz_replay.py).
-            note = f" (truncated: {bag.problem})" if bag.truncated else ""
-            raise BagError(f"{bag.path}: no recorded circle states to replay{note}")
+        bag, records = load_bag(opts.bag, opts.tolerant)
         truncated_note = (f"replay: {opts.bag}: truncated ({bag.problem}); using what was complete"
                           if bag.truncated else "")
         if opts.publish:

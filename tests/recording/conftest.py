@@ -1,0 +1,90 @@
+"""A small replay corpus built from the recorded test bags (real node runs), for corpus and plugin tests."""
+from __future__ import annotations
+
+import math
+import shutil
+from collections.abc import Callable
+from pathlib import Path
+from typing import NamedTuple
+
+import numpy as np
+import pytest
+
+DATA = Path(__file__).resolve().parents[1] / "data"
+
+
+def copy_bag(source: Path, out: Path, keep_predictions: int | None = None,
+             change: Callable | None = None) -> Path:
+    """Copy a bag record by record: the first `keep_predictions` predictions and what precedes them.
+
+    A prefix of a recording replays exactly as the whole did up to that point,
+    so a short copy of a bit-identical bag is bit-identical too.
+    """
+    from circle_collision_ros.recording.bag_reader import RECORDED_TYPES, open_bag
+    from circle_collision_ros.recording.bag_recorder import BagRecorder
+    from circle_collision_ros.recording.replay import RecordedTypes
+
+    contents = open_bag(source, message_types=RECORDED_TYPES | {RecordedTypes.CONFIG})
+    predictions = 0
+    with BagRecorder(out) as rec:
+        for info in contents.topics.values():
+            rec.add_topic(info.topic, info.type_name)
+        for r in contents.records():
+            if r.type_name == RecordedTypes.PREDICTIONS:
+                predictions += 1
+                if keep_predictions is not None and predictions > keep_predictions:
+                    break
+            rec.write(r.topic, change(r) if change else r.data, r.log_time_ns, r.publish_time_ns)
+    return out
+
+
+def nudge_first_contact(record) -> bytes:
+    """Move the first finite time_to_collision in a prediction record up by one ulp."""
+    from rclpy.serialization import deserialize_message, serialize_message
+
+    from circle_collision_msgs.msg import CollisionPredictionArray
+    from circle_collision_ros.recording.replay import RecordedTypes
+
+    if record.type_name != RecordedTypes.PREDICTIONS:
+        return record.data
+    msg = deserialize_message(record.data, CollisionPredictionArray)
+    finite = [p for p in msg.predictions if 0 < p.time_to_collision < math.inf]
+    if not finite:
+        return record.data
+    finite[0].time_to_collision = float(np.nextafter(finite[0].time_to_collision, math.inf))
+    return serialize_message(msg)
+
+
+class Corpus(NamedTuple):
+    root: Path                 # parent folder holding everything below
+    identical: list[Path]      # short copies of the recorded bags, in nested folders
+    mismatch: Path             # a bag with one-ulp changes in its recorded predictions
+    truncated: Path            # a .mcap cut in half
+    not_a_bag: Path            # a text file named like a recording
+
+
+@pytest.fixture(scope="session")
+def small_corpus(tmp_path_factory: pytest.TempPathFactory) -> Corpus:
+    root = tmp_path_factory.mktemp("corpus")
+    identical = [
+        copy_bag(DATA / "plain_2d", root / "robot_a" / "run_1", keep_predictions=30),
+        copy_bag(DATA / "spheres_3d", root / "robot_a" / "run_2", keep_predictions=20),
+        copy_bag(DATA / "bad_inputs_2d", root / "robot_b" / "2026" / "run_3", keep_predictions=30),
+    ]
+    mismatch = copy_bag(DATA / "plain_2d", root / "robot_b" / "run_4", keep_predictions=30,
+                        change=nudge_first_contact)
+    source = next((DATA / "plain_2d").glob("*.mcap")).read_bytes()
+    truncated = root / "robot_c" / "cut.mcap"
+    truncated.parent.mkdir()
+    truncated.write_bytes(source[: len(source) // 2])
+    not_a_bag = root / "robot_c" / "notes.mcap"
+    not_a_bag.write_text("not a recording\n")
+    return Corpus(root, identical, mismatch, truncated, not_a_bag)
+
+
+@pytest.fixture
+def good_corpus(small_corpus: Corpus, tmp_path: Path) -> Path:
+    """A folder holding only the identical bags (copied)."""
+    for bag in small_corpus.identical:
+        shutil.copytree(bag, tmp_path / "good" / bag.name)
+    return tmp_path / "good"
