@@ -378,8 +378,10 @@ def run_streams(bodies: int, rate: float, seconds: float) -> dict:
         run.close()
 
 
-def run_arrays(bodies: int, rate: float, seconds: float, marker_rate: float) -> dict:
-    run = ScenarioRun({"marker_rate": str(float(marker_rate)), "max_bodies": "100000"})
+def run_arrays(bodies: int, rate: float, seconds: float, marker_rate: float,
+               state_reliability: str = "best_effort") -> dict:
+    run = ScenarioRun({"marker_rate": str(float(marker_rate)), "max_bodies": "100000",
+                       "state_reliability": state_reliability})
     try:
         pub = run.client.create_publisher(CircleStateArray, "circle_states",
                                           QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE))
@@ -408,11 +410,21 @@ def run_arrays(bodies: int, rate: float, seconds: float, marker_rate: float) -> 
         diag = run.diagnostics_after(2.2)
         counts = _node_counts(diag)
         label = f"{bodies} bodies in arrays, {rate:.0f} Hz, markers " + (
-            f"{marker_rate:g} Hz" if marker_rate else "off")
+            f"{marker_rate:g} Hz" if marker_rate else "off") + (
+            ", reliable KEEP_LAST 1" if state_reliability == "reliable" else "")
         return {"scenario": label, "bodies": bodies, "rate_hz": rate, "marker_rate": marker_rate,
                 **run.latencies(), **counts, "frames": frames, "warmup_frames": 5}
     finally:
         run.close()
+
+
+def measure_qos(seconds: float) -> list[dict]:
+    """Issue 19: best-effort (+ the shipped profile) against reliable KEEP_LAST 1 inputs, same run."""
+    rows = []
+    for bodies, rate in ((1000, 30.0), (5000, 30.0), (10000, 10.0)):
+        for reliability in ("best_effort", "reliable"):
+            rows.append(run_arrays(bodies, rate, seconds, marker_rate=10.0, state_reliability=reliability))
+    return rows
 
 
 def measure_targets(seconds: float) -> list[dict]:
@@ -471,12 +483,15 @@ def main() -> int:
     parser.add_argument("--receive", help=argparse.SUPPRESS)  # internal: the receiver process
     parser.add_argument("--targets", action="store_true",
                         help="run the issue-14 target scenarios instead (see the module docstring)")
+    parser.add_argument("--qos", action="store_true",
+                        help="compare best-effort and reliable KEEP_LAST 1 state subscriptions at "
+                             "1,000/5,000/10,000 bodies (issue 19)")
     opts = parser.parse_args()
     seconds = 3.0 if opts.quick else opts.seconds
     if opts.receive:
         return receive_predictions(opts.receive)
-    if opts.targets:
-        rows = measure_targets(seconds)
+    if opts.targets or opts.qos:
+        rows = measure_targets(seconds) if opts.targets else measure_qos(seconds)
         print(targets_table(rows))
         if opts.json:
             Path(opts.json).write_text(json.dumps(rows, indent=2))
