@@ -23,14 +23,14 @@ import sys
 import time
 from pathlib import Path
 
-import numpy as np
 import pytest
 from rclpy.serialization import deserialize_message, serialize_message
 
-from circle_collision_msgs.msg import CircleStateArray, CollisionPredictionArray
+from circle_collision_msgs.msg import CircleStateArray
 from circle_collision_ros.recording.bag_reader import RECORDED_TYPES, open_bag
 from circle_collision_ros.recording.bag_recorder import BagRecorder
 from circle_collision_ros.recording.replay import RecordedTypes, replay_offline
+from tests.recording.bag_edits import nudge_first_contact
 
 DATA = Path(__file__).resolve().parent / "data"
 BAGS = sorted(p for p in DATA.iterdir() if (p / "metadata.yaml").is_file())
@@ -85,16 +85,13 @@ def _rewrite(bag: Path, out: Path, change) -> None:
 def test_a_one_ulp_change_is_a_mismatch(tmp_path: Path) -> None:
     changed = []
 
-    def nudge(record) -> bytes:
-        if record.type_name != RecordedTypes.PREDICTIONS or changed:
+    def nudge(record) -> bytes:  # the first prediction with a finite contact only
+        if changed:
             return record.data
-        msg = deserialize_message(record.data, CollisionPredictionArray)
-        finite = [p for p in msg.predictions if 0 < p.time_to_collision < math.inf]
-        if not finite:
-            return record.data
-        finite[0].time_to_collision = float(np.nextafter(finite[0].time_to_collision, math.inf))
-        changed.append(True)
-        return serialize_message(msg)
+        data = nudge_first_contact(record)
+        if data is not record.data:
+            changed.append(True)
+        return data
 
     _rewrite(DATA / "plain_2d", tmp_path / "nudged", nudge)
     assert changed

@@ -1,14 +1,14 @@
 """A small replay corpus built from the recorded test bags (real node runs), for corpus and plugin tests."""
 from __future__ import annotations
 
-import math
 import shutil
 from collections.abc import Callable
 from pathlib import Path
 from typing import NamedTuple
 
-import numpy as np
 import pytest
+
+from tests.recording.bag_edits import nudge_first_contact
 
 DATA = Path(__file__).resolve().parents[1] / "data"
 
@@ -36,23 +36,6 @@ def copy_bag(source: Path, out: Path, keep_predictions: int | None = None,
                     break
             rec.write(r.topic, change(r) if change else r.data, r.log_time_ns, r.publish_time_ns)
     return out
-
-
-def nudge_first_contact(record) -> bytes:
-    """Move the first finite time_to_collision in a prediction record up by one ulp."""
-    from rclpy.serialization import deserialize_message, serialize_message
-
-    from circle_collision_msgs.msg import CollisionPredictionArray
-    from circle_collision_ros.recording.replay import RecordedTypes
-
-    if record.type_name != RecordedTypes.PREDICTIONS:
-        return record.data
-    msg = deserialize_message(record.data, CollisionPredictionArray)
-    finite = [p for p in msg.predictions if 0 < p.time_to_collision < math.inf]
-    if not finite:
-        return record.data
-    finite[0].time_to_collision = float(np.nextafter(finite[0].time_to_collision, math.inf))
-    return serialize_message(msg)
 
 
 class Corpus(NamedTuple):
