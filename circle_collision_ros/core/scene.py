@@ -105,6 +105,9 @@ class SceneContacts:
     point: np.ndarray
     normal: np.ndarray
     closing_speed: np.ndarray
+    #: The ids as UTF-8 for encoders: ``(blob, start_a, len_a, start_b, len_b)``,
+    #: row k's id_a is ``blob[start_a[k]:start_a[k] + len_a[k]]`` (None: ids not all str).
+    id_utf8: tuple | None = None
 
     def __len__(self) -> int:
         return int(self.ttc.shape[0])
@@ -195,6 +198,13 @@ class Scene:
         self._alive = np.zeros(cap, dtype=bool)
         self._ids = np.full(cap, None, dtype=object)
         self._rank = np.full(cap, -1, dtype=np.int64)
+        # Each id's UTF-8 bytes in an append-only blob (published contacts keep
+        # referring to the blob of their time; growth and compaction copy).
+        self._id_start = np.zeros(cap, dtype=np.int64)
+        self._id_len = np.zeros(cap, dtype=np.int64)
+        self._utf8 = np.zeros(1024, dtype=np.uint8)
+        self._utf8_n = 0
+        self._utf8_ok = True  # every id seen since clear() is a str
         self._okeys: list = []
         self._rank_ok = True
         self._order = None  # alive slots in id order (cached until membership changes)
@@ -371,6 +381,8 @@ class Scene:
             self._alive[s] = True
             self._rank_insert(s)
             slots[x] = s
+        if fresh.size:
+            self._add_utf8(slots[fresh])
         take = newer.copy()
         take[full] = False
         sl, src = slots[take], rows[take]
@@ -455,7 +467,8 @@ class Scene:
                 grown[:old] = getattr(self, name)
                 setattr(self, name, grown)
             for name, dt in (("_R", np.float64), ("_T", np.int64), ("_Tf", np.float64),
-                             ("_recv", np.int64), ("_alive", bool), ("_rank", np.int64)):
+                             ("_recv", np.int64), ("_alive", bool), ("_rank", np.int64),
+                             ("_id_start", np.int64), ("_id_len", np.int64)):
                 grown = np.full(new, -1 if name == "_rank" else 0, dtype=dt)
                 grown[:old] = getattr(self, name)
                 setattr(self, name, grown)
@@ -468,6 +481,47 @@ class Scene:
                 self._gstale = stale
             self._free = list(range(new - 1, old - 1, -1))
         return self._free.pop()
+
+    def _add_utf8(self, slots: np.ndarray) -> None:
+        """Append the UTF-8 bytes of the ids of new `slots` to the id blob."""
+        names = self._ids[slots].tolist()
+        if not self._utf8_ok or not all(type(x) is str for x in names):
+            self._utf8_ok = False
+            return
+        joined = "".join(names)
+        if joined.isascii():
+            lengths = np.fromiter(map(len, names), dtype=np.int64, count=len(names))
+            data = joined.encode("ascii")
+        else:
+            encoded = [x.encode() for x in names]
+            lengths = np.fromiter(map(len, encoded), dtype=np.int64, count=len(names))
+            data = b"".join(encoded)
+        n, k = self._utf8_n, len(data)
+        if n + k > self._utf8.shape[0]:
+            live = np.flatnonzero(self._alive)
+            live = live[~np.isin(live, slots)]
+            used = int(self._id_len[live].sum())
+            if n > 2 * used + 4096:  # mostly ids of removed bodies: keep only the live ones
+                blob = np.zeros(max(1024, 2 * (used + k)), dtype=np.uint8)
+                pos = 0
+                for s in live.tolist():
+                    m = int(self._id_len[s])
+                    blob[pos:pos + m] = self._utf8[self._id_start[s]:self._id_start[s] + m]
+                    self._id_start[s] = pos
+                    pos += m
+                n = pos
+            else:
+                blob = np.zeros(max(1024, 2 * (n + k)), dtype=np.uint8)
+                blob[:n] = self._utf8[:n]
+            self._utf8 = blob
+        self._utf8[n:n + k] = np.frombuffer(data, dtype=np.uint8)
+        starts = np.empty(len(names), dtype=np.int64)
+        starts[0] = n
+        np.cumsum(lengths[:-1], out=starts[1:])
+        starts[1:] += n
+        self._id_start[slots] = starts
+        self._id_len[slots] = lengths
+        self._utf8_n = n + k
 
     # ------------------------------------------------------------------ states
     def snapshot(self) -> SceneSnapshot:
@@ -500,11 +554,21 @@ class Scene:
 
     # ------------------------------------------------------------ pair engine
     def _bounds(self, slots: np.ndarray):
+        """Swept bounds over ``[max(E, T), E + S + H]`` (relative to each state's stamp)."""
         E = self._epoch
         tr = self._T[slots]
         t0 = (np.maximum(E, tr) - tr).astype(np.float64) * 1e-9
         t1 = (E + self._slack_ns - tr).astype(np.float64) * 1e-9 + self._h
-        return _bp.swept_bounds(self._P[slots], self._V[slots], self._A[slots], self._R[slots], t0, t1)
+        return t0, t1
+
+    def _set_bounds(self, slots: np.ndarray) -> None:
+        """self._lo/_hi[slots] = the swept bounds (few slots: compiled, bitwise the same)."""
+        t0, t1 = self._bounds(slots)
+        if slots.size <= 64:
+            _sk.swept_bound_rows(self._P, self._V, self._A, self._R, slots, t0, t1, self._lo, self._hi)
+        else:
+            self._lo[slots], self._hi[slots] = _bp.swept_bounds(
+                self._P[slots], self._V[slots], self._A[slots], self._R[slots], t0, t1)
 
     #: Below this many pairs the compiled row loop (scene_kernels.evaluate_rows) beats the
     #: vectorised batch (numpy set-up costs ~0.3 ms a call); both give the same bits.
@@ -562,9 +626,7 @@ class Scene:
         slots = self._sorted_slots()
         if slots.size:
             self._Tf[slots] = (self._T[slots] - self._epoch).astype(np.float64) * 1e-9
-            lo, hi = self._bounds(slots)
-            self._lo[slots] = lo
-            self._hi[slots] = hi
+            self._set_bounds(slots)
         if slots.size < 2:
             return slots, _EMPTY_I, _EMPTY_I
         I, J, _ = _bp.candidate_pairs(
@@ -711,9 +773,7 @@ class Scene:
         live = dirty[self._alive[dirty]]
         if live.size:
             self._Tf[live] = (self._T[live] - self._epoch).astype(np.float64) * 1e-9
-            lo, hi = self._bounds(live)
-            self._lo[live] = lo
-            self._hi[live] = hi
+            self._set_bounds(live)
         X, Y = [], []
         for s in live.tolist():
             cand = self._grid_insert_query(s)
@@ -883,9 +943,12 @@ class Scene:
     def _publish(self, rows) -> SceneContacts:
         A, B, ttc, cns, over, pt, nm, cs = rows
         for x in rows:
-            x.flags.writeable = False  # shared with the merge cache
+            x.flags.writeable = False  # SceneContacts' arrays are read-only
+        utf8 = None
+        if self._utf8_ok:
+            utf8 = (self._utf8, self._id_start[A], self._id_len[A], self._id_start[B], self._id_len[B])
         return SceneContacts(self.reference_ns or 0, self._ids[A], self._ids[B], ttc, cns, over,
-                             pt, nm, cs)
+                             pt, nm, cs, utf8)
 
     def full_recomputation(self) -> SceneContacts:
         """The rule applied from scratch to the stored states (caches untouched).

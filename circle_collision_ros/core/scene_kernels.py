@@ -21,9 +21,19 @@ import math
 import numpy as np
 from numba import njit
 
+from circle_collision_ros.core.broad_phase import _ABS_MARGIN, _COORD_MARGIN, _REL_MARGIN
+from circle_collision_ros.core.kinematics import arc_position
 from circle_collision_ros.core.narrow_phase import _ttc_scalar
 
-__all__ = ["evaluate_rows", "order_rows", "split_past"]
+__all__ = ["evaluate_rows", "order_rows", "split_past", "pair_keys", "assemble", "swept_bound_rows"]
+
+#: Overlap decided without the narrow phase: only for values well inside the
+#: narrow phase's input range, so no rounding bound below can fail.
+_SAFE = 1e100
+#: |p_a - p_b|^2 computed in floats is within ~6 units in the last place of
+#: the exact value, (r_a + r_b)^2 within ~3: below (1 - 2^-30) of it, the
+#: exact f(0) = |p_a - p_b|^2 - (r_a + r_b)^2 is certainly negative.
+_OVERLAP_MARGIN = 1.0 - 2.0 ** -30
 
 
 @njit(cache=True, error_model="numpy")
@@ -96,19 +106,27 @@ def evaluate_rows(P, V, A, Rad, T, ia, ib, t_eval, horizon, tau, point, normal, 
             pb[d] = P[b, d] + dtb * (V[b, d] + (0.5 * dtb) * A[b, d])
             vb[d] = V[b, d] + dtb * A[b, d]
             ab[d] = A[b, d]
-        t = _ttc_scalar(pa[0], pa[1], pa[2], va[0], va[1], va[2], aa[0], aa[1], aa[2], Rad[a],
-                        pb[0], pb[1], pb[2], vb[0], vb[1], vb[2], ab[0], ab[1], ab[2], Rad[b],
-                        horizon)
+        s = (pa[0] - pb[0]) * (pa[0] - pb[0])
+        big = 0.0
+        for d in range(D):
+            if d > 0:
+                s += (pa[d] - pb[d]) * (pa[d] - pb[d])
+            big = max(big, abs(pa[d]), abs(pb[d]), abs(va[d]), abs(vb[d]), abs(aa[d]), abs(ab[d]))
+        rs = Rad[a] + Rad[b]
+        if big < _SAFE and 1.0 / _SAFE < rs < _SAFE and s < (rs * rs) * _OVERLAP_MARGIN:
+            # f(0) < 0 for certain: the narrow phase's contract answers 0.0 (overlap at 0)
+            t = 0.0
+        else:
+            t = _ttc_scalar(pa[0], pa[1], pa[2], va[0], va[1], va[2], aa[0], aa[1], aa[2], Rad[a],
+                            pb[0], pb[1], pb[2], vb[0], vb[1], vb[2], ab[0], ab[1], ab[2], Rad[b],
+                            horizon)
         tau[k] = t
         overlap[k] = False
         if t <= horizon:
             closing[k] = _details(pa[:D], va[:D], aa[:D], Rad[a], pb[:D], vb[:D], ab[:D], t,
                                   point[k], normal[k])
-            if t == 0.0:
-                s = (pa[0] - pb[0]) * (pa[0] - pb[0])
-                for d in range(1, D):
-                    s += (pa[d] - pb[d]) * (pa[d] - pb[d])
-                overlap[k] = math.sqrt(s) - (Rad[a] + Rad[b]) < 0.0
+            if t == 0.0:  # the overlap test of Scene._resolve: norm(p_a - p_b) - (r_a + r_b) < 0
+                overlap[k] = math.sqrt(s) - rs < 0.0
     return ia.shape[0]
 
 
@@ -255,3 +273,40 @@ def assemble(F, ttc_f, ra, rb, rtp, rtau, rov, rpt, rnm, rcs,
                 nm[x, d] = nm2[y, d]
             cs[x] = cs2[y]
     return A, B, t_all, cns, over, pt, nm, cs
+
+
+@njit(cache=True, error_model="numpy")
+def swept_bound_rows(P, V, A, Rad, slots, t0, t1, lo, hi):
+    """broad_phase.swept_bounds of the rows `slots` (windows t0[k], t1[k]) into lo/hi[slots]:
+    the same operations per row, for a few bodies at a time (no numpy set-up)."""
+    D = P.shape[1]
+    for k in range(slots.shape[0]):
+        s = slots[k]
+        a0 = t0[k]
+        a1 = t1[k]
+        tm = max(abs(a0), abs(a1))
+        motion = 0.0
+        coord = 0.0
+        for d in range(D):
+            p, v, a = P[s, d], V[s, d], A[s, d]
+            x0 = arc_position(p, v, a, a0)
+            x1 = arc_position(p, v, a, a1)
+            l = min(x0, x1)
+            h = max(x0, x1)
+            if a != 0.0:
+                ts = -v / a
+                if ts > a0 and ts < a1:
+                    xs = arc_position(p, v, a, ts)
+                    l = min(l, xs)
+                    h = max(h, xs)
+            lo[s, d] = l
+            hi[s, d] = h
+            m = abs(v) * tm + 0.5 * abs(a) * tm * tm
+            motion = m if d == 0 else motion + m
+            coord = abs(p) if d == 0 else max(coord, abs(p))
+        coord = coord + motion
+        r = Rad[s]
+        pad = r + _REL_MARGIN * (r + motion) + _COORD_MARGIN * coord + _ABS_MARGIN
+        for d in range(D):
+            lo[s, d] = lo[s, d] - pad
+            hi[s, d] = hi[s, d] + pad
