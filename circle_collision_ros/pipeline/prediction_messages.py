@@ -130,9 +130,11 @@ class ScenePrediction:
         c = self.contacts
         # The scene reports only finite contacts with finite details; this mask is the
         # last line of defence behind the "never publishes NaN" guarantee.
+        if all(np.isfinite(x).all() for x in (c.ttc, c.closing_speed, c.point, c.normal)):
+            return slice(None)  # the common case, without per-row reductions
         finite = np.isfinite(c.ttc) & np.isfinite(c.closing_speed) \
             & np.isfinite(c.point).all(axis=1) & np.isfinite(c.normal).all(axis=1)
-        return np.flatnonzero(finite) if not finite.all() else slice(None)
+        return np.flatnonzero(finite)
 
     def rows(self) -> Iterator[PredictionRow]:
         """The entries one by one, in publication order (see `columns`)."""
