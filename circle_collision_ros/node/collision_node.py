@@ -151,8 +151,9 @@ class Unanswered:
     oldest_received_ns: int | None = None  # rmw receive time (system clock)
     changed: bool = False
 
-    def note(self, received_ns: int, changed: bool) -> None:
-        self.inputs += 1
+    def note(self, received_ns: int, changed: bool, inputs: int = 1) -> None:
+        """`inputs` inputs ingested, the first of them received at `received_ns`."""
+        self.inputs += inputs
         if self.oldest_received_ns is None:
             self.oldest_received_ns = received_ns
         self.changed = self.changed or changed
@@ -279,16 +280,20 @@ class CollisionNode(Node):
         while budget > 0:
             before = len(taken)
             for source in self._inputs:
-                sub = source.subscription
-                while len(taken) - before < budget:
-                    try:
-                        with sub.handle:
-                            message = sub.handle.take_message(source.msg_type, True)
-                    except InvalidHandle:  # destroyed during shutdown
-                        return
-                    if message is None:
-                        break
-                    taken.append((source, message[0], message[1]))
+                handle = source.subscription.handle
+                room = budget - (len(taken) - before)
+                try:
+                    with handle:  # held for the whole run of takes (entering costs more than a take)
+                        take = handle.take_message
+                        msg_type = source.msg_type
+                        while room > 0:
+                            message = take(msg_type, True)
+                            if message is None:
+                                break
+                            taken.append((source, message[0], message[1]))
+                            room -= 1
+                except InvalidHandle:  # destroyed during shutdown
+                    return
             if len(taken) == before:
                 return
             budget -= len(taken) - before
@@ -336,14 +341,14 @@ class CollisionNode(Node):
                 if error is not None:
                     self.counters.rejected += 1
                     self._warn(source.topic, f"{source.topic}: rejected CircleState: {error}")
-                else:
+                elif report.accepted or report.removed or report.ignored or report.rejected \
+                        or report.expired:  # (a wave's counts sit on its first message)
                     changed = changed or report.changed
                     self._account(source.topic, report)
         except Exception as exc:  # a bug must cost these messages, not the node
             self.counters.errors += 1
             self._warn("receive", f"{len(run)} single-state message(s) skipped: {exc!r}")
-        for _, _, received_ns in run:
-            self._unanswered.note(received_ns, changed)
+        self._unanswered.note(run[0][2], changed, len(run))
 
     def _account(self, topic: str, report: IntakeReport) -> None:
         c = self.counters
