@@ -242,7 +242,7 @@ def assemble(F, ttc_f, ra, rb, rtp, rtau, rov, rpt, rnm, rcs,
     for x in range(Ap.shape[0]):
         t_all[kf + x] = tau2[x]
         k_all[kf + x] = rank[Ap[x]] * cap + rank[Bp[x]]
-    order_rows(o, t_all, k_all, kf, 0)
+    order_rows(o, t_all, k_all, kf, m * m)  # F is sorted: no moves; never gives up
     A = np.empty(m, dtype=np.int64)
     B = np.empty(m, dtype=np.int64)
     cns = np.empty(m, dtype=np.int64)

@@ -164,8 +164,7 @@ class ScenePrediction:
     def to_cdr(self) -> bytes:
         """As serialized bytes, without building message objects (the node's path)."""
         columns = self.columns
-        # the columns' rows are the contacts' rows: the scene's encoded ids fit them
-        same_rows = isinstance(self._finite_rows, slice) and not (
-            self.report_all_pairs and len(self.capture) <= ReportAll.MAX_BODIES)
+        # No contact row dropped and none appended: the scene's encoded ids fit the columns.
+        same_rows = isinstance(self._finite_rows, slice) and len(columns) == len(self.contacts)
         return encode_prediction_array(self.stamp, self.frame_id, float(self.horizon), columns,
                                        self.contacts.id_utf8 if same_rows else None)
