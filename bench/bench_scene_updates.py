@@ -22,6 +22,7 @@ Printed figures (same run, so ratios are comparable on a busy machine):
 from __future__ import annotations
 
 import argparse
+import gc
 import os
 import statistics
 import sys
@@ -96,6 +97,8 @@ def main() -> int:
     stamp += 1
     print(f"scene: {n} bodies, {len(first.contacts)} contacts within {config.horizon:g} s, "
           f"{predictor.stats.candidate_pairs} pairs evaluated on the full path")
+    gc.collect()
+    gc.freeze()  # as collision_node does after start-up (node/collision_node.py, _started_node)
 
     # 1 + 2: one-body updates (newer stamps, inside one epoch), then the same via full recomputation.
     rng = np.random.default_rng(1)
