@@ -194,6 +194,7 @@ class CollisionNode(Node):
         self._transport_profile = (os.environ.get(TransportProfile.ENV)
                                    or os.environ.get(TransportProfile.DEPRECATED_ENV) or "")
         self._unmatched_publishers: list[str] = []
+        self._publisher_info: dict[str, tuple[int, float, dict[str, int]]] = {}  # (count, read at, kinds)
         self._last_warning: dict[str, float] = {}
 
         overrides = QoSOverridingOptions.with_default_policies()
@@ -492,10 +493,7 @@ class CollisionNode(Node):
         reliable = node_parameters.value_of(self, "state_reliability") == "reliable"
         summary, unmatched = [], []
         for source in self._inputs:
-            kinds: dict[str, int] = {}
-            for info in self.get_publishers_info_by_topic(source.topic):
-                kind = info.qos_profile.reliability.name.lower()
-                kinds[kind] = kinds.get(kind, 0) + 1
+            kinds = self._publisher_kinds(source.topic)
             shown = ", ".join(f"{n} {k}" for k, n in sorted(kinds.items())) or "none"
             summary.append(f"{source.topic}: {shown}")
             if reliable and kinds.get("best_effort"):
@@ -506,6 +504,24 @@ class CollisionNode(Node):
         return {"transport_profile": self._transport_profile or "Fast DDS defaults",
                 "largest_input_kb": f"{largest / 1024:.1f}",
                 "input_publishers": "; ".join(summary)}
+
+    #: Publisher QoS lists older than this are read again even if the count is unchanged, s.
+    PUBLISHER_INFO_REFRESH_S = 10.0
+
+    def _publisher_kinds(self, topic: str) -> dict[str, int]:
+        """How many publishers on `topic` offer each reliability, listed again only when their
+        count changed (or every PUBLISHER_INFO_REFRESH_S): listing 300 per-body publishers'
+        QoS took ~20-50 ms, once a second on the prediction thread."""
+        count = self.count_publishers(topic)
+        now = time.monotonic()
+        cached = self._publisher_info.get(topic)
+        if cached is None or cached[0] != count or now - cached[1] > self.PUBLISHER_INFO_REFRESH_S:
+            kinds: dict[str, int] = {}
+            for info in self.get_publishers_info_by_topic(topic):
+                kind = info.qos_profile.reliability.name.lower()
+                kinds[kind] = kinds.get(kind, 0) + 1
+            cached = self._publisher_info[topic] = (count, now, kinds)
+        return cached[2]
 
     # -- recording ------------------------------------------------------------------------------
     def _start_recording(self, path: str) -> None:
