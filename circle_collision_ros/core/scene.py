@@ -47,7 +47,12 @@ only shifts the cached times, and a rebuild happens when the epoch moves
 (every ``S`` of stamp time), the horizon changes, or more than
 ``full_rebuild_fraction`` of the bodies changed (a tracker array moving every
 body takes the vectorised full-scene path).  :meth:`Scene.full_recomputation`
-applies the rule from scratch; incremental results equal it bitwise.
+applies the rule from scratch (vectorised numpy); incremental results equal it
+bitwise.  Between rebuilds the sorted order of the last query is kept and
+repaired rather than re-sorted, and only the pairs whose contact began before
+``R`` (overlapping pairs, typically) are evaluated again at each new ``R``;
+small batches run through compiled row loops that repeat the numpy
+operations exactly (core/scene_kernels.py).
 
 When every body carries the stamp ``R`` (a tracker array), ``t_p == R`` for
 every pair and the result is the narrow phase on the states propagated to
@@ -693,10 +698,6 @@ class Scene:
         m &= self._rlive[:n]
         self._rdead += int(np.count_nonzero(m))
         self._rlive[:n][m] = False
-
-    def _live_rows(self):
-        idx = np.flatnonzero(self._rlive[:self._rn])
-        return tuple(getattr(self, name)[idx] for name in self._REC)
 
     def _rebuild_all(self) -> None:
         self._clear_records()
