@@ -88,6 +88,20 @@ def _inv(S):
 
 
 @njit(cache=True, error_model="numpy")
+def _mat_mul(X, Y):
+    """X Y for small square matrices."""
+    D = X.shape[0]
+    out = np.zeros((D, D))
+    for i in range(D):
+        for j in range(D):
+            acc = 0.0
+            for k in range(D):
+                acc += X[i, k] * Y[k, j]
+            out[i, j] = acc
+    return out
+
+
+@njit(cache=True, error_model="numpy")
 def _state(dp, dv, da, Sigma, t):
     """(g, gd, A = S^-1, norm = density factor, K, Vc, rho^2, degenerate) at t."""
     D = dp.shape[0]
@@ -109,21 +123,9 @@ def _state(dp, dv, da, Sigma, t):
     # det / (tr/D)^D ~ (product of eigenvalue ratios): tiny means (near) singular
     degenerate = not (det > DEGENERATE_RATIO * (tr / D) ** D) or not (tr > 0.0)
     norm = 1.0 / ((2.0 * math.pi) ** (0.5 * D) * math.sqrt(abs(det))) if not degenerate else 0.0
-    # K = C^T A; Vc = Svv - C^T A C
-    K = np.zeros((D, D))
-    for i in range(D):
-        for j in range(D):
-            acc = 0.0
-            for k in range(D):
-                acc += C[k, i] * A[k, j]
-            K[i, j] = acc
-    Vc = np.empty((D, D))
-    for i in range(D):
-        for j in range(D):
-            acc = 0.0
-            for k in range(D):
-                acc += K[i, k] * C[k, j]
-            Vc[i, j] = Svv[i, j] - acc
+    # K = C^T A; Vc = Svv - C^T A C (explicit loops: numba's @ needs scipy's BLAS)
+    K = _mat_mul(C.T, A)
+    Vc = Svv - _mat_mul(K, C)
     rho2 = BROAD_K2 * tr
     return g, gd, A, norm, K, Vc, rho2, degenerate
 

@@ -19,7 +19,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-__all__ = ["make_adaptive", "MAX_DEPTH"]
+__all__ = ["make_adaptive", "push_halves", "MAX_DEPTH"]
 
 # QUADPACK's dqk15 abscissae and weights (tests/core/test_uncertainty_quadrature.py
 # checks them against mpmath's Gauss-Legendre nodes and polynomial exactness).
@@ -36,6 +36,20 @@ _WG = np.array([0.129484966168869693270611432679082, 0.2797053914892766679014677
 
 MAX_DEPTH = 40
 _STACK = MAX_DEPTH + 2
+
+
+@njit(cache=True, error_model="numpy", inline="always")
+def push_halves(sa, sb, sd, top, a, m, b, d):
+    """Push [m, b] then [a, m] (depth d + 1) on the interval stack; returns
+    the new top.  The left half ends on top, so intervals are processed left
+    to right (depth first)."""
+    sa[top] = m
+    sb[top] = b
+    sd[top] = d + 1
+    sa[top + 1] = a
+    sb[top + 1] = m
+    sd[top + 1] = d + 1
+    return top + 2
 
 
 def make_adaptive(fn):
@@ -85,14 +99,8 @@ def make_adaptive(fn):
             if e <= tol * ((pb - pa) / width) or d >= MAX_DEPTH or not (pa < m < pb):
                 total += val
                 err += e
-            else:  # right half below the left one: the left half is done first
-                sa[top] = m
-                sb[top] = pb
-                sd[top] = d + 1
-                sa[top + 1] = pa
-                sb[top + 1] = m
-                sd[top + 1] = d + 1
-                top += 2
+            else:
+                top = push_halves(sa, sb, sd, top, pa, m, pb, d)
         return total, err
 
     return adaptive

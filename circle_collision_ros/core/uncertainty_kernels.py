@@ -15,6 +15,7 @@ from numba import njit
 from circle_collision_ros.core.entry_rate import BROAD_K2, entry_rate_gauss3, entry_rate_integral
 from circle_collision_ros.core.narrow_phase import _ttc_kernel_h
 from circle_collision_ros.core.overlap_probability import eig_sym, overlap_probability
+from circle_collision_ros.core.quadrature import push_halves
 from circle_collision_ros.core.sobol import scrambled_directions, sobol_points
 
 __all__ = ["BROAD_PHASE_SIGMAS", "TUBE_TAIL", "chi2_tail_even", "S_at", "max_sigma_over",
@@ -179,13 +180,7 @@ def tube_intervals(dp, dv, da, R, Sigma, H, out):
                 out[cnt, 1] = tb
                 cnt += 1
             continue
-        sa[top] = m
-        sb[top] = tb
-        sd[top] = d + 1
-        sa[top + 1] = ta
-        sb[top + 1] = m
-        sd[top + 1] = d + 1
-        top += 2
+        top = push_halves(sa, sb, sd, top, ta, m, tb, d)
     return cnt, t_inside
 
 
@@ -363,6 +358,12 @@ def pair_probability(dp, dv, da, R, Sigma, H, thr):
     pair = _Pair(dp, dv, da, R, Sigma)
     leaves = np.empty((1 << _TUBE_DEPTH, 2))
     cnt, t_inside = tube_intervals(dp, dv, da, R, Sigma, H, leaves)
+    if cnt == 0 and thr > TUBE_TAIL and thr <= 1.0 - TUBE_TAIL:
+        # the tube alone decides (far pairs, tiny sigma): P <= TUBE_TAIL < thr
+        # wherever it is outside, >= 1 - TUBE_TAIL >= thr from t_inside on
+        if t_inside <= H:
+            return 1.0, TUBE_TAIL, t_inside
+        return 0.0, TUBE_TAIL, math.inf
     p0 = pair.prob_at(0.0)
     dt = PLAUSIBLE_RTOL * H
 
