@@ -96,7 +96,8 @@ def make_adaptive(fn):
             d = sd[top]
             val, e = gk15(prm, pa, pb)
             m = 0.5 * (pa + pb)
-            if e <= tol * ((pb - pa) / width) or d >= MAX_DEPTH or not (pa < m < pb):
+            # (a NaN estimate is accepted: never split without end)
+            if not (e > tol * ((pb - pa) / width)) or d >= MAX_DEPTH or not (pa < m < pb):
                 total += val
                 err += e
             else:

@@ -97,7 +97,8 @@ def uncertain_pairs(pa, va, aa, ra, cov_a, pb, vb, ab, rb, cov_b,
     (position, velocity) of each body (order x, y[, z], vx, vy[, vz]) [m^2,
     m^2/s, m^2/s^2]; horizon H [s] (finite, >= 0); threshold in (0, 1].
     The caller validates covariances (``covariance_problem``); tiny negative
-    eigenvalues from rounding are clamped here."""
+    eigenvalues from rounding are clamped here.  A row with a non-finite value
+    or a negative radius gets NaN in all three outputs."""
     pa = np.asarray(pa, dtype=np.float64)
     if pa.ndim != 2 or pa.shape[1] not in (2, 3):
         raise ValueError(f"pa must have shape (n, 2) or (n, 3), got {pa.shape}")
@@ -127,9 +128,18 @@ def uncertain_pairs(pa, va, aa, ra, cov_a, pb, vb, ab, rb, cov_b,
         ix = np.flatnonzero(exact)
         t = time_to_collision(pa[ix], va[ix], aa[ix], ra[ix], pb[ix], vb[ix], ab[ix], rb[ix], H)
         hit = t <= H
-        prob[ix] = np.where(hit, 1.0, 0.0)
-        tpl[ix] = np.where(hit, t, np.inf)
-    for i in np.flatnonzero(~exact):
+        nan = np.isnan(t)  # invalid input: NaN as time_to_collision
+        prob[ix] = np.where(nan, np.nan, np.where(hit, 1.0, 0.0))
+        bound[ix] = np.where(nan, np.nan, 0.0)
+        tpl[ix] = np.where(hit | nan, t, np.inf)
+    # rows with a non-finite value or a negative radius: NaN in all three
+    # outputs (as time_to_collision), never a hang or an exception
+    finite = (np.isfinite(pa).all(1) & np.isfinite(va).all(1) & np.isfinite(aa).all(1)
+              & np.isfinite(pb).all(1) & np.isfinite(vb).all(1) & np.isfinite(ab).all(1)
+              & np.isfinite(sigma.reshape(n, -1)).all(1) & (ra >= 0) & (rb >= 0))
+    bad = ~finite & ~exact
+    prob[bad] = bound[bad] = tpl[bad] = np.nan
+    for i in np.flatnonzero(~exact & finite):
         # relative state from relative quantities (map offsets cancel first)
         dp = pa[i] - pb[i]
         dv = va[i] - vb[i]

@@ -147,3 +147,24 @@ def test_k_sigma_tail_and_the_cauchy_schwarz_step():
                 M = np.hstack([np.eye(D), t * np.eye(D)])
                 dev = np.linalg.norm(z @ (M @ L).T, axis=1)
                 assert np.all(dev <= r[i] / BROAD_PHASE_SIGMAS * np.linalg.norm(z, axis=1) * (1 + 1e-12))
+
+
+def test_invalid_rows_give_nan_and_leave_the_others_alone():
+    rng = np.random.default_rng(4)
+    args = list(_batch(rng, 3, 2, 0.2))
+    good = uncertain_pairs(*args, 2.0, 0.05)
+    args[0] = args[0].copy()
+    args[0][1, 0] = np.nan  # pa of row 1
+    args[4] = args[4].copy()
+    args[4][2, 0, 0] = np.inf  # cov_a of row 2
+    res = uncertain_pairs(*args, 2.0, 0.05)
+    for f_good, f in zip(good, res):
+        assert np.isnan(f[1]) and np.isnan(f[2])
+        assert f[0].tobytes() == f_good[0].tobytes()
+
+
+def test_invalid_exact_rows_give_nan():
+    z = np.zeros((1, 2))
+    res = uncertain_pairs(np.array([[np.nan, 0.0]]), z, z, np.ones(1), np.zeros((1, 4, 4)),
+                          z, z, z, np.ones(1), np.zeros((1, 4, 4)), 1.0, 0.01)
+    assert all(np.isnan(f[0]) for f in res)
