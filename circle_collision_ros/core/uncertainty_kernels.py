@@ -235,7 +235,7 @@ def instant_probability(dp, dv, da, R, Sigma, t):
 _PANELS = 2
 _RICE_TOL = 1e-4  # quadrature tolerance of the entry-rate integral per panel
 _P0_ERR = 1e-9  # error of one instantaneous probability (overlap_probability)
-PLAUSIBLE_RTOL = 1e-7  # the plausible time's bracket width, relative to H
+PLAUSIBLE_RTOL = 1e-6  # the plausible time's bracket width, relative to H
 BRACKET_MAX = 0.01  # with da != 0: widest [lower, upper] reported from the bounds alone
 
 
@@ -323,11 +323,15 @@ def _first_crossing(pair, a, pa, b, thr, dt):
             v, e = pair.rice_short(lo, c)
         if pair.degenerate:
             return None
+        # entry-rate model of the step that the certificate would still pass
+        rate = (v + e) / (c - lo)
         if plo + v + e + _P0_ERR < thr:  # certified: no crossing in [lo, c]
             if c == b:
                 return None
-            step = 2.0 * (c - lo)
             lo, plo = c, pair.prob_at(c)
+            step = 2.0 * step
+            if rate > 0.0:
+                step = min(step, 0.9 * (thr - plo - _P0_ERR) / rate)
             stall = stall + 1 if stall >= 0 else 1
         else:
             pc = pair.prob_at(c)
@@ -336,7 +340,9 @@ def _first_crossing(pair, a, pa, b, thr, dt):
                 stall = stall - 1 if stall <= 0 else -1
             else:  # neither certified nor above: a shorter step
                 step = 0.5 * (c - lo)
-                c = lo + step
+                if rate > 0.0:
+                    step = min(step, 0.9 * (thr - plo - _P0_ERR) / rate)
+                c = lo + max(step, 0.0)
                 continue
         if hi == math.inf:
             c = min(lo + step, b)
@@ -347,6 +353,8 @@ def _first_crossing(pair, a, pa, b, thr, dt):
             c = lo + (thr - plo) / (phi - plo) * (hi - lo)
             w = hi - lo
             c = min(max(c, lo + 1e-3 * w), hi - 1e-3 * w)
+        if hi - c > dt and c - lo > step:  # not beyond what the certificate is expected to pass
+            c = lo + step
     return lo
 
 
