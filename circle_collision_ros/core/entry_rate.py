@@ -60,6 +60,27 @@ def _pos_part_mean(m, s):
 
 
 @njit(cache=True, error_model="numpy")
+def _slow_exit_mean(m, s, c):
+    """E[Y 1{0 < Y <= c}] for Y ~ N(m, s^2), c >= 0 (outward speeds of exits
+    slow enough to allow a re-entry, see ``entry_rate_integral``)."""
+    if not (s > 0.0):
+        return m if (0.0 < m <= c) else 0.0
+    a = -m / s
+    b = (c - m) / s
+    mass = 0.5 * (math.erfc(a * _RS2) - math.erfc(b * _RS2))
+    return max(m * mass + s * _RS2PI * (math.exp(-0.5 * a * a) - math.exp(-0.5 * b * b)), 0.0)
+
+
+@njit(cache=True, error_model="numpy")
+def _rate(m, s, cap):
+    """The conditional rate factor: entries E[(-Y)^+] (cap < 0) or slow exits
+    E[Y 1{0 < Y <= cap}] (cap >= 0)."""
+    if cap < 0.0:
+        return _pos_part_mean(m, s)
+    return _slow_exit_mean(m, s, cap)
+
+
+@njit(cache=True, error_model="numpy")
 def _inv(S):
     """(inverse, determinant) of a symmetric 2x2 or 3x3 matrix (adjugate)."""
     D = S.shape[0]
@@ -131,7 +152,7 @@ def _state(dp, dv, da, Sigma, t):
 
 
 @njit(cache=True, error_model="numpy")
-def _surface_integrand(x, n, g, gd, A, norm, K, Vc):
+def _surface_integrand(x, n, g, gd, A, norm, K, Vc, cap):
     """f_t(x) E[(-n.Xdot)^+ | X = x] at the sphere point x with normal n."""
     D = x.shape[0]
     q = 0.0
@@ -153,11 +174,11 @@ def _surface_integrand(x, n, g, gd, A, norm, K, Vc):
         s2 += n[i] * Vn
     if not (q < 1400.0):
         return 0.0
-    return norm * math.exp(-0.5 * q) * _pos_part_mean(m, math.sqrt(max(s2, 0.0)))
+    return norm * math.exp(-0.5 * q) * _rate(m, math.sqrt(max(s2, 0.0)), cap)
 
 
 # ---- 2-D: the arc integral at one t ---------------------------------------------
-# prm = (R, phig, g, gd, A, norm, K, Vc)
+# prm = (R, phig, g, gd, A, norm, K, Vc, cap)
 
 
 @njit(cache=True, error_model="numpy")
@@ -180,7 +201,7 @@ def _arc_integrand(psi, prm):
         return 0.0
     m = n0 * (gd[0] + K[0, 0] * d0 + K[0, 1] * d1) + n1 * (gd[1] + K[1, 0] * d0 + K[1, 1] * d1)
     s2 = Vc[0, 0] * n0 * n0 + (Vc[0, 1] + Vc[1, 0]) * n0 * n1 + Vc[1, 1] * n1 * n1
-    return R * prm[5] * math.exp(-0.5 * q) * _pos_part_mean(m, math.sqrt(max(s2, 0.0)))
+    return R * prm[5] * math.exp(-0.5 * q) * _rate(m, math.sqrt(max(s2, 0.0)), prm[8])
 
 
 _arc_adaptive = make_adaptive(_arc_integrand)
@@ -201,7 +222,7 @@ def _arc_half_angle(R, gn, rho2):
 
 
 @njit(cache=True, error_model="numpy")
-def nu_plus_2d(dp, dv, da, R, Sigma, t, tol, acc):
+def nu_plus_2d(dp, dv, da, R, Sigma, t, tol, acc, cap):
     """nu+(t) in 2-D over the tube's arc; acc[0] = max inner error estimate
     seen, acc[1] = 1 when S(t) is degenerate."""
     g, gd, A, norm, K, Vc, rho2, degenerate = _state(dp, dv, da, Sigma, t)
@@ -249,7 +270,7 @@ def nu_plus_2d(dp, dv, da, R, Sigma, t, tol, acc):
             ne += 1
     ends[ne] = -alpha + 2.0 * alpha * j1 / _SCAN
     ne += 1
-    prm = (R, phig, g, gd, A, norm, K, Vc)
+    prm = (R, phig, g, gd, A, norm, K, Vc, cap)
     total = 0.0
     err = 0.0
     for j in range(ne - 1):
@@ -261,7 +282,7 @@ def nu_plus_2d(dp, dv, da, R, Sigma, t, tol, acc):
 
 
 # ---- 3-D: the cap integral at one t ---------------------------------------------
-# prm = (R, theta, u, e1, e2, g, gd, A, norm, K, Vc)
+# prm = (R, theta, u, e1, e2, g, gd, A, norm, K, Vc, cap)
 
 
 @njit(cache=True, error_model="numpy")
@@ -279,7 +300,7 @@ def _ring_integrand(psi, prm):
     for i in range(3):
         n[i] = ct * u[i] + st * (cp * e1[i] + sp * e2[i])
     x = R * n
-    return _surface_integrand(x, n, prm[5], prm[6], prm[7], prm[8], prm[9], prm[10])
+    return _surface_integrand(x, n, prm[5], prm[6], prm[7], prm[8], prm[9], prm[10], prm[11])
 
 
 _ring_adaptive = make_adaptive(_ring_integrand)
@@ -289,7 +310,7 @@ _ring_adaptive = make_adaptive(_ring_integrand)
 def _cap_integrand(th, prm):
     """R^2 sin(theta) * ring integral at polar angle theta."""
     R = prm[0]
-    p2 = (R, th, prm[1], prm[2], prm[3], prm[4], prm[5], prm[6], prm[7], prm[8], prm[9])
+    p2 = (R, th, prm[1], prm[2], prm[3], prm[4], prm[5], prm[6], prm[7], prm[8], prm[9], prm[12])
     tol = prm[10]
     v1, e1 = _ring_adaptive(p2, 0.0, math.pi, tol)
     v2, e2 = _ring_adaptive(p2, math.pi, 2.0 * math.pi, tol)
@@ -303,7 +324,7 @@ _cap_adaptive = make_adaptive(_cap_integrand)
 
 
 @njit(cache=True, error_model="numpy")
-def nu_plus_3d(dp, dv, da, R, Sigma, t, tol, acc):
+def nu_plus_3d(dp, dv, da, R, Sigma, t, tol, acc, cap):
     """nu+(t) in 3-D over the tube's cap (same conventions as nu_plus_2d)."""
     g, gd, A, norm, K, Vc, rho2, degenerate = _state(dp, dv, da, Sigma, t)
     if degenerate:
@@ -333,24 +354,24 @@ def nu_plus_3d(dp, dv, da, R, Sigma, t, tol, acc):
     e2[1] = u[2] * e1[0] - u[0] * e1[2]
     e2[2] = u[0] * e1[1] - u[1] * e1[0]
     inner_tol = tol / (2.0 * math.pi * R * R + 1e-300)
-    prm = (R, u, e1, e2, g, gd, A, norm, K, Vc, inner_tol, acc)
+    prm = (R, u, e1, e2, g, gd, A, norm, K, Vc, inner_tol, acc, cap)
     v, e = _cap_adaptive(prm, 0.0, alpha, tol)
     acc[0] = max(acc[0], e)
     return v
 
 
 # ---- the t integral ------------------------------------------------------------
-# prm = (dp, dv, da, R, Sigma, inner_tol, acc)
+# prm = (dp, dv, da, R, Sigma, inner_tol, acc, cap0, cap1): cap(t) = cap0 - cap1 t
 
 
 @njit(cache=True, error_model="numpy")
 def _nu_2d(t, prm):
-    return nu_plus_2d(prm[0], prm[1], prm[2], prm[3], prm[4], t, prm[5], prm[6])
+    return nu_plus_2d(prm[0], prm[1], prm[2], prm[3], prm[4], t, prm[5], prm[6], prm[7] - prm[8] * t)
 
 
 @njit(cache=True, error_model="numpy")
 def _nu_3d(t, prm):
-    return nu_plus_3d(prm[0], prm[1], prm[2], prm[3], prm[4], t, prm[5], prm[6])
+    return nu_plus_3d(prm[0], prm[1], prm[2], prm[3], prm[4], t, prm[5], prm[6], prm[7] - prm[8] * t)
 
 
 _t_adaptive_2d = make_adaptive(_nu_2d)
@@ -358,15 +379,30 @@ _t_adaptive_3d = make_adaptive(_nu_3d)
 
 
 @njit(cache=True, error_model="numpy")
-def entry_rate_integral(dp, dv, da, R, Sigma, ta, tb, tol, acc):
+def entry_rate_integral(dp, dv, da, R, Sigma, ta, tb, tol, acc, slow_H=-1.0):
     """(int_ta^tb nu+ dt over the tube's arc/cap, error estimate).
 
     acc (2,) float64 scratch: acc[1] is set to 1 if S(t) was degenerate at a
     node (the value is then not usable).  The error estimate is the t-rule's
-    |K15 - G7| sum plus (tb - ta) times the largest inner estimate."""
+    |K15 - G7| sum plus (tb - ta) times the largest inner estimate.
+
+    slow_H >= 0: instead of entries, the expected number of *slow exits*:
+    exits at t with outward radial speed <= |da| (slow_H - t) / 2.  The
+    radial distance rho = |X| of any path has rho'' = (|Xdot|^2 -
+    (n.Xdot)^2) / rho + n.da >= -|da|, so after an exit at t2 (rho = R,
+    rho' >= 0) a re-entry at t3 <= slow_H needs rho'(t2) <= |da| (t3 - t2)/2:
+    every re-entry within [0, slow_H] follows its own slow exit, and
+    P(contact) >= P0 + E[entries] - E[slow exits]."""
     acc[0] = 0.0
     inner_tol = tol / max(tb - ta, 1e-300)
-    prm = (dp, dv, da, R, Sigma, inner_tol, acc)
+    if slow_H >= 0.0:
+        an = 0.0
+        for k in range(da.shape[0]):
+            an += da[k] * da[k]
+        half = 0.5 * math.sqrt(an)
+        prm = (dp, dv, da, R, Sigma, inner_tol, acc, half * slow_H, half)
+    else:
+        prm = (dp, dv, da, R, Sigma, inner_tol, acc, -1.0, 0.0)
     if dp.shape[0] == 2:
         v, e = _t_adaptive_2d(prm, ta, tb, tol)
     else:
@@ -387,13 +423,13 @@ def entry_rate_gauss3(dp, dv, da, R, Sigma, ta, tb, tol, acc):
     x = h * math.sqrt(0.6)
     itol = tol / max(tb - ta, 1e-300)
     if dp.shape[0] == 2:
-        f0 = nu_plus_2d(dp, dv, da, R, Sigma, c - x, itol, acc)
-        f1 = nu_plus_2d(dp, dv, da, R, Sigma, c, itol, acc)
-        f2 = nu_plus_2d(dp, dv, da, R, Sigma, c + x, itol, acc)
+        f0 = nu_plus_2d(dp, dv, da, R, Sigma, c - x, itol, acc, -1.0)
+        f1 = nu_plus_2d(dp, dv, da, R, Sigma, c, itol, acc, -1.0)
+        f2 = nu_plus_2d(dp, dv, da, R, Sigma, c + x, itol, acc, -1.0)
     else:
-        f0 = nu_plus_3d(dp, dv, da, R, Sigma, c - x, itol, acc)
-        f1 = nu_plus_3d(dp, dv, da, R, Sigma, c, itol, acc)
-        f2 = nu_plus_3d(dp, dv, da, R, Sigma, c + x, itol, acc)
+        f0 = nu_plus_3d(dp, dv, da, R, Sigma, c - x, itol, acc, -1.0)
+        f1 = nu_plus_3d(dp, dv, da, R, Sigma, c, itol, acc, -1.0)
+        f2 = nu_plus_3d(dp, dv, da, R, Sigma, c + x, itol, acc, -1.0)
     g3 = h * (5.0 * f0 + 8.0 * f1 + 5.0 * f2) / 9.0
     g1 = 2.0 * h * f1
     return g3, abs(g3 - g1) + (tb - ta) * acc[0]

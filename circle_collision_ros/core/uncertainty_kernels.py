@@ -414,8 +414,16 @@ def pair_probability(dp, dv, da, R, Sigma, H, thr):
     if not pair.degenerate:
         if straight:
             return min(1.0, max(0.0, upper)), err + _P0_ERR + TUBE_TAIL, tpl
-        # da != 0: pmax <= P <= upper (+ errors); the bracket alone if narrow
-        lower = pair.pmax
+        # da != 0: a path enters at most twice, so upper over-counts exactly
+        # the re-entries, each preceded by its own slow exit
+        # (entry_rate_integral): lower = upper - E[slow exits]
+        slow = 0.0
+        for a, b in _panels(leaves, cnt, math.inf):
+            pair.acc[1] = 0.0
+            v, e = entry_rate_integral(dp, dv, da, R, Sigma, a, b, _RICE_TOL, pair.acc, H)
+            slow += v
+            err += e
+        lower = max(pair.pmax, upper - slow)
         if upper - lower <= BRACKET_MAX:
             mid = 0.5 * (upper + lower)
             return min(1.0, max(0.0, mid)), 0.5 * (upper - lower) + err + _P0_ERR + 2 * TUBE_TAIL, tpl
