@@ -1,0 +1,471 @@
+"""Numba kernels of core.uncertainty: covariance propagation, the k-sigma tube,
+randomized QMC on the exact solver, the per-pair orchestration.
+
+See docs/uncertainty.md for the mathematics; each guarantee is stated where
+it is made.
+"""
+from __future__ import annotations
+
+import math
+from statistics import NormalDist
+
+import numpy as np
+from numba import njit
+
+from circle_collision_ros.core.entry_rate import BROAD_K2, entry_rate_gauss3, entry_rate_integral
+from circle_collision_ros.core.narrow_phase import _ttc_kernel_h
+from circle_collision_ros.core.overlap_probability import eig_sym, overlap_probability
+from circle_collision_ros.core.quadrature import push_halves
+from circle_collision_ros.core.sobol import scrambled_directions, sobol_points
+
+__all__ = ["BROAD_PHASE_SIGMAS", "TUBE_TAIL", "chi2_tail_even", "S_at", "max_sigma_over",
+           "pair_probability", "QMC_REPLICATES", "QMC_POINTS", "QMC_T"]
+
+
+def chi2_tail_even(x: float, dof: int) -> float:
+    """P(chi^2_dof > x) for even dof (closed form: e^{-x/2} sum_{j < dof/2} (x/2)^j / j!)."""
+    h = 0.5 * x
+    term, s = 1.0, 0.0
+    for j in range(dof // 2):
+        s += term
+        term *= h / (j + 1)
+    return math.exp(-h) * s
+
+
+# k of the k-sigma tube: with z the whitened (dp, dv) (2D <= 6 standard
+# normals), P(|z| > k) = P(chi^2_6 > k^2) <= TUBE_TAIL (fewer dof: smaller),
+# and on |z| <= k every t has |X(t) - g(t)| <= k sqrt(lambda_max(S(t)))
+# (Cauchy-Schwarz).  Two bodies: 2 * TUBE_TAIL = 5.2e-10 < 1e-9.
+BROAD_PHASE_SIGMAS = 7.5
+TUBE_TAIL = chi2_tail_even(BROAD_PHASE_SIGMAS ** 2, 6)  # 2.6e-10
+assert BROAD_K2 == BROAD_PHASE_SIGMAS ** 2
+
+# Randomized QMC: QMC_REPLICATES independent scrambles of QMC_POINTS Sobol
+# points; stated bound QMC_T standard errors of the replicate mean (Student t
+# with 15 dof: two-sided 99.9 % quantile 4.07) and never below 3 / N.
+QMC_REPLICATES = 16
+QMC_POINTS = 512
+QMC_T = 4.1
+_QMC_SEED = 18_2026
+
+
+def _normal_table(dim: int) -> np.ndarray:
+    """(QMC_REPLICATES, QMC_POINTS, dim) standard normals from the scrambled
+    Sobol replicates (inverse CDF: statistics.NormalDist, Wichura AS241)."""
+    inv = NormalDist().inv_cdf
+    out = np.empty((QMC_REPLICATES, QMC_POINTS, dim))
+    for r in range(QMC_REPLICATES):
+        dirs, shift = scrambled_directions(dim, _QMC_SEED + 1000 * dim + r)
+        u = sobol_points(dirs, shift, QMC_POINTS)
+        out[r] = np.vectorize(inv)(u)
+    return out
+
+
+_TABLES: dict[int, np.ndarray] = {}
+
+
+def normal_table(dim: int) -> np.ndarray:
+    if dim not in _TABLES:
+        _TABLES[dim] = _normal_table(dim)
+    return _TABLES[dim]
+
+
+@njit(cache=True, error_model="numpy")
+def S_at(Sigma, t):
+    """Position covariance S(t) = Spp + t (Spv + Svp) + t^2 Svv of (D, D)."""
+    D = Sigma.shape[0] // 2
+    S = np.empty((D, D))
+    for i in range(D):
+        for j in range(D):
+            S[i, j] = Sigma[i, j] + t * (Sigma[i, D + j] + Sigma[D + i, j]) + t * t * Sigma[D + i, D + j]
+    return S
+
+
+@njit(cache=True, error_model="numpy")
+def _lam_max(Sigma, t):
+    """Largest eigenvalue of S(t) (closed form in 2-D, Jacobi in 3-D)."""
+    S = S_at(Sigma, t)
+    if S.shape[0] == 2:
+        h = 0.5 * (S[0, 0] + S[1, 1])
+        d = 0.5 * (S[0, 0] - S[1, 1])
+        o = 0.5 * (S[0, 1] + S[1, 0])
+        return h + math.sqrt(d * d + o * o)
+    lam, _ = eig_sym(S)
+    return lam[lam.shape[0] - 1]
+
+
+@njit(cache=True, error_model="numpy")
+def max_sigma_over(Sigma, ta, tb):
+    """Upper bound of sqrt(lambda_max(S(t))) over t in [ta, tb]: lambda_max
+    of S(t) is convex in t, so its maximum is at an end; the factor
+    (1 + 1e-9) covers the rounding of S and of the eigenvalues
+    (relative error ~1e-15 of the largest eigenvalue)."""
+    lm = max(_lam_max(Sigma, ta), _lam_max(Sigma, tb))
+    return math.sqrt(lm * (1.0 + 1e-9))
+
+
+@njit(cache=True, error_model="numpy")
+def _axis_range(p, v, a, ta, tb):
+    """[lo, hi] of p + v t + a t^2 / 2 over [ta, tb], widened by the rounding."""
+    ga = p + ta * (v + 0.5 * ta * a)
+    gb = p + tb * (v + 0.5 * tb * a)
+    lo = min(ga, gb)
+    hi = max(ga, gb)
+    if a != 0.0:
+        ts = -v / a
+        if ta < ts < tb:
+            gv = p + ts * (v + 0.5 * ts * a)
+            lo = min(lo, gv)
+            hi = max(hi, gv)
+    m = 8.0 * 2.220446049250313e-16 * (abs(p) + tb * (abs(v) + 0.5 * tb * abs(a)))
+    return lo - m, hi + m
+
+
+@njit(cache=True, error_model="numpy")
+def _mean_range(dp, dv, da, ta, tb):
+    """(min |g|, max |g|) bounds over [ta, tb] (per-axis boxes)."""
+    dmin = 0.0
+    dmax = 0.0
+    for k in range(dp.shape[0]):
+        lo, hi = _axis_range(dp[k], dv[k], da[k], ta, tb)
+        if lo > 0.0:
+            dmin += lo * lo
+        elif hi < 0.0:
+            dmin += hi * hi
+        m = max(abs(lo), abs(hi))
+        dmax += m * m
+    return math.sqrt(dmin), math.sqrt(dmax)
+
+
+_TUBE_DEPTH = 8  # leaves of width >= H / 256
+
+
+@njit(cache=True, error_model="numpy")
+def tube_intervals(dp, dv, da, R, Sigma, H, out):
+    """Classify [0, H] with the k-sigma tube (k = BROAD_PHASE_SIGMAS).
+
+    Writes the ambiguous leaf intervals [out[j, 0], out[j, 1]] (merged when
+    adjacent; out has >= 2^_TUBE_DEPTH rows) and returns (count, inside):
+    inside is True when some interval has the whole tube inside the ball (then
+    P(contact) >= 1 - TUBE_TAIL).  Outside the ambiguous intervals, no path of
+    the tube touches the sphere |x| = R."""
+    k = BROAD_PHASE_SIGMAS
+    sa = np.empty(_TUBE_DEPTH + 2)
+    sb = np.empty(_TUBE_DEPTH + 2)
+    sd = np.empty(_TUBE_DEPTH + 2, dtype=np.int64)
+    sa[0] = 0.0
+    sb[0] = H
+    sd[0] = 0
+    top = 1
+    cnt = 0
+    t_inside = math.inf
+    while top > 0:
+        top -= 1
+        ta = sa[top]
+        tb = sb[top]
+        d = sd[top]
+        rho = k * max_sigma_over(Sigma, ta, tb)
+        gmin, gmax = _mean_range(dp, dv, da, ta, tb)
+        if gmin - rho > R:
+            continue
+        if gmax + rho < R:
+            t_inside = min(t_inside, ta)
+            continue
+        m = 0.5 * (ta + tb)
+        if d >= _TUBE_DEPTH or not (ta < m < tb):
+            if cnt > 0 and out[cnt - 1, 1] == ta:
+                out[cnt - 1, 1] = tb
+            else:
+                out[cnt, 0] = ta
+                out[cnt, 1] = tb
+                cnt += 1
+            continue
+        top = push_halves(sa, sb, sd, top, ta, m, tb, d)
+    return cnt, t_inside
+
+
+@njit(cache=True, error_model="numpy")
+def _factor(Sigma):
+    """L (2D, 2D) with L L^T = Sigma (eigen factor; PSD after clamping)."""
+    lam, V = eig_sym(Sigma)
+    n = Sigma.shape[0]
+    L = np.empty((n, n))
+    for j in range(n):
+        s = math.sqrt(lam[j])
+        for i in range(n):
+            L[i, j] = V[i, j] * s
+    return L
+
+
+def qmc_probability(dp, dv, da, R, Sigma, H, Z):
+    """(mean, standard error) of P(contact within [0, H]) over the randomized
+    QMC replicates Z (r, m, 2D): each sample's (dp, dv) = mean + L z goes
+    through the exact solver's serial batch kernel (same contract and bits as
+    ``time_to_collision``; rows are independent, so the answer does not
+    depend on anything but this pair)."""
+    D = dp.shape[0]
+    r, m, _ = Z.shape
+    L = _factor(np.ascontiguousarray(Sigma))
+    Zf = Z.reshape(r * m, 2 * D)
+    Y = np.zeros((r * m, 2 * D))
+    for j in range(2 * D):  # elementwise, not BLAS: the same bits on every machine/thread count
+        Y += Zf[:, j:j + 1] * L[:, j]
+    n = r * m
+    zeros = np.zeros((n, D))
+    t = np.empty(n)
+    _ttc_kernel_h(np.ascontiguousarray(dp + Y[:, :D]), np.ascontiguousarray(dv + Y[:, D:]),
+                  np.ascontiguousarray(np.broadcast_to(da, (n, D))), np.full(n, R),
+                  zeros, zeros, zeros, np.zeros(n), H, t)
+    est = (t <= H).reshape(r, m).mean(axis=1)
+    return float(est.mean()), float(est.std(ddof=1) / math.sqrt(r))
+
+
+@njit(cache=True, error_model="numpy")
+def instant_probability(dp, dv, da, R, Sigma, t):
+    """P(|X(t)| <= R) (1e-9 absolute, see overlap_probability)."""
+    D = dp.shape[0]
+    g = np.empty(D)
+    for k in range(D):
+        g[k] = dp[k] + t * (dv[k] + 0.5 * t * da[k])
+    return overlap_probability(g, S_at(Sigma, t), R)
+
+
+# Ambiguous tube intervals are cut into _PANELS panels for the entry-rate
+# integral; the plausible-time search certifies panel by panel.
+_PANELS = 2
+_RICE_TOL = 1e-4  # quadrature tolerance of the entry-rate integral per panel
+_P0_ERR = 1e-9  # error of one instantaneous probability (overlap_probability)
+PLAUSIBLE_RTOL = 1e-6  # the plausible time's bracket width, relative to H
+BRACKET_MAX = 0.01  # with da != 0: widest [lower, upper] reported from the bounds alone
+
+
+def _panels(leaves, cnt, t_end):
+    """Panel ends (list of (a, b)) of the ambiguous intervals before t_end."""
+    out = []
+    for j in range(cnt):
+        a, b = float(leaves[j, 0]), min(float(leaves[j, 1]), t_end)
+        if not a < b:
+            continue
+        for q in range(_PANELS):
+            pa = a + (b - a) * q / _PANELS
+            pb = b if q == _PANELS - 1 else a + (b - a) * (q + 1) / _PANELS
+            out.append((pa, pb))
+    return out
+
+
+class _Pair:
+    """One uncertain pair's state for the orchestration (relative state)."""
+
+    def __init__(self, dp, dv, da, R, Sigma):
+        self.dp, self.dv, self.da, self.R, self.Sigma = dp, dv, da, R, Sigma
+        self.acc = np.zeros(2)
+        self.pmax = 0.0
+        self.degenerate = False
+        self.cache = {}  # (a, b) -> entry-rate integral and its error
+
+    def prob_at(self, t):
+        p = instant_probability(self.dp, self.dv, self.da, self.R, self.Sigma, t)
+        self.pmax = max(self.pmax, p)
+        return p
+
+    def rice_short(self, a, b):
+        """Entry-rate integral over a short interval (3-point Gauss)."""
+        self.acc[1] = 0.0
+        v, e = entry_rate_gauss3(self.dp, self.dv, self.da, self.R, self.Sigma, a, b,
+                                 _RICE_TOL, self.acc)
+        if self.acc[1] != 0.0:
+            self.degenerate = True
+        return v, e
+
+    def rice(self, a, b):
+        key = (a, b)
+        if key in self.cache:
+            return self.cache[key]
+        self.acc[1] = 0.0
+        v, e = entry_rate_integral(self.dp, self.dv, self.da, self.R, self.Sigma, a, b,
+                                   _RICE_TOL, self.acc)
+        if self.acc[1] != 0.0:
+            self.degenerate = True
+        self.cache[key] = (v, e)
+        return v, e
+
+
+_SEARCH_STEPS = 64  # certified steps per panel before the conservative exit
+
+
+def _first_crossing(pair, a, pa, b, thr, dt):
+    """First t in [a, b] with P(|X(t)| <= R) >= thr given P(a) = pa < thr,
+    or None when certified absent.
+
+    Invariant: P < thr on [a, lo] is certified (each step by
+    sup_[lo, c] P <= P(lo) + int_lo^c nu+ + errors < thr).  Until a point
+    with P >= thr is known the candidate c walks right with a step that
+    doubles after a certified step and halves after a failed one; once
+    P(hi) >= thr is known, the first crossing lies in (lo, hi] and c is the
+    secant of P between lo and hi (bisection when a side stalls).  Returns hi
+    once hi - lo <= dt.  Conservative exits (an earlier time than the true
+    first crossing, never a later one): lo when the step shrinks below dt,
+    or after _SEARCH_STEPS steps (P within the certificate's resolution of
+    the threshold over a long stretch)."""
+    lo, plo = a, pa
+    hi, phi = math.inf, -1.0
+    step = b - a
+    c = b
+    stall = 0
+    for _ in range(_SEARCH_STEPS):
+        if hi - lo <= dt:
+            return hi
+        if c - lo <= dt:
+            return lo
+        if lo == a and c == b:
+            v, e = pair.rice(a, b)  # the panel's own integral (cached)
+        else:
+            v, e = pair.rice_short(lo, c)
+        if pair.degenerate:
+            return None
+        # entry-rate model of the step that the certificate would still pass
+        rate = (v + e) / (c - lo)
+        if plo + v + e + _P0_ERR < thr:  # certified: no crossing in [lo, c]
+            if c == b:
+                return None
+            lo, plo = c, pair.prob_at(c)
+            step = 2.0 * step
+            if rate > 0.0:
+                step = min(step, 0.9 * (thr - plo - _P0_ERR) / rate)
+            stall = stall + 1 if stall >= 0 else 1
+        else:
+            pc = pair.prob_at(c)
+            if pc >= thr:
+                hi, phi = c, pc
+                stall = stall - 1 if stall <= 0 else -1
+            else:  # neither certified nor above: a shorter step
+                step = 0.5 * (c - lo)
+                if rate > 0.0:
+                    step = min(step, 0.9 * (thr - plo - _P0_ERR) / rate)
+                c = lo + max(step, 0.0)
+                continue
+        if hi == math.inf:
+            c = min(lo + step, b)
+            continue
+        if abs(stall) >= 2 or not (phi > plo):
+            c = 0.5 * (lo + hi)
+        else:
+            c = lo + (thr - plo) / (phi - plo) * (hi - lo)
+            w = hi - lo
+            c = min(max(c, lo + 1e-3 * w), hi - 1e-3 * w)
+        if hi - c > dt and c - lo > step:  # not beyond what the certificate is expected to pass
+            c = lo + step
+    return lo
+
+
+def pair_probability(dp, dv, da, R, Sigma, H, thr):
+    """(probability, bound, plausible time) of one uncertain pair (relative state).
+
+    See docs/uncertainty.md for the method and why each bound holds."""
+    D = dp.shape[0]
+    pair = _Pair(dp, dv, da, R, Sigma)
+    leaves = np.empty((1 << _TUBE_DEPTH, 2))
+    cnt, t_inside = tube_intervals(dp, dv, da, R, Sigma, H, leaves)
+    if cnt == 0 and thr > TUBE_TAIL and thr <= 1.0 - TUBE_TAIL:
+        # the tube alone decides (far pairs, tiny sigma): P <= TUBE_TAIL < thr
+        # wherever it is outside, >= 1 - TUBE_TAIL >= thr from t_inside on
+        if t_inside <= H:
+            return 1.0, TUBE_TAIL, t_inside
+        return 0.0, TUBE_TAIL, math.inf
+    p0 = pair.prob_at(0.0)
+    dt = PLAUSIBLE_RTOL * H
+
+    # plausible time: certified walk over the ambiguous panels before t_inside
+    tpl = math.inf
+    if p0 >= thr:
+        tpl = 0.0
+    else:
+        for a, b in _panels(leaves, cnt, t_inside):
+            pa = p0 if a == 0.0 else pair.prob_at(a)
+            if pa >= thr:
+                tpl = a
+                break
+            r = _first_crossing(pair, a, pa, b, thr, dt)
+            if pair.degenerate:
+                break
+            if r is not None:
+                tpl = r
+                break
+        else:
+            tpl = t_inside  # +inf when the tube never lies inside
+    if pair.degenerate:
+        tpl, _ = plausible_time_grid(dp, dv, da, R, Sigma, H, thr)
+
+    if t_inside <= H:
+        return 1.0, TUBE_TAIL, tpl
+    if cnt == 0:
+        return 0.0, TUBE_TAIL, tpl
+    total = 0.0
+    err = 0.0
+    if not pair.degenerate:
+        for a, b in _panels(leaves, cnt, math.inf):
+            v, e = pair.rice(a, b)
+            total += v
+            err += e
+            if pair.degenerate:
+                break
+    upper = p0 + total
+    straight = not np.any(da != 0.0)
+    if not pair.degenerate:
+        if straight:
+            return min(1.0, max(0.0, upper)), err + _P0_ERR + TUBE_TAIL, tpl
+        # da != 0: a path enters at most twice, so upper over-counts exactly
+        # the re-entries, each preceded by its own slow exit
+        # (entry_rate_integral): lower = upper - E[slow exits]
+        slow = 0.0
+        for a, b in _panels(leaves, cnt, math.inf):
+            pair.acc[1] = 0.0
+            v, e = entry_rate_integral(dp, dv, da, R, Sigma, a, b, _RICE_TOL, pair.acc, H)
+            slow += v
+            err += e
+        lower = max(pair.pmax, upper - slow)
+        if upper - lower <= BRACKET_MAX:
+            mid = 0.5 * (upper + lower)
+            return min(1.0, max(0.0, mid)), 0.5 * (upper - lower) + err + _P0_ERR + 2 * TUBE_TAIL, tpl
+    mean, se = qmc_probability(dp, dv, da, R, Sigma, H, normal_table(2 * D))
+    n = QMC_REPLICATES * QMC_POINTS
+    lo = pair.pmax - _P0_ERR
+    hi = 1.0 if pair.degenerate else upper + err + _P0_ERR + 2 * TUBE_TAIL
+    p = min(1.0, max(0.0, min(max(mean, lo), hi)))
+    return p, max(QMC_T * se, 3.0 / n) + TUBE_TAIL, tpl
+
+
+_GRID = 64
+
+
+@njit(cache=True, error_model="numpy")
+def plausible_time_grid(dp, dv, da, R, Sigma, H, thr):
+    """(first t with P(|X(t)| <= R) >= thr, max P seen) for degenerate
+    covariances (no entry-rate certificate): a grid of _GRID steps, then
+    bisection of the first step that ends at or above thr to 1e-12 H (a
+    crossing and recrossing inside one grid step is not detected)."""
+    p0 = instant_probability(dp, dv, da, R, Sigma, 0.0)
+    pmax = p0
+    if p0 >= thr:
+        return 0.0, pmax
+    ta = 0.0
+    for i in range(1, _GRID + 1):
+        tb = H * i / _GRID
+        pb = instant_probability(dp, dv, da, R, Sigma, tb)
+        pmax = max(pmax, pb)
+        if pb >= thr:
+            lo = ta
+            hi = tb
+            for _ in range(80):
+                m = 0.5 * (lo + hi)
+                if not (lo < m < hi) or hi - lo <= 1e-12 * H:
+                    break
+                pm = instant_probability(dp, dv, da, R, Sigma, m)
+                pmax = max(pmax, pm)
+                if pm >= thr:
+                    hi = m
+                else:
+                    lo = m
+            return hi, pmax
+        ta = tb
+    return math.inf, pmax
