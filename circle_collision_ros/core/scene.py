@@ -910,13 +910,11 @@ class Scene:
         return res
 
     def _uncertain_pairs(self, threshold: float, contacts: SceneContacts | None) -> SceneUncertainty:
-        from circle_collision_ros.core import uncertainty as unc  # heavy kernels: load on first use
-
         R = self.reference_ns
         e = np.empty(0)
-        unc_slots = np.flatnonzero(self._alive & self._U)
-        if R is None or unc_slots.size == 0:
+        if R is None or not (self._alive & self._U).any():
             return SceneUncertainty(R or 0, np.empty(0, dtype=object), np.empty(0, dtype=object), e, e, e)
+        from circle_collision_ros.core import uncertainty as unc  # heavy kernels: loaded on first use
         slots = self._sorted_slots()
         dtn = R - self._T[slots]
         P, V = _propagate_ns(self._P[slots], self._V[slots], self._A[slots], dtn)

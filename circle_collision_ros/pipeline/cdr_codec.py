@@ -244,6 +244,20 @@ def encode_state_array(batch: StateBatch, stamp_ns: int, frame_id: str) -> bytes
     w.time(*divmod(int(stamp_ns), 1_000_000_000))
     w.string(frame_id.encode())
     w.u32(len(batch))
+    _write_states(w, batch)
+    return bytes(w.buf)
+
+
+def encode_state(batch: StateBatch) -> bytes:
+    """Serialized CircleState of a one-state batch (as encode_state_array writes each state)."""
+    if len(batch) != 1:
+        raise ValueError(f"encode_state takes one state, got {len(batch)}")
+    w = _Writer()
+    _write_states(w, batch)
+    return bytes(w.buf)
+
+
+def _write_states(w: _Writer, batch: StateBatch) -> None:
     numbers = np.column_stack([batch.radius, batch.position, batch.velocity, batch.acceleration]).tolist()
     if batch.covariance is None:
         covariances = [()] * len(batch)
@@ -260,7 +274,6 @@ def encode_state_array(batch: StateBatch, stamp_ns: int, frame_id: str) -> bytes
         w.u32(len(cov))
         if cov:
             w.f64s(*cov)
-    return bytes(w.buf)
 
 
 @njit(cache=True)

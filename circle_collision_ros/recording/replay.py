@@ -19,6 +19,7 @@ import argparse
 import json
 import math
 import os
+import struct
 import sys
 import time
 from collections.abc import Callable
@@ -29,7 +30,8 @@ from nav_msgs.msg import Odometry
 from circle_collision_msgs.msg import CircleState, CircleStateArray
 from circle_collision_ros.recording.bag_reader import (RECORDED_TYPES, BagContents, BagError, BagRecord,
                                                       open_bag)
-from circle_collision_ros.pipeline.cdr_codec import CdrError, decode_states
+from circle_collision_ros.pipeline.cdr_codec import (CDR_BE, CdrError, decode_states, encode_state,
+                                                    encode_state_array)
 from circle_collision_ros.pipeline.odometry import (ODOMETRY_TYPE, OdometrySource,
                                                    odometry_batch)
 from circle_collision_ros.pipeline.state_batch import StateBatch
@@ -258,6 +260,24 @@ def replay_bag(path: str | os.PathLike[str], *, tolerant: bool = False,
     return report
 
 
+def current_layout_bytes(record: BagRecord) -> bytes:
+    """The record's input bytes in the current interface layout (republishing an older recording).
+
+    A CircleState(Array) recorded before issue 18 is decoded by its recorded layout and
+    written again with an empty covariance (the same states; the array header's frame is
+    carried by each state, as the node reads it). Anything else is returned unchanged.
+    """
+    if record.type_name not in (RecordedTypes.STATE, RecordedTypes.STATE_ARRAY) \
+            or RecordedLayout.has_uncertainty(record.schema):
+        return record.data
+    batch = decode_states(record.data, RecordedTypes.INPUTS[record.type_name], uncertainty=False)
+    if record.type_name == RecordedTypes.STATE:
+        return encode_state(batch)
+    order = ">" if record.data[:2] == CDR_BE else "<"
+    sec, nanosec = struct.unpack_from(f"{order}iI", record.data, 4)
+    return encode_state_array(batch, sec * 1_000_000_000 + nanosec, "")
+
+
 def republish(records: list[BagRecord], rate: float) -> int:
     """Publish recorded inputs on their topics at recorded pace / rate; returns count."""
     import rclpy
@@ -283,7 +303,11 @@ def republish(records: list[BagRecord], rate: float) -> int:
             delay = (r.log_time_ns - start_log) * 1e-9 / rate - (time.monotonic() - start_wall)
             if delay > 0:
                 time.sleep(delay)
-            publishers[r.topic].publish(r.data)  # the recorded bytes, unchanged
+            try:
+                data = current_layout_bytes(r)  # the recorded bytes, unchanged unless recorded in
+            except CdrError:                    # an older layout (then the same states, re-encoded)
+                data = r.data  # malformed as recorded: sent as recorded, the node rejects it as before
+            publishers[r.topic].publish(data)
             sent += 1
     except KeyboardInterrupt:
         pass
