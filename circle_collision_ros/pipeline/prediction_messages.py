@@ -141,8 +141,8 @@ class ScenePrediction:
             extra[found[has]] = False
             extra &= (u.probability >= self.probability_threshold) & np.isfinite(u.probability) \
                 & np.isfinite(u.probability_bound)
-            e = np.array(sorted(np.flatnonzero(extra).tolist(),
-                                key=lambda j: (u.plausible_ttc[j], u.id_a[j], u.id_b[j])), dtype=np.int64)
+            keys = list(zip(u.plausible_ttc.tolist(), u.id_a.tolist(), u.id_b.tolist()))
+            e = np.array(sorted(np.flatnonzero(extra).tolist(), key=keys.__getitem__), dtype=np.int64)
             m = e.size
             id_a, id_b = id_a + u.id_a[e].tolist(), id_b + u.id_b[e].tolist()
             status = np.concatenate([status, np.full(m, CollisionPrediction.NO_CONTACT, np.uint8)])
