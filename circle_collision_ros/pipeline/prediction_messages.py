@@ -126,15 +126,31 @@ class ScenePrediction:
         status = np.where(c.overlapping[k], CollisionPrediction.OVERLAPPING,
                           CollisionPrediction.CONTACT).astype(np.uint8)
         id_a, id_b = c.id_a[k].tolist(), c.id_b[k].tolist()
-        ttc, contact_ns, closing = c.ttc[k], c.contact_ns[k], c.closing_speed[k]
-        probability, bound, plausible = np.ones(n), np.zeros(n), ttc.copy()
+        ttc = c.ttc[k]
+        parts = {"status": [status], "ttc": [ttc], "contact_ns": [c.contact_ns[k]], "point": [point],
+                 "normal": [normal], "closing": [c.closing_speed[k]], "probability": [np.ones(n)],
+                 "bound": [np.zeros(n)], "plausible": [ttc]}
+
+        def no_contact_rows(a: list, b: list, probability, bound, plausible) -> None:
+            """Append NO_CONTACT rows (time +inf, zero details) with these probability fields."""
+            nonlocal id_a, id_b
+            m = len(a)
+            id_a, id_b = id_a + a, id_b + b
+            for name, value in (("status", np.full(m, CollisionPrediction.NO_CONTACT, np.uint8)),
+                                ("ttc", np.full(m, np.inf)), ("contact_ns", np.zeros(m, np.int64)),
+                                ("point", np.zeros((m, 3))), ("normal", np.zeros((m, 3))),
+                                ("closing", np.zeros(m)), ("probability", probability), ("bound", bound),
+                                ("plausible", plausible)):
+                parts[name].append(value)
+
         u = self.uncertainty
         if u is not None and len(u):
             row = {pair: j for j, pair in enumerate(zip(u.id_a.tolist(), u.id_b.tolist()))}
             found = np.array([row.get(pair, -1) for pair in zip(id_a, id_b)], dtype=np.int64).reshape(n)
             has = found >= 0
-            probability[has] = u.probability[found[has]]
-            bound[has] = u.probability_bound[found[has]]
+            parts["probability"][0][has] = u.probability[found[has]]
+            parts["bound"][0][has] = u.probability_bound[found[has]]
+            parts["plausible"][0] = plausible = ttc.copy()
             plausible[has] = u.plausible_ttc[found[has]]
             # Uncertain pairs whose mean paths miss within the horizon, listed when probable.
             extra = np.ones(len(u), dtype=bool)
@@ -143,37 +159,22 @@ class ScenePrediction:
                 & np.isfinite(u.probability_bound)
             keys = list(zip(u.plausible_ttc.tolist(), u.id_a.tolist(), u.id_b.tolist()))
             e = np.array(sorted(np.flatnonzero(extra).tolist(), key=keys.__getitem__), dtype=np.int64)
-            m = e.size
-            id_a, id_b = id_a + u.id_a[e].tolist(), id_b + u.id_b[e].tolist()
-            status = np.concatenate([status, np.full(m, CollisionPrediction.NO_CONTACT, np.uint8)])
-            ttc = np.concatenate([ttc, np.full(m, np.inf)])
-            contact_ns = np.concatenate([contact_ns, np.zeros(m, np.int64)])
-            point = np.concatenate([point, np.zeros((m, 3))])
-            normal = np.concatenate([normal, np.zeros((m, 3))])
-            closing = np.concatenate([closing, np.zeros(m)])
-            probability = np.concatenate([probability, u.probability[e]])
-            bound = np.concatenate([bound, u.probability_bound[e]])
-            plausible = np.concatenate([plausible, u.plausible_ttc[e]])
+            no_contact_rows(u.id_a[e].tolist(), u.id_b[e].tolist(), u.probability[e], u.probability_bound[e],
+                            u.plausible_ttc[e])
         if self.report_all_pairs and len(self.capture) <= ReportAll.MAX_BODIES:
             ids = self.capture.ids()
             rank = {b: r for r, b in enumerate(ids)}
             pairs = set(zip(map(rank.__getitem__, id_a), map(rank.__getitem__, id_b)))
             rest = [(a, b) for a in range(len(ids)) for b in range(a + 1, len(ids)) if (a, b) not in pairs]
             m = len(rest)
-            id_a = id_a + [ids[a] for a, _ in rest]
-            id_b = id_b + [ids[b] for _, b in rest]
-            status = np.concatenate([status, np.full(m, CollisionPrediction.NO_CONTACT, np.uint8)])
-            ttc = np.concatenate([ttc, np.full(m, np.inf)])
-            contact_ns = np.concatenate([contact_ns, np.zeros(m, np.int64)])
-            point = np.concatenate([point, np.zeros((m, 3))])
-            normal = np.concatenate([normal, np.zeros((m, 3))])
-            closing = np.concatenate([closing, np.zeros(m)])
-            probability = np.concatenate([probability, np.zeros(m)])
-            bound = np.concatenate([bound, np.zeros(m)])
-            plausible = np.concatenate([plausible, np.full(m, np.inf)])
+            no_contact_rows([ids[a] for a, _ in rest], [ids[b] for _, b in rest], np.zeros(m), np.zeros(m),
+                            np.full(m, np.inf))
+        col = {name: np.concatenate(values) if len(values) > 1 else values[0] for name, values in parts.items()}
         f64 = lambda x: np.ascontiguousarray(x, dtype=np.float64)  # noqa: E731
-        return PredictionColumns(id_a, id_b, status, f64(ttc), np.ascontiguousarray(contact_ns, dtype=np.int64),
-                                 point, normal, f64(closing), f64(probability), f64(bound), f64(plausible))
+        return PredictionColumns(id_a, id_b, col["status"], f64(col["ttc"]),
+                                 np.ascontiguousarray(col["contact_ns"], dtype=np.int64), col["point"],
+                                 col["normal"], f64(col["closing"]), f64(col["probability"]), f64(col["bound"]),
+                                 f64(col["plausible"]))
 
     def rows(self) -> Iterator[PredictionRow]:
         """The entries one by one, in publication order (see `columns`)."""
