@@ -1,0 +1,158 @@
+"""Collision probability of Gaussian-uncertain pairs (issue 18), ROS-free.
+
+Model.  Each body's (position, velocity) at t = 0 is Gaussian with a joint
+covariance (order x, y[, z], vx, vy[, vz]); accelerations are exact; bodies
+are independent.  The relative centre X(t) = dp + dv t + da t^2/2 is then
+Gaussian, X(t) ~ N(g(t), S(t)) with S(t) = Spp + t (Spv + Svp) + t^2 Svv
+(Sigma = cov_a + cov_b).  docs/uncertainty.md has the methods, the error
+bounds and why they hold.
+
+Public API (contract: /work/coord/issue18_contract.md):
+
+* ``uncertain_pairs(...) -> UncertainPairs``: per row the probability of
+  contact within [0, H], a stated bound on its error, and the earliest
+  plausible contact time (first t with P(|X(t)| <= R) >= threshold).
+* ``BROAD_PHASE_SIGMAS`` and ``inflation_radius``: the broad-phase
+  inflation that drops probability mass < 1e-9 per pair.
+* ``covariance_problem(cov)``: why a covariance is unusable, or None.
+
+Zero covariance rows (Sigma = 0 exactly) take the exact solver's answer:
+probability 1.0 if ``time_to_collision(...) <= H`` else 0.0, bound 0.0,
+plausible time = that time or +inf.  Every row's result depends only on the
+row (deterministic; sampling, where used, is seeded).
+"""
+from __future__ import annotations
+
+import math
+from typing import NamedTuple
+
+import numpy as np
+
+from circle_collision_ros.core.narrow_phase import time_to_collision
+from circle_collision_ros.core.uncertainty_kernels import (
+    BROAD_PHASE_SIGMAS,
+    TUBE_TAIL,
+    max_sigma_over,
+    pair_probability,
+)
+
+__all__ = ["UncertainPairs", "uncertain_pairs", "BROAD_PHASE_SIGMAS", "TUBE_TAIL",
+           "inflation_radius", "covariance_problem", "COV_SYMMETRY_RTOL", "COV_PSD_RTOL"]
+
+# Tolerances of covariance_problem (the node rejects what fails them):
+COV_SYMMETRY_RTOL = 1e-9  # |C - C^T| <= 1e-9 * max|C| (elementwise)
+COV_PSD_RTOL = 1e-9       # smallest eigenvalue >= -1e-9 * largest |eigenvalue|
+
+
+class UncertainPairs(NamedTuple):
+    """Per-row results of ``uncertain_pairs`` (all (n,) float64)."""
+
+    collision_probability: np.ndarray  # P(contact within [0, H])
+    collision_probability_bound: np.ndarray  # stated bound on |reported - true|
+    plausible_time: np.ndarray  # s: first t in [0, H] with P(|X(t)| <= R) >= threshold; +inf if none
+
+
+def covariance_problem(cov) -> str | None:
+    """Why ``cov`` (a (k, k) covariance, k = 2D) is unusable, or None.
+
+    Checks, in order: square 2-D array; finite; symmetric to
+    ``COV_SYMMETRY_RTOL`` (relative to the largest |element|); positive
+    semi-definite to ``COV_PSD_RTOL`` (smallest eigenvalue >= -rtol * largest
+    |eigenvalue|; smaller negative eigenvalues are rounding and the core
+    clamps them to 0)."""
+    c = np.asarray(cov, dtype=np.float64)
+    if c.ndim != 2 or c.shape[0] != c.shape[1]:
+        return f"covariance must be a square matrix, got shape {c.shape}"
+    if not np.all(np.isfinite(c)):
+        bad = np.argwhere(~np.isfinite(c))[0]
+        return f"covariance element ({bad[0]}, {bad[1]}) is not finite ({c[bad[0], bad[1]]})"
+    scale = float(np.max(np.abs(c))) if c.size else 0.0
+    asym = np.abs(c - c.T)
+    if scale > 0 and float(asym.max()) > COV_SYMMETRY_RTOL * scale:
+        i, j = np.unravel_index(int(np.argmax(asym)), asym.shape)
+        return (f"covariance is not symmetric: element ({i}, {j}) = {c[i, j]!r} but "
+                f"({j}, {i}) = {c[j, i]!r}")
+    if scale > 0:
+        lam = np.linalg.eigvalsh(0.5 * (c + c.T))
+        if lam[0] < -COV_PSD_RTOL * max(abs(lam[0]), abs(lam[-1])):
+            return (f"covariance is not positive semi-definite: eigenvalue {lam[0]:.6g} "
+                    f"(largest {lam[-1]:.6g})")
+    return None
+
+
+def _rows(x, n, D, name):
+    a = np.ascontiguousarray(np.asarray(x, dtype=np.float64))
+    shape = (n, D) if D else (n,)
+    if a.shape != shape:
+        raise ValueError(f"{name} must have shape {shape}, got {a.shape}")
+    return a
+
+
+def uncertain_pairs(pa, va, aa, ra, cov_a, pb, vb, ab, rb, cov_b,
+                    horizon: float, threshold: float) -> UncertainPairs:
+    """Collision probability, its bound and the earliest plausible contact of n pairs.
+
+    pa, va, aa, pb, vb, ab: (n, D) float64, D in {2, 3} [m, m/s, m/s^2];
+    ra, rb: (n,) radii [m]; cov_a, cov_b: (n, 2D, 2D) joint covariance of
+    (position, velocity) of each body (order x, y[, z], vx, vy[, vz]) [m^2,
+    m^2/s, m^2/s^2]; horizon H [s] (finite, >= 0); threshold in (0, 1].
+    The caller validates covariances (``covariance_problem``); tiny negative
+    eigenvalues from rounding are clamped here."""
+    pa = np.asarray(pa, dtype=np.float64)
+    if pa.ndim != 2 or pa.shape[1] not in (2, 3):
+        raise ValueError(f"pa must have shape (n, 2) or (n, 3), got {pa.shape}")
+    n, D = pa.shape
+    pa = _rows(pa, n, D, "pa")
+    va, aa, pb, vb, ab = (_rows(x, n, D, name) for x, name in
+                          ((va, "va"), (aa, "aa"), (pb, "pb"), (vb, "vb"), (ab, "ab")))
+    ra, rb = _rows(ra, n, 0, "ra"), _rows(rb, n, 0, "rb")
+    cov_a = np.asarray(cov_a, dtype=np.float64)
+    cov_b = np.asarray(cov_b, dtype=np.float64)
+    for c, name in ((cov_a, "cov_a"), (cov_b, "cov_b")):
+        if c.shape != (n, 2 * D, 2 * D):
+            raise ValueError(f"{name} must have shape {(n, 2 * D, 2 * D)}, got {c.shape}")
+    H = float(horizon)
+    if not (H >= 0.0 and math.isfinite(H)):
+        raise ValueError(f"horizon must be finite and >= 0, got {horizon!r}")
+    thr = float(threshold)
+    if not (0.0 < thr <= 1.0):
+        raise ValueError(f"threshold must be in (0, 1], got {threshold!r}")
+
+    prob = np.zeros(n)
+    bound = np.zeros(n)
+    tpl = np.full(n, np.inf)
+    sigma = cov_a + cov_b
+    exact = ~np.any(sigma.reshape(n, -1) != 0.0, axis=1)
+    if exact.any():
+        ix = np.flatnonzero(exact)
+        t = time_to_collision(pa[ix], va[ix], aa[ix], ra[ix], pb[ix], vb[ix], ab[ix], rb[ix], H)
+        hit = t <= H
+        prob[ix] = np.where(hit, 1.0, 0.0)
+        tpl[ix] = np.where(hit, t, np.inf)
+    for i in np.flatnonzero(~exact):
+        # relative state from relative quantities (map offsets cancel first)
+        dp = pa[i] - pb[i]
+        dv = va[i] - vb[i]
+        da = aa[i] - ab[i]
+        R = ra[i] + rb[i]
+        prob[i], bound[i], tpl[i] = pair_probability(dp, dv, da, R, np.ascontiguousarray(sigma[i]),
+                                                     H, thr)
+    return UncertainPairs(prob, bound, tpl)
+
+
+def inflation_radius(cov, horizon: float) -> np.ndarray:
+    """(n,) m: ``BROAD_PHASE_SIGMAS * max over t in [0, H] of
+    sqrt(lambda_max(Spp + t (Spv + Svp) + t^2 Svv))`` of each body's own
+    covariance cov (n, 2D, 2D).  lambda_max(S(t)) is convex in t (a maximum of
+    the convex quadratics n^T S(t) n), so the maximum is at t = 0 or t = H.
+    Add it to the body's radius in the broad phase only: a pair both of whose
+    bodies stay within their inflated paths drops at most 2 * TUBE_TAIL < 1e-9
+    of probability (docs/uncertainty.md)."""
+    cov = np.asarray(cov, dtype=np.float64)
+    if cov.ndim != 3 or cov.shape[1] != cov.shape[2] or cov.shape[1] not in (4, 6):
+        raise ValueError(f"cov must have shape (n, 4, 4) or (n, 6, 6), got {cov.shape}")
+    H = float(horizon)
+    out = np.empty(cov.shape[0])
+    for i in range(cov.shape[0]):
+        out[i] = BROAD_PHASE_SIGMAS * max_sigma_over(np.ascontiguousarray(cov[i]), 0.0, H)
+    return out

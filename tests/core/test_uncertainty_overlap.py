@@ -1,0 +1,125 @@
+"""Instantaneous overlap probability P(|X| <= R) against mpmath, 1e-9 absolute.
+
+Guarantee proved here (docs/uncertainty.md, "Instantaneous probability"):
+``overlap_probability(mean, S, R)`` is within 1e-9 of the exact value for the
+float inputs as given, in 2-D and 3-D, for covariances that are isotropic,
+strongly anisotropic (axis ratio up to 1e6), singular (rank 0, 1, 2),
+sigma << R (down to 1e-5 R) and sigma >> R (up to 1e4 R), and means inside,
+on the edge of and far outside the disc/ball.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from circle_collision_ros.core.overlap_probability import eig_sym, overlap_probability
+from tests.core.uncertainty_reference import isotropic_reference, overlap_reference
+
+TOL = 1e-9
+
+
+def _rotation(rng, D):
+    q, r = np.linalg.qr(rng.normal(size=(D, D)))
+    return q * np.sign(np.diag(r))
+
+
+def random_case(rng, D):
+    """(mean, S, R): random orientation, scales and degeneracies."""
+    R = 10 ** rng.uniform(-1, 1)
+    kind = rng.integers(0, 6)
+    if kind == 0:    # comparable sigma
+        sig = R * 10 ** rng.uniform(-1, 0.5, size=D)
+    elif kind == 1:  # strongly anisotropic
+        sig = R * 10 ** rng.uniform(-1, 1, size=D)
+        sig[rng.integers(0, D)] *= 10 ** rng.uniform(-6, -3)
+    elif kind == 2:  # singular: some directions exact
+        sig = R * 10 ** rng.uniform(-1, 0.5, size=D)
+        sig[rng.permutation(D)[: rng.integers(1, D + 1)]] = 0.0
+    elif kind == 3:  # sigma << R
+        sig = R * 10 ** rng.uniform(-5, -2, size=D)
+    elif kind == 4:  # sigma >> R
+        sig = R * 10 ** rng.uniform(1, 4, size=D)
+    else:            # mixed
+        sig = R * 10 ** rng.uniform(-4, 3, size=D)
+    Q = _rotation(rng, D)
+    S = Q @ np.diag(sig ** 2) @ Q.T
+    S = 0.5 * (S + S.T)
+    where = rng.integers(0, 4)
+    u = rng.normal(size=D)
+    u /= np.linalg.norm(u)
+    scale = max(R, float(sig.max()))
+    if where == 0:
+        mean = u * R * rng.uniform(0, 1)                     # inside
+    elif where == 1:
+        mean = u * (R + rng.normal() * float(sig.max()) * 2)  # near the edge
+    elif where == 2:
+        mean = u * (R + scale * rng.uniform(1, 10))           # outside / far
+    else:
+        mean = u * R * rng.uniform(0, 3)
+    return mean, S, R
+
+
+@pytest.mark.parametrize("D", [2, 3])
+def test_isotropic_against_the_poisson_series(D):
+    rng = np.random.default_rng(7 + D)
+    for _ in range(40):
+        s = 10 ** rng.uniform(-3, 2)
+        R = 10 ** rng.uniform(-1, 1)
+        m = rng.choice([0.0, rng.uniform(0, 2 * R), R + rng.normal() * s, rng.uniform(0, R + 8 * s)])
+        m = min(m, 100 * s)  # keeps the series short (noncentrality <= 1e4)
+        u = rng.normal(size=D)
+        mean = u / np.linalg.norm(u) * m
+        got = overlap_probability(mean, s * s * np.eye(D), R)
+        ref = isotropic_reference(float(np.linalg.norm(mean)), s, R, D)
+        assert abs(got - ref) <= TOL, (mean, s, R, got, ref)
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_random_2d_against_mpmath(seed):
+    rng = np.random.default_rng(100 + seed)
+    worst = 0.0
+    for _ in range(40):
+        mean, S, R = random_case(rng, 2)
+        got = overlap_probability(mean, S, R)
+        ref = overlap_reference(mean, S, R)
+        worst = max(worst, abs(got - ref))
+        assert abs(got - ref) <= TOL, (mean.tolist(), S.tolist(), R, got, ref)
+    assert 0.0 <= worst <= TOL
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("seed", range(3))
+def test_random_3d_against_mpmath(seed):
+    rng = np.random.default_rng(200 + seed)
+    for _ in range(4):
+        mean, S, R = random_case(rng, 3)
+        got = overlap_probability(mean, S, R)
+        ref = overlap_reference(mean, S, R, dps=20)
+        assert abs(got - ref) <= TOL, (mean.tolist(), S.tolist(), R, got, ref)
+
+
+def test_degenerate_covariances_exactly():
+    """Zero covariance: the indicator (edge included); rank 1: a 1-D interval."""
+    z = np.zeros((2, 2))
+    assert overlap_probability(np.array([0.6, 0.8]), z, 1.0) == 1.0
+    assert overlap_probability(np.array([0.6, 0.8000001]), z, 1.0) == 0.0
+    S = np.array([[0.0, 0.0], [0.0, 4.0]])  # only y uncertain, x exact at 0.6
+    w = math.sqrt(1 - 0.36)
+    ref = 0.5 * (math.erf((w - 0.5) / (2 * math.sqrt(2))) - math.erf((-w - 0.5) / (2 * math.sqrt(2))))
+    assert abs(overlap_probability(np.array([0.6, 0.5]), S, 1.0) - ref) <= 1e-15
+    assert overlap_probability(np.array([1.5, 0.0]), S, 1.0) == 0.0
+    assert overlap_probability(np.zeros(3), np.zeros((3, 3)), 0.5) == 1.0
+
+
+def test_eigen_decomposition_is_accurate():
+    rng = np.random.default_rng(3)
+    for n in (2, 3, 4, 6):
+        for _ in range(20):
+            B = rng.normal(size=(n, n)) * 10 ** rng.uniform(-3, 3, size=n)
+            A = B @ B.T
+            lam, V = eig_sym(A)
+            assert np.all(np.diff(lam) >= 0)
+            assert np.abs(V @ np.diag(lam) @ V.T - A).max() <= 1e-13 * np.abs(A).max()
+            assert np.abs(V.T @ V - np.eye(n)).max() <= 1e-13
