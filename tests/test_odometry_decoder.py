@@ -205,7 +205,7 @@ def test_zero_covariance_is_exact_and_bad_blocks_name_their_field() -> None:
     for field, values, reason in [
             ("pose", np.diag([1.0, -1.0, 1.0, 0, 0, 0]), "not positive semi-definite"),
             ("twist", np.triu(np.ones((6, 6))), "not symmetric"),
-            ("pose", np.diag([math.nan, 1.0, 1.0, 0, 0, 0]), "non-finite")]:
+            ("pose", np.diag([math.nan, 1.0, 1.0, 0, 0, 0]), "not finite")]:
         msg = odometry()
         msg.pose.covariance, msg.twist.covariance = [0.0] * 36, [0.0] * 36
         getattr(msg, field).covariance = values.ravel().tolist()

@@ -19,8 +19,8 @@ frame check, latest-by-stamp merge, recording, replay):
   block of `twist.covariance`, which is in child_frame_id like the twist,
   rotated into header.frame_id as R S R^T by the same orientation; no cross
   terms (Odometry carries none). Each block must be finite, symmetric and PSD
-  (state_validation.CovarianceRule), else the message is rejected naming the
-  field. Both blocks zero (most drivers) is an exact state, as before.
+  (core.uncertainty.covariance_problem), else the message is rejected naming
+  the field. Both blocks zero (most drivers) is an exact state, as before.
 - orientation: a quaternion whose norm is within QuaternionRule.TOLERANCE of 1
   is normalised (float32 round trips and integration drift stay usable); zero,
   non-finite or further from unit is rejected as a whole message (OdometryError):
@@ -38,6 +38,7 @@ from typing import NamedTuple
 
 import numpy as np
 
+from circle_collision_ros.core.uncertainty import covariance_problem
 from circle_collision_ros.pipeline.cdr_codec import CDR_BE, CDR_LE, CdrError, _align, _string, _u32
 from circle_collision_ros.pipeline.state_batch import StateBatch
 
@@ -151,8 +152,6 @@ def odometry_covariance(odom: OdometryFields, q: tuple[float, float, float, floa
 
     Raises OdometryError naming the field whose block is not finite/symmetric/PSD.
     """
-    from circle_collision_ros.pipeline.state_validation import covariance_problem
-
     pose = np.array(odom.pose_covariance).reshape(6, 6)[:3, :3]
     twist = np.array(odom.twist_covariance).reshape(6, 6)[:3, :3]
     if not pose.any() and not twist.any():
@@ -160,7 +159,7 @@ def odometry_covariance(odom: OdometryFields, q: tuple[float, float, float, floa
     for field, block in (("pose.covariance", pose), ("twist.covariance", twist)):
         problem = covariance_problem(block)
         if problem:
-            raise OdometryError(f"{field} (x, y, z block) {problem}")
+            raise OdometryError(f"{field} (x, y, z block) {problem.removeprefix('covariance ')}")
     rot = rotation_matrix(q)
     velocity = rot @ twist @ rot.T
     out = np.zeros((6, 6))

@@ -13,6 +13,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from circle_collision_ros.core.uncertainty import COV_PSD_RTOL, COV_SYMMETRY_RTOL, covariance_problem
 from circle_collision_ros.pipeline.cdr_codec import COVARIANCE_SIZE
 from circle_collision_ros.pipeline.state_batch import StateBatch, covariance_block
 
@@ -42,46 +43,21 @@ class ValueLimits:
     MAX_MAGNITUDE = 1e12
 
 
-class CovarianceRule:
-    """When a covariance block is usable: finite, symmetric and positive semi-definite.
-
-    Symmetric: |C_ij - C_ji| <= SYMMETRY * max|C| (trackers' rounding in F P F^T + Q).
-    PSD: smallest eigenvalue of (C + C^T) / 2 >= -PSD * largest (rounding; the core clamps).
-    """
-
-    SYMMETRY = 1e-9
-    PSD = 1e-9
-
-
 def covariance_rejected(blocks: np.ndarray) -> np.ndarray:
-    """(n,) bool: which (n, m, m) covariance blocks break CovarianceRule (vectorised)."""
+    """(n,) bool: which (n, m, m) covariance blocks core.uncertainty.covariance_problem refuses,
+    vectorised with its tolerances (finite; symmetric to COV_SYMMETRY_RTOL x max|C|; smallest
+    eigenvalue >= -COV_PSD_RTOL x largest |eigenvalue|)."""
     finite = np.isfinite(blocks).all(axis=(1, 2))
     out = ~finite
     k = np.flatnonzero(finite)
     if k.size:
         c = blocks[k]
         scale = np.abs(c).max(axis=(1, 2))
-        asym = np.abs(c - c.transpose(0, 2, 1)).max(axis=(1, 2)) > CovarianceRule.SYMMETRY * scale
-        eig = np.linalg.eigvalsh(0.5 * (c + c.transpose(0, 2, 1)))
-        out[k] = asym | (eig[:, 0] < -CovarianceRule.PSD * np.maximum(eig[:, -1], 0.0))
+        asym = np.abs(c - c.transpose(0, 2, 1)).max(axis=(1, 2)) > COV_SYMMETRY_RTOL * scale
+        lam = np.linalg.eigvalsh(0.5 * (c + c.transpose(0, 2, 1)))
+        not_psd = lam[:, 0] < -COV_PSD_RTOL * np.maximum(np.abs(lam[:, 0]), np.abs(lam[:, -1]))
+        out[k] = (scale > 0) & (asym | not_psd)
     return out
-
-
-def covariance_problem(block: np.ndarray) -> str | None:
-    """What is wrong with one covariance block under CovarianceRule, or None."""
-    c = np.asarray(block, dtype=np.float64)
-    bad = np.argwhere(~np.isfinite(c))
-    if bad.size:
-        i, j = bad[0].tolist()
-        return f"has a non-finite value (C[{i},{j}] = {c[i, j]})"
-    diff = np.abs(c - c.T)
-    i, j = np.unravel_index(int(np.argmax(diff)), c.shape)
-    if diff[i, j] > CovarianceRule.SYMMETRY * np.abs(c).max():
-        return f"is not symmetric (C[{i},{j}] = {c[i, j]!r}, C[{j},{i}] = {c[j, i]!r})"
-    eig = np.linalg.eigvalsh(0.5 * (c + c.T))
-    if eig[0] < -CovarianceRule.PSD * max(eig[-1], 0.0):
-        return f"is not positive semi-definite (smallest eigenvalue {eig[0]:.6g}, largest {eig[-1]:.6g})"
-    return None
 
 
 @dataclass(frozen=True)
@@ -118,8 +94,8 @@ def covariance_checks(batch: StateBatch, dimensions: int) -> tuple[np.ndarray, n
     and not all zero on the used axes (a zero or absent covariance is an exact state).
 
     Only the rows and columns a `dimensions`-D scene uses are checked (x, y, vx, vy in 2-D).
-    The tolerances are the core's (core.uncertainty.covariance_problem states them), applied
-    vectorised here; the reason of a bad row is that function's text.
+    The rule and tolerances are the core's (core.uncertainty.covariance_problem), applied
+    vectorised here (covariance_rejected); the reason of a bad row is that function's text.
     """
     n = len(batch)
     if batch.covariance is None:
@@ -130,7 +106,9 @@ def covariance_checks(batch: StateBatch, dimensions: int) -> tuple[np.ndarray, n
     bad = size_bad.copy()
     rows = np.flatnonzero(given & ~batch.remove)
     if rows.size:
-        bad[rows] = covariance_rejected(block[rows])
+        flagged = rows[covariance_rejected(block[rows])]
+        # the core's own check decides (and words) each refusal: no row refused without its reason
+        bad[flagged] = [covariance_problem(block[k]) is not None for k in flagged.tolist()]
     return bad & ~batch.remove, given & ~bad & ~batch.remove
 
 
@@ -140,7 +118,7 @@ def _covariance_reason(batch: StateBatch, k: int, dimensions: int) -> str | None
         return f"covariance has {size} values (expected 0 or {COVARIANCE_SIZE}: 6x6 row-major)"
     problem = covariance_problem(covariance_block(batch.covariance[k:k + 1], dimensions)[0])
     axes = "x, y, vx, vy" if dimensions == 2 else "x, y, z, vx, vy, vz"
-    return None if problem is None else f"covariance (over {axes}) {problem}"
+    return None if problem is None else f"{problem} (rows/columns {axes})"
 
 
 def _reasons(batch: StateBatch, k: int, frame_id: str, now_ns: int | None, dup: bool,

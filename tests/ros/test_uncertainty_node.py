@@ -46,7 +46,7 @@ def _covariance(position_sigma: float, velocity_sigma: float = 0.0) -> list[floa
 
 BAD_COVARIANCES = [
     ("wrong length", [0.01] * 7, "covariance has 7 values"),
-    ("nan", [math.nan if k == 7 else (0.01 if k % 7 == 0 else 0.0) for k in range(36)], "non-finite"),
+    ("nan", [math.nan if k == 7 else (0.01 if k % 7 == 0 else 0.0) for k in range(36)], "not finite"),
     ("not symmetric", (np.eye(6) * 0.01 + np.triu(np.full((6, 6), 0.001), 1)).ravel().tolist(),
      "not symmetric"),
     ("not PSD", np.diag([0.01, -0.04, 0.0, 0.01, 0.01, 0.0]).ravel().tolist(), "not positive semi-definite"),
