@@ -118,6 +118,10 @@ class CollisionPredictor:
         d = self.config.dimensions
         scene.upsert_many(["a", "b"], np.eye(2, d), np.zeros((2, d)), np.zeros((2, d)), np.ones(2), 1)
         scene.predictions()
+        # and the uncertain path's kernels (a first uncertain state would otherwise wait for them)
+        scene.merge(["a"], [2], np.eye(1, d), np.zeros((1, d)), np.zeros((1, d)), [1.0], [False], 0,
+                    covariances=np.eye(2 * d)[None] * 0.01)
+        scene.uncertain_pairs(self.config.probability_threshold, scene.predictions())
 
     def reconfigure(self, **changes) -> None:
         """Apply run-time changes (RUNTIME_FIELDS)."""
