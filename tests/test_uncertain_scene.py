@@ -10,6 +10,8 @@ Guarantees proved here:
   exact rationals), M = [[I, dt I], [0, I]];
 - the inflated broad phase loses nothing: every pair whose probability (the core on every
   pair, brute force) is above 1e-9 is evaluated by the scene;
+- any covariance content (NaN, inf, huge, wrong length, asymmetric, indefinite) is used or
+  rejected with a reason naming the covariance; nothing raises, nothing published is NaN;
 - the reporting rule: contacts always; other uncertain pairs iff probability >=
   probability_threshold (a run-time change applies), as NO_CONTACT rows after the contacts
   ordered by plausible time; exact rows carry 1.0 / 0.0 / time_to_collision.
@@ -20,6 +22,8 @@ from fractions import Fraction
 
 import numpy as np
 import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
 
 from circle_collision_ros.core.scene import Scene
 from circle_collision_ros.core.uncertainty import uncertain_pairs
@@ -143,3 +147,33 @@ def test_reporting_rule_and_threshold() -> None:
     predictor.reconfigure(probability_threshold=1.0)
     strict = predictor.predict().columns
     assert len(strict) == n_contacts  # only mean contacts remain (no miss reaches probability 1)
+
+
+_entry = st.one_of(st.floats(allow_nan=True, allow_infinity=True), st.sampled_from([0.0, 1e-300, 1e30, -1e-12]),
+                   st.floats(-1.0, 1.0))
+
+
+@settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(st.lists(st.one_of(st.lists(_entry, min_size=36, max_size=36), st.lists(_entry, max_size=35),
+                          st.builds(lambda s: (np.diag([s] * 6)).ravel().tolist(), st.floats(0.0, 4.0))),
+                min_size=3, max_size=3), st.sampled_from([2, 3]))
+def test_any_covariance_content_is_used_or_rejected_with_a_reason(covariances, dimensions) -> None:
+    """Random covariance contents through validation, the scene and the encoder: nothing raises,
+    each refused state has a reason naming the covariance, nothing published is NaN."""
+    batch = _batch(3, seed=2, sigma=0.0, spread=1.5)
+    sizes = np.array([len(c) for c in covariances], dtype=np.int64)
+    cov = np.zeros((3, 36))
+    for k, c in enumerate(covariances):
+        if len(c) == 36:
+            cov[k] = c
+    batch = StateBatch(**{**batch.__dict__, "covariance": cov, "covariance_size": sizes})
+    predictor = CollisionPredictor(PredictorConfig(stale_timeout=3600.0, dimensions=dimensions))
+    report = predictor.receive_batch(batch, BASE)
+    for rejection in report.rejected:
+        assert "covariance" in rejection.reason
+    prediction = predictor.predict()
+    c = prediction.columns
+    for name in ("ttc", "closing_speed", "probability", "probability_bound", "plausible_ttc"):
+        assert not np.isnan(getattr(c, name)).any(), name
+    assert ((c.probability >= 0.0) & (c.probability <= 1.0)).all()
+    prediction.to_cdr()

@@ -940,6 +940,8 @@ class Scene:
         n = np.int64(slots.size)
         key = np.unique(np.minimum(I, J) * n + np.maximum(I, J))
         I, J = key // n, key % n
+        if I.size == 0:
+            return SceneUncertainty(R, np.empty(0, dtype=object), np.empty(0, dtype=object), e, e, e)
         res = unc.uncertain_pairs(P[I], V[I], A[I], Rad[I], C[I], P[J], V[J], A[J], Rad[J], C[J],
                                   self._h, threshold)
         ids = self._ids[slots]

@@ -41,6 +41,9 @@ class ValueLimits:
     """
 
     MAX_MAGNITUDE = 1e12
+    # Covariance entries (m^2, m^2/s, m^2/s^2): the square of the above. Propagated over the
+    # largest stamp difference (dt^2 ~ 5e18) they stay finite (~1e43).
+    MAX_COVARIANCE = MAX_MAGNITUDE ** 2
 
 
 def covariance_rejected(blocks: np.ndarray) -> np.ndarray:
@@ -106,6 +109,9 @@ def covariance_checks(batch: StateBatch, dimensions: int) -> tuple[np.ndarray, n
     bad = size_bad.copy()
     rows = np.flatnonzero(given & ~batch.remove)
     if rows.size:
+        huge = np.abs(block[rows]).max(axis=(1, 2)) > ValueLimits.MAX_COVARIANCE  # NaN: not here
+        bad[rows[huge]] = True
+        rows = rows[~huge]
         flagged = rows[covariance_rejected(block[rows])]
         # the core's own check decides (and words) each refusal: no row refused without its reason
         bad[flagged] = [covariance_problem(block[k]) is not None for k in flagged.tolist()]
@@ -116,8 +122,13 @@ def _covariance_reason(batch: StateBatch, k: int, dimensions: int) -> str | None
     size = int(batch.covariance_size[k])
     if size not in (0, COVARIANCE_SIZE):
         return f"covariance has {size} values (expected 0 or {COVARIANCE_SIZE}: 6x6 row-major)"
-    problem = covariance_problem(covariance_block(batch.covariance[k:k + 1], dimensions)[0])
+    block = covariance_block(batch.covariance[k:k + 1], dimensions)[0]
     axes = "x, y, vx, vy" if dimensions == 2 else "x, y, z, vx, vy, vz"
+    largest = float(np.abs(block).max())
+    if largest > ValueLimits.MAX_COVARIANCE:
+        return f"covariance has a value of magnitude {largest:g}, beyond {ValueLimits.MAX_COVARIANCE:g}" \
+               f" (rows/columns {axes})"
+    problem = covariance_problem(block)
     return None if problem is None else f"{problem} (rows/columns {axes})"
 
 
