@@ -47,7 +47,7 @@ DEGENERATE_RATIO = 1e-12
 _RS2 = 1.0 / math.sqrt(2.0)
 _RS2PI = 1.0 / math.sqrt(2.0 * math.pi)
 BROAD_K2 = 7.5 ** 2  # BROAD_PHASE_SIGMAS^2 (uncertainty_kernels asserts they agree)
-_SCAN = 32  # arc scan points for the density's local maxima (panel ends)
+_SCAN = 16  # arc scan points for the density's local maxima (panel ends)
 
 
 @njit(cache=True, error_model="numpy")
@@ -160,26 +160,28 @@ def _surface_integrand(x, n, g, gd, A, norm, K, Vc):
 
 @njit(cache=True, error_model="numpy")
 def _arc_integrand(psi, prm):
+    """R f_t(x) E[(-n.Xdot)^+ | x] at x = R (cos, sin)(phig + psi): scalar
+    code (no temporaries: this is the innermost loop)."""
     R = prm[0]
     phi = prm[1] + psi
-    n = np.empty(2)
-    n[0] = math.cos(phi)
-    n[1] = math.sin(phi)
-    x = R * n
-    return R * _surface_integrand(x, n, prm[2], prm[3], prm[4], prm[5], prm[6], prm[7])
+    n0 = math.cos(phi)
+    n1 = math.sin(phi)
+    g = prm[2]
+    gd = prm[3]
+    A = prm[4]
+    K = prm[6]
+    Vc = prm[7]
+    d0 = R * n0 - g[0]
+    d1 = R * n1 - g[1]
+    q = A[0, 0] * d0 * d0 + (A[0, 1] + A[1, 0]) * d0 * d1 + A[1, 1] * d1 * d1
+    if not (q < 1400.0):
+        return 0.0
+    m = n0 * (gd[0] + K[0, 0] * d0 + K[0, 1] * d1) + n1 * (gd[1] + K[1, 0] * d0 + K[1, 1] * d1)
+    s2 = Vc[0, 0] * n0 * n0 + (Vc[0, 1] + Vc[1, 0]) * n0 * n1 + Vc[1, 1] * n1 * n1
+    return R * prm[5] * math.exp(-0.5 * q) * _pos_part_mean(m, math.sqrt(max(s2, 0.0)))
 
 
 _arc_adaptive = make_adaptive(_arc_integrand)
-
-
-@njit(cache=True, error_model="numpy")
-def _mahal(x, g, A):
-    D = x.shape[0]
-    q = 0.0
-    for i in range(D):
-        for j in range(D):
-            q += (x[i] - g[i]) * A[i, j] * (x[j] - g[j])
-    return q
 
 
 @njit(cache=True, error_model="numpy")
@@ -209,24 +211,41 @@ def nu_plus_2d(dp, dv, da, R, Sigma, t, tol, acc):
     if alpha < 0.0:
         return 0.0
     phig = math.atan2(g[1], g[0]) if gn > 0.0 else 0.0
-    # panel ends at the local minima of the Mahalanobis distance on the arc
-    # (the density's peaks), found on a scan of _SCAN + 1 points
-    ends = np.empty(_SCAN + 3)
-    ne = 0
-    ends[ne] = -alpha
-    ne += 1
+    # Only arc points with Mahalanobis distance q(x) <= k^2 matter: a path
+    # through x at time t has |z| >= sqrt(q(x)) (the whitened (dp, dv)
+    # projects onto X(t) - g(t) without growing), so entries at q > k^2 belong
+    # to paths outside the tube (already counted in the tail).  A scan of
+    # _SCAN + 1 points finds that window (one scan step of margin each side)
+    # and the local minima of q (the density's peaks: panel ends).
     qs = np.empty(_SCAN + 1)
-    x = np.empty(2)
+    jmin = 0
     for j in range(_SCAN + 1):
         psi = -alpha + 2.0 * alpha * j / _SCAN
-        x[0] = R * math.cos(phig + psi)
-        x[1] = R * math.sin(phig + psi)
-        qs[j] = _mahal(x, g, A)
-    for j in range(1, _SCAN):
+        d0 = R * math.cos(phig + psi) - g[0]
+        d1 = R * math.sin(phig + psi) - g[1]
+        qs[j] = A[0, 0] * d0 * d0 + (A[0, 1] + A[1, 0]) * d0 * d1 + A[1, 1] * d1 * d1
+        if qs[j] < qs[jmin]:
+            jmin = j
+    j0 = _SCAN
+    j1 = 0
+    for j in range(_SCAN + 1):
+        if qs[j] <= BROAD_K2:
+            j0 = min(j0, j)
+            j1 = max(j1, j)
+    if j0 > j1:  # no scan point inside: the narrowest window about the minimum
+        j0 = jmin
+        j1 = jmin
+    j0 = max(j0 - 1, 0)
+    j1 = min(j1 + 1, _SCAN)
+    ends = np.empty(_SCAN + 3)
+    ne = 0
+    ends[ne] = -alpha + 2.0 * alpha * j0 / _SCAN
+    ne += 1
+    for j in range(j0 + 1, j1):
         if qs[j] <= qs[j - 1] and qs[j] < qs[j + 1]:
             ends[ne] = -alpha + 2.0 * alpha * j / _SCAN
             ne += 1
-    ends[ne] = alpha
+    ends[ne] = -alpha + 2.0 * alpha * j1 / _SCAN
     ne += 1
     prm = (R, phig, g, gd, A, norm, K, Vc)
     total = 0.0
@@ -351,3 +370,28 @@ def entry_rate_integral(dp, dv, da, R, Sigma, ta, tb, tol, acc):
     else:
         v, e = _t_adaptive_3d(prm, ta, tb, tol)
     return v, e + (tb - ta) * acc[0]
+
+
+@njit(cache=True, error_model="numpy")
+def entry_rate_gauss3(dp, dv, da, R, Sigma, ta, tb, tol, acc):
+    """(int_ta^tb nu+ dt by the 3-point Gauss rule, error estimate) for short
+    intervals (the plausible-time search): the estimate is |G3 - midpoint
+    rule| (the midpoint is G3's centre node, so no extra evaluation; for a
+    smooth nu+ a large over-estimate of G3's error) plus (tb - ta) times the
+    largest inner estimate.  acc as in ``entry_rate_integral``."""
+    acc[0] = 0.0
+    h = 0.5 * (tb - ta)
+    c = ta + h
+    x = h * math.sqrt(0.6)
+    itol = tol / max(tb - ta, 1e-300)
+    if dp.shape[0] == 2:
+        f0 = nu_plus_2d(dp, dv, da, R, Sigma, c - x, itol, acc)
+        f1 = nu_plus_2d(dp, dv, da, R, Sigma, c, itol, acc)
+        f2 = nu_plus_2d(dp, dv, da, R, Sigma, c + x, itol, acc)
+    else:
+        f0 = nu_plus_3d(dp, dv, da, R, Sigma, c - x, itol, acc)
+        f1 = nu_plus_3d(dp, dv, da, R, Sigma, c, itol, acc)
+        f2 = nu_plus_3d(dp, dv, da, R, Sigma, c + x, itol, acc)
+    g3 = h * (5.0 * f0 + 8.0 * f1 + 5.0 * f2) / 9.0
+    g1 = 2.0 * h * f1
+    return g3, abs(g3 - g1) + (tb - ta) * acc[0]

@@ -12,7 +12,7 @@ from statistics import NormalDist
 import numpy as np
 from numba import njit
 
-from circle_collision_ros.core.entry_rate import BROAD_K2, entry_rate_integral
+from circle_collision_ros.core.entry_rate import BROAD_K2, entry_rate_gauss3, entry_rate_integral
 from circle_collision_ros.core.narrow_phase import _ttc_scalar, _ttc_scalar2
 from circle_collision_ros.core.overlap_probability import eig_sym, overlap_probability
 from circle_collision_ros.core.sobol import scrambled_directions, sobol_points
@@ -82,7 +82,14 @@ def S_at(Sigma, t):
 
 @njit(cache=True, error_model="numpy")
 def _lam_max(Sigma, t):
-    lam, _ = eig_sym(S_at(Sigma, t))
+    """Largest eigenvalue of S(t) (closed form in 2-D, Jacobi in 3-D)."""
+    S = S_at(Sigma, t)
+    if S.shape[0] == 2:
+        h = 0.5 * (S[0, 0] + S[1, 1])
+        d = 0.5 * (S[0, 0] - S[1, 1])
+        o = 0.5 * (S[0, 1] + S[1, 0])
+        return h + math.sqrt(d * d + o * o)
+    lam, _ = eig_sym(S)
     return lam[lam.shape[0] - 1]
 
 
@@ -129,7 +136,7 @@ def _mean_range(dp, dv, da, ta, tb):
     return math.sqrt(dmin), math.sqrt(dmax)
 
 
-_TUBE_DEPTH = 12  # leaves of width >= H / 4096
+_TUBE_DEPTH = 8  # leaves of width >= H / 256
 
 
 @njit(cache=True, error_model="numpy")
@@ -246,9 +253,10 @@ def instant_probability(dp, dv, da, R, Sigma, t):
 
 # Ambiguous tube intervals are cut into _PANELS panels for the entry-rate
 # integral; the plausible-time search certifies panel by panel.
-_PANELS = 8
-_RICE_TOL = 1e-8  # quadrature tolerance of the entry-rate integral per panel
+_PANELS = 2
+_RICE_TOL = 2e-5  # quadrature tolerance of the entry-rate integral per panel
 _P0_ERR = 1e-9  # error of one instantaneous probability (overlap_probability)
+PLAUSIBLE_RTOL = 1e-7  # the plausible time's bracket width, relative to H
 BRACKET_MAX = 0.01  # with da != 0: widest [lower, upper] reported from the bounds alone
 
 
@@ -274,41 +282,84 @@ class _Pair:
         self.acc = np.zeros(2)
         self.pmax = 0.0
         self.degenerate = False
+        self.cache = {}  # (a, b) -> entry-rate integral and its error
 
     def prob_at(self, t):
         p = instant_probability(self.dp, self.dv, self.da, self.R, self.Sigma, t)
         self.pmax = max(self.pmax, p)
         return p
 
+    def rice_short(self, a, b):
+        """Entry-rate integral over a short interval (3-point Gauss)."""
+        self.acc[1] = 0.0
+        v, e = entry_rate_gauss3(self.dp, self.dv, self.da, self.R, self.Sigma, a, b,
+                                 _RICE_TOL, self.acc)
+        if self.acc[1] != 0.0:
+            self.degenerate = True
+        return v, e
+
     def rice(self, a, b):
+        key = (a, b)
+        if key in self.cache:
+            return self.cache[key]
         self.acc[1] = 0.0
         v, e = entry_rate_integral(self.dp, self.dv, self.da, self.R, self.Sigma, a, b,
                                    _RICE_TOL, self.acc)
         if self.acc[1] != 0.0:
             self.degenerate = True
+        self.cache[key] = (v, e)
         return v, e
 
 
 def _first_crossing(pair, a, pa, b, thr, dt):
     """First t in [a, b] with P(|X(t)| <= R) >= thr given P(a) = pa < thr,
-    or None when certified absent: sup over [a, b] <= pa + int_a^b nu+ < thr.
-    Intervals narrower than dt that cannot be certified return a
-    (conservative: an earlier plausible time)."""
-    v, e = pair.rice(a, b)
-    if pair.degenerate:
-        return None
-    if pa + v + e + _P0_ERR < thr:
-        return None
-    m = 0.5 * (a + b)
-    if b - a <= dt or not (a < m < b):
-        return b if pair.prob_at(b) >= thr else a
-    pm = pair.prob_at(m)
-    r = _first_crossing(pair, a, pa, m, thr, dt)
-    if r is not None:
-        return r
-    if pm >= thr:
-        return m
-    return _first_crossing(pair, m, pm, b, thr, dt)
+    or None when certified absent.
+
+    Invariant: P < thr on [a, lo] is certified (each step by
+    sup_[lo, c] P <= P(lo) + int_lo^c nu+ + errors < thr); when a point hi
+    with P(hi) >= thr is known, the first crossing lies in (lo, hi].  Next
+    candidate: the secant of P between lo and hi (bisection when a side
+    stalls), so a simple crossing takes a handful of steps.  Returns hi once
+    hi - lo <= dt; if the interval left of an uncertified candidate shrinks
+    below dt, returns lo (conservative: an earlier plausible time)."""
+    lo, plo = a, pa
+    hi, phi = math.inf, -1.0
+    c = b
+    stall = 0
+    for _ in range(400):
+        if hi - lo <= dt:
+            return hi
+        if c - lo <= dt:
+            return lo
+        if lo == a and c == b:
+            v, e = pair.rice(a, b)  # the panel's own integral (cached)
+        else:
+            v, e = pair.rice_short(lo, c)
+        if pair.degenerate:
+            return None
+        if plo + v + e + _P0_ERR < thr:  # certified: no crossing in [lo, c]
+            if c == b:
+                return None
+            lo, plo = c, pair.prob_at(c)
+            stall = stall + 1 if stall >= 0 else 1
+        else:
+            pc = pair.prob_at(c)
+            if pc >= thr:
+                hi, phi = c, pc
+                stall = stall - 1 if stall <= 0 else -1
+            else:  # neither certified nor above: look closer to lo
+                c = lo + 0.5 * (c - lo)
+                continue
+        if hi == math.inf:
+            c = b
+            continue
+        if abs(stall) >= 2 or not (phi > plo):
+            c = 0.5 * (lo + hi)
+        else:
+            c = lo + (thr - plo) / (phi - plo) * (hi - lo)
+            w = hi - lo
+            c = min(max(c, lo + 1e-3 * w), hi - 1e-3 * w)
+    return lo
 
 
 def pair_probability(dp, dv, da, R, Sigma, H, thr):
@@ -320,7 +371,7 @@ def pair_probability(dp, dv, da, R, Sigma, H, thr):
     leaves = np.empty((1 << _TUBE_DEPTH, 2))
     cnt, t_inside = tube_intervals(dp, dv, da, R, Sigma, H, leaves)
     p0 = pair.prob_at(0.0)
-    dt = 1e-9 * max(H, 1e-300)
+    dt = PLAUSIBLE_RTOL * H
 
     # plausible time: certified walk over the ambiguous panels before t_inside
     tpl = math.inf
