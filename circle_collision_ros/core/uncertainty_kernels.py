@@ -12,6 +12,7 @@ from statistics import NormalDist
 import numpy as np
 from numba import njit
 
+from circle_collision_ros.core.entry_rate import BROAD_K2, entry_rate_gauss3, entry_rate_integral
 from circle_collision_ros.core.narrow_phase import _ttc_scalar, _ttc_scalar2
 from circle_collision_ros.core.overlap_probability import eig_sym, overlap_probability
 from circle_collision_ros.core.sobol import scrambled_directions, sobol_points
@@ -36,6 +37,7 @@ def chi2_tail_even(x: float, dof: int) -> float:
 # (Cauchy-Schwarz).  Two bodies: 2 * TUBE_TAIL = 5.2e-10 < 1e-9.
 BROAD_PHASE_SIGMAS = 7.5
 TUBE_TAIL = chi2_tail_even(BROAD_PHASE_SIGMAS ** 2, 6)  # 2.6e-10
+assert BROAD_K2 == BROAD_PHASE_SIGMAS ** 2
 
 # Randomized QMC: QMC_REPLICATES independent scrambles of QMC_POINTS Sobol
 # points; stated bound QMC_T standard errors of the replicate mean (Student t
@@ -80,7 +82,14 @@ def S_at(Sigma, t):
 
 @njit(cache=True, error_model="numpy")
 def _lam_max(Sigma, t):
-    lam, _ = eig_sym(S_at(Sigma, t))
+    """Largest eigenvalue of S(t) (closed form in 2-D, Jacobi in 3-D)."""
+    S = S_at(Sigma, t)
+    if S.shape[0] == 2:
+        h = 0.5 * (S[0, 0] + S[1, 1])
+        d = 0.5 * (S[0, 0] - S[1, 1])
+        o = 0.5 * (S[0, 1] + S[1, 0])
+        return h + math.sqrt(d * d + o * o)
+    lam, _ = eig_sym(S)
     return lam[lam.shape[0] - 1]
 
 
@@ -127,7 +136,7 @@ def _mean_range(dp, dv, da, ta, tb):
     return math.sqrt(dmin), math.sqrt(dmax)
 
 
-_TUBE_DEPTH = 12  # leaves of width >= H / 4096
+_TUBE_DEPTH = 8  # leaves of width >= H / 256
 
 
 @njit(cache=True, error_model="numpy")
@@ -148,7 +157,7 @@ def tube_intervals(dp, dv, da, R, Sigma, H, out):
     sd[0] = 0
     top = 1
     cnt = 0
-    inside = False
+    t_inside = math.inf
     while top > 0:
         top -= 1
         ta = sa[top]
@@ -159,7 +168,7 @@ def tube_intervals(dp, dv, da, R, Sigma, H, out):
         if gmin - rho > R:
             continue
         if gmax + rho < R:
-            inside = True
+            t_inside = min(t_inside, ta)
             continue
         m = 0.5 * (ta + tb)
         if d >= _TUBE_DEPTH or not (ta < m < tb):
@@ -177,7 +186,7 @@ def tube_intervals(dp, dv, da, R, Sigma, H, out):
         sb[top + 1] = m
         sd[top + 1] = d + 1
         top += 2
-    return cnt, inside
+    return cnt, t_inside
 
 
 @njit(cache=True, error_model="numpy")
@@ -242,15 +251,189 @@ def instant_probability(dp, dv, da, R, Sigma, t):
     return overlap_probability(g, S_at(Sigma, t), R)
 
 
+# Ambiguous tube intervals are cut into _PANELS panels for the entry-rate
+# integral; the plausible-time search certifies panel by panel.
+_PANELS = 2
+_RICE_TOL = 2e-5  # quadrature tolerance of the entry-rate integral per panel
+_P0_ERR = 1e-9  # error of one instantaneous probability (overlap_probability)
+PLAUSIBLE_RTOL = 1e-7  # the plausible time's bracket width, relative to H
+BRACKET_MAX = 0.01  # with da != 0: widest [lower, upper] reported from the bounds alone
+
+
+def _panels(leaves, cnt, t_end):
+    """Panel ends (list of (a, b)) of the ambiguous intervals before t_end."""
+    out = []
+    for j in range(cnt):
+        a, b = float(leaves[j, 0]), min(float(leaves[j, 1]), t_end)
+        if not a < b:
+            continue
+        for q in range(_PANELS):
+            pa = a + (b - a) * q / _PANELS
+            pb = b if q == _PANELS - 1 else a + (b - a) * (q + 1) / _PANELS
+            out.append((pa, pb))
+    return out
+
+
+class _Pair:
+    """One uncertain pair's state for the orchestration (relative state)."""
+
+    def __init__(self, dp, dv, da, R, Sigma):
+        self.dp, self.dv, self.da, self.R, self.Sigma = dp, dv, da, R, Sigma
+        self.acc = np.zeros(2)
+        self.pmax = 0.0
+        self.degenerate = False
+        self.cache = {}  # (a, b) -> entry-rate integral and its error
+
+    def prob_at(self, t):
+        p = instant_probability(self.dp, self.dv, self.da, self.R, self.Sigma, t)
+        self.pmax = max(self.pmax, p)
+        return p
+
+    def rice_short(self, a, b):
+        """Entry-rate integral over a short interval (3-point Gauss)."""
+        self.acc[1] = 0.0
+        v, e = entry_rate_gauss3(self.dp, self.dv, self.da, self.R, self.Sigma, a, b,
+                                 _RICE_TOL, self.acc)
+        if self.acc[1] != 0.0:
+            self.degenerate = True
+        return v, e
+
+    def rice(self, a, b):
+        key = (a, b)
+        if key in self.cache:
+            return self.cache[key]
+        self.acc[1] = 0.0
+        v, e = entry_rate_integral(self.dp, self.dv, self.da, self.R, self.Sigma, a, b,
+                                   _RICE_TOL, self.acc)
+        if self.acc[1] != 0.0:
+            self.degenerate = True
+        self.cache[key] = (v, e)
+        return v, e
+
+
+def _first_crossing(pair, a, pa, b, thr, dt):
+    """First t in [a, b] with P(|X(t)| <= R) >= thr given P(a) = pa < thr,
+    or None when certified absent.
+
+    Invariant: P < thr on [a, lo] is certified (each step by
+    sup_[lo, c] P <= P(lo) + int_lo^c nu+ + errors < thr); when a point hi
+    with P(hi) >= thr is known, the first crossing lies in (lo, hi].  Next
+    candidate: the secant of P between lo and hi (bisection when a side
+    stalls), so a simple crossing takes a handful of steps.  Returns hi once
+    hi - lo <= dt; if the interval left of an uncertified candidate shrinks
+    below dt, returns lo (conservative: an earlier plausible time)."""
+    lo, plo = a, pa
+    hi, phi = math.inf, -1.0
+    c = b
+    stall = 0
+    for _ in range(400):
+        if hi - lo <= dt:
+            return hi
+        if c - lo <= dt:
+            return lo
+        if lo == a and c == b:
+            v, e = pair.rice(a, b)  # the panel's own integral (cached)
+        else:
+            v, e = pair.rice_short(lo, c)
+        if pair.degenerate:
+            return None
+        if plo + v + e + _P0_ERR < thr:  # certified: no crossing in [lo, c]
+            if c == b:
+                return None
+            lo, plo = c, pair.prob_at(c)
+            stall = stall + 1 if stall >= 0 else 1
+        else:
+            pc = pair.prob_at(c)
+            if pc >= thr:
+                hi, phi = c, pc
+                stall = stall - 1 if stall <= 0 else -1
+            else:  # neither certified nor above: look closer to lo
+                c = lo + 0.5 * (c - lo)
+                continue
+        if hi == math.inf:
+            c = b
+            continue
+        if abs(stall) >= 2 or not (phi > plo):
+            c = 0.5 * (lo + hi)
+        else:
+            c = lo + (thr - plo) / (phi - plo) * (hi - lo)
+            w = hi - lo
+            c = min(max(c, lo + 1e-3 * w), hi - 1e-3 * w)
+    return lo
+
+
+def pair_probability(dp, dv, da, R, Sigma, H, thr):
+    """(probability, bound, plausible time) of one uncertain pair (relative state).
+
+    See docs/uncertainty.md for the method and why each bound holds."""
+    D = dp.shape[0]
+    pair = _Pair(dp, dv, da, R, Sigma)
+    leaves = np.empty((1 << _TUBE_DEPTH, 2))
+    cnt, t_inside = tube_intervals(dp, dv, da, R, Sigma, H, leaves)
+    p0 = pair.prob_at(0.0)
+    dt = PLAUSIBLE_RTOL * H
+
+    # plausible time: certified walk over the ambiguous panels before t_inside
+    tpl = math.inf
+    if p0 >= thr:
+        tpl = 0.0
+    else:
+        for a, b in _panels(leaves, cnt, t_inside):
+            pa = p0 if a == 0.0 else pair.prob_at(a)
+            if pa >= thr:
+                tpl = a
+                break
+            r = _first_crossing(pair, a, pa, b, thr, dt)
+            if pair.degenerate:
+                break
+            if r is not None:
+                tpl = r
+                break
+        else:
+            tpl = t_inside  # +inf when the tube never lies inside
+    if pair.degenerate:
+        tpl, _ = plausible_time_grid(dp, dv, da, R, Sigma, H, thr)
+
+    if t_inside <= H:
+        return 1.0, TUBE_TAIL, tpl
+    if cnt == 0:
+        return 0.0, TUBE_TAIL, tpl
+    total = 0.0
+    err = 0.0
+    if not pair.degenerate:
+        for a, b in _panels(leaves, cnt, math.inf):
+            v, e = pair.rice(a, b)
+            total += v
+            err += e
+            if pair.degenerate:
+                break
+    upper = p0 + total
+    straight = not np.any(da != 0.0)
+    if not pair.degenerate:
+        if straight:
+            return min(1.0, max(0.0, upper)), err + _P0_ERR + TUBE_TAIL, tpl
+        # da != 0: pmax <= P <= upper (+ errors); the bracket alone if narrow
+        lower = pair.pmax
+        if upper - lower <= BRACKET_MAX:
+            mid = 0.5 * (upper + lower)
+            return min(1.0, max(0.0, mid)), 0.5 * (upper - lower) + err + _P0_ERR + 2 * TUBE_TAIL, tpl
+    mean, se = qmc_probability(dp, dv, da, R, Sigma, H, normal_table(2 * D))
+    n = QMC_REPLICATES * QMC_POINTS
+    lo = pair.pmax - _P0_ERR
+    hi = 1.0 if pair.degenerate else upper + err + _P0_ERR + 2 * TUBE_TAIL
+    p = min(1.0, max(0.0, min(max(mean, lo), hi)))
+    return p, max(QMC_T * se, 3.0 / n) + TUBE_TAIL, tpl
+
+
 _GRID = 64
 
 
 @njit(cache=True, error_model="numpy")
 def plausible_time_grid(dp, dv, da, R, Sigma, H, thr):
-    """(first t with P(|X(t)| <= R) >= thr, max P seen): a grid of _GRID
-    steps, then bisection of the first step that ends at or above thr to
-    1e-12 H (first version: a crossing and recrossing inside one grid step
-    is not detected)."""
+    """(first t with P(|X(t)| <= R) >= thr, max P seen) for degenerate
+    covariances (no entry-rate certificate): a grid of _GRID steps, then
+    bisection of the first step that ends at or above thr to 1e-12 H (a
+    crossing and recrossing inside one grid step is not detected)."""
     p0 = instant_probability(dp, dv, da, R, Sigma, 0.0)
     pmax = p0
     if p0 >= thr:
@@ -276,20 +459,3 @@ def plausible_time_grid(dp, dv, da, R, Sigma, H, thr):
             return hi, pmax
         ta = tb
     return math.inf, pmax
-
-
-def pair_probability(dp, dv, da, R, Sigma, H, thr):
-    """(probability, bound, plausible time) of one uncertain pair (relative state)."""
-    D = dp.shape[0]
-    leaves = np.empty((1 << _TUBE_DEPTH, 2))
-    cnt, inside = tube_intervals(dp, dv, da, R, Sigma, H, leaves)
-    tpl, pmax = plausible_time_grid(dp, dv, da, R, Sigma, H, thr)
-    if inside:
-        return 1.0, TUBE_TAIL, tpl
-    if cnt == 0:
-        return 0.0, TUBE_TAIL, tpl
-    mean, se = qmc_probability(dp, dv, da, R, Sigma, H, normal_table(2 * D))
-    n = QMC_REPLICATES * QMC_POINTS
-    bound = max(QMC_T * se, 3.0 / n) + TUBE_TAIL
-    p = min(1.0, max(mean, pmax - 1e-9))
-    return p, bound, tpl

@@ -1,0 +1,397 @@
+"""Expected rate of entries into the disc/ball (Rice's formula) and its integral.
+
+For X(t) = dp + dv t + da t^2/2 with (dp, dv) Gaussian, (X(t), Xdot(t)) is
+jointly Gaussian.  The expected number of entries of X into the ball
+|x| <= R per unit time is (Rice)
+
+    nu+(t) = int_{|x| = R} f_t(x) E[(-n.Xdot)^+ | X(t) = x] dS(x),
+
+n = x / R the outward normal; given X(t) = x, n.Xdot is N(m, s^2) with
+m = n.(gd + K (x - g)), s^2 = n^T (Svv - C^T S^-1 C) n, K = C^T S^-1,
+C = Cov(X, Xdot) = Spv + t Svv, and E[(-Y)^+] = s phi(m/s) - m Phi(-m/s).
+
+Exactness (docs/uncertainty.md): a straight path (da = 0) enters a convex
+set at most once, and contact in [0, H] happens iff the path is inside at 0
+or enters in (0, H], so P(contact) = P(|X(0)| <= R) + int_0^H nu+ exactly;
+with da != 0 a path enters at most twice and the same sum is an upper bound.
+Also, for any a < b, sup_{t in [a, b]} P(|X(t)| <= R) <= P(|X(a)| <= R) +
+int_a^b nu+ (a path inside at some t in (a, b] is inside at a or entered in
+between): core.uncertainty_kernels uses it to certify that a threshold
+crossing was not skipped.
+
+Localisation (the only approximation besides quadrature): on the event
+|z| <= k of the whitened (dp, dv) (probability >= 1 - TUBE_TAIL) every t
+has |X(t) - g(t)| <= k sqrt(lambda_max(S(t))) <= k sqrt(tr S(t)) =: rho(t).
+Entries at (t, x) with |x - g(t)| > rho(t) therefore belong to paths with
+|z| > k; dropping them drops at most E[N 1{|z| > k}] <= 2 TUBE_TAIL.  So
+the t-integral runs over the tube's ambiguous intervals only
+(``uncertainty_kernels.tube_intervals``) and the surface integral over the
+arc/cap |x - g(t)| <= rho(t).
+
+Degenerate S(t) (smallest/largest eigenvalue ratio < 1e-12 at a quadrature
+node, e.g. a covariance of rank < D): no density on the sphere; the node is
+flagged and the caller falls back to randomized QMC on the exact solver.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+from circle_collision_ros.core.quadrature import make_adaptive
+
+__all__ = ["entry_rate_integral", "DEGENERATE_RATIO"]
+
+DEGENERATE_RATIO = 1e-12
+_RS2 = 1.0 / math.sqrt(2.0)
+_RS2PI = 1.0 / math.sqrt(2.0 * math.pi)
+BROAD_K2 = 7.5 ** 2  # BROAD_PHASE_SIGMAS^2 (uncertainty_kernels asserts they agree)
+_SCAN = 16  # arc scan points for the density's local maxima (panel ends)
+
+
+@njit(cache=True, error_model="numpy")
+def _pos_part_mean(m, s):
+    """E[(-Y)^+] for Y ~ N(m, s^2)."""
+    if not (s > 0.0):
+        return max(-m, 0.0)
+    r = m / s
+    return s * _RS2PI * math.exp(-0.5 * r * r) - m * 0.5 * math.erfc(r * _RS2)
+
+
+@njit(cache=True, error_model="numpy")
+def _inv(S):
+    """(inverse, determinant) of a symmetric 2x2 or 3x3 matrix (adjugate)."""
+    D = S.shape[0]
+    A = np.empty((D, D))
+    if D == 2:
+        det = S[0, 0] * S[1, 1] - S[0, 1] * S[1, 0]
+        A[0, 0] = S[1, 1] / det
+        A[1, 1] = S[0, 0] / det
+        A[0, 1] = -S[0, 1] / det
+        A[1, 0] = -S[1, 0] / det
+        return A, det
+    c00 = S[1, 1] * S[2, 2] - S[1, 2] * S[2, 1]
+    c01 = S[1, 2] * S[2, 0] - S[1, 0] * S[2, 2]
+    c02 = S[1, 0] * S[2, 1] - S[1, 1] * S[2, 0]
+    det = S[0, 0] * c00 + S[0, 1] * c01 + S[0, 2] * c02
+    A[0, 0] = c00 / det
+    A[1, 0] = c01 / det
+    A[2, 0] = c02 / det
+    A[0, 1] = (S[0, 2] * S[2, 1] - S[0, 1] * S[2, 2]) / det
+    A[1, 1] = (S[0, 0] * S[2, 2] - S[0, 2] * S[2, 0]) / det
+    A[2, 1] = (S[0, 1] * S[2, 0] - S[0, 0] * S[2, 1]) / det
+    A[0, 2] = (S[0, 1] * S[1, 2] - S[0, 2] * S[1, 1]) / det
+    A[1, 2] = (S[0, 2] * S[1, 0] - S[0, 0] * S[1, 2]) / det
+    A[2, 2] = (S[0, 0] * S[1, 1] - S[0, 1] * S[1, 0]) / det
+    return A, det
+
+
+@njit(cache=True, error_model="numpy")
+def _state(dp, dv, da, Sigma, t):
+    """(g, gd, A = S^-1, norm = density factor, K, Vc, rho^2, degenerate) at t."""
+    D = dp.shape[0]
+    g = np.empty(D)
+    gd = np.empty(D)
+    S = np.empty((D, D))
+    C = np.empty((D, D))
+    Svv = np.empty((D, D))
+    tr = 0.0
+    for i in range(D):
+        g[i] = dp[i] + t * (dv[i] + 0.5 * t * da[i])
+        gd[i] = dv[i] + t * da[i]
+        for j in range(D):
+            S[i, j] = Sigma[i, j] + t * (Sigma[i, D + j] + Sigma[D + i, j]) + t * t * Sigma[D + i, D + j]
+            C[i, j] = Sigma[i, D + j] + t * Sigma[D + i, D + j]
+            Svv[i, j] = Sigma[D + i, D + j]
+        tr += S[i, i]
+    A, det = _inv(S)
+    # det / (tr/D)^D ~ (product of eigenvalue ratios): tiny means (near) singular
+    degenerate = not (det > DEGENERATE_RATIO * (tr / D) ** D) or not (tr > 0.0)
+    norm = 1.0 / ((2.0 * math.pi) ** (0.5 * D) * math.sqrt(abs(det))) if not degenerate else 0.0
+    # K = C^T A; Vc = Svv - C^T A C
+    K = np.zeros((D, D))
+    for i in range(D):
+        for j in range(D):
+            acc = 0.0
+            for k in range(D):
+                acc += C[k, i] * A[k, j]
+            K[i, j] = acc
+    Vc = np.empty((D, D))
+    for i in range(D):
+        for j in range(D):
+            acc = 0.0
+            for k in range(D):
+                acc += K[i, k] * C[k, j]
+            Vc[i, j] = Svv[i, j] - acc
+    rho2 = BROAD_K2 * tr
+    return g, gd, A, norm, K, Vc, rho2, degenerate
+
+
+@njit(cache=True, error_model="numpy")
+def _surface_integrand(x, n, g, gd, A, norm, K, Vc):
+    """f_t(x) E[(-n.Xdot)^+ | X = x] at the sphere point x with normal n."""
+    D = x.shape[0]
+    q = 0.0
+    m = 0.0
+    s2 = 0.0
+    d = np.empty(D)
+    for i in range(D):
+        d[i] = x[i] - g[i]
+    for i in range(D):
+        Ad = 0.0
+        Kd = 0.0
+        Vn = 0.0
+        for j in range(D):
+            Ad += A[i, j] * d[j]
+            Kd += K[i, j] * d[j]
+            Vn += Vc[i, j] * n[j]
+        q += d[i] * Ad
+        m += n[i] * (gd[i] + Kd)
+        s2 += n[i] * Vn
+    if not (q < 1400.0):
+        return 0.0
+    return norm * math.exp(-0.5 * q) * _pos_part_mean(m, math.sqrt(max(s2, 0.0)))
+
+
+# ---- 2-D: the arc integral at one t ---------------------------------------------
+# prm = (R, phig, g, gd, A, norm, K, Vc)
+
+
+@njit(cache=True, error_model="numpy")
+def _arc_integrand(psi, prm):
+    """R f_t(x) E[(-n.Xdot)^+ | x] at x = R (cos, sin)(phig + psi): scalar
+    code (no temporaries: this is the innermost loop)."""
+    R = prm[0]
+    phi = prm[1] + psi
+    n0 = math.cos(phi)
+    n1 = math.sin(phi)
+    g = prm[2]
+    gd = prm[3]
+    A = prm[4]
+    K = prm[6]
+    Vc = prm[7]
+    d0 = R * n0 - g[0]
+    d1 = R * n1 - g[1]
+    q = A[0, 0] * d0 * d0 + (A[0, 1] + A[1, 0]) * d0 * d1 + A[1, 1] * d1 * d1
+    if not (q < 1400.0):
+        return 0.0
+    m = n0 * (gd[0] + K[0, 0] * d0 + K[0, 1] * d1) + n1 * (gd[1] + K[1, 0] * d0 + K[1, 1] * d1)
+    s2 = Vc[0, 0] * n0 * n0 + (Vc[0, 1] + Vc[1, 0]) * n0 * n1 + Vc[1, 1] * n1 * n1
+    return R * prm[5] * math.exp(-0.5 * q) * _pos_part_mean(m, math.sqrt(max(s2, 0.0)))
+
+
+_arc_adaptive = make_adaptive(_arc_integrand)
+
+
+@njit(cache=True, error_model="numpy")
+def _arc_half_angle(R, gn, rho2):
+    """Half-angle of the arc {|x| = R, |x - g| <= rho} about g's direction
+    (-1: empty; pi: whole circle/sphere)."""
+    if gn == 0.0:
+        return math.pi if R * R <= rho2 else -1.0
+    c = (R * R + gn * gn - rho2) / (2.0 * R * gn)
+    if c > 1.0:
+        return -1.0
+    if c <= -1.0:
+        return math.pi
+    return math.acos(c)
+
+
+@njit(cache=True, error_model="numpy")
+def nu_plus_2d(dp, dv, da, R, Sigma, t, tol, acc):
+    """nu+(t) in 2-D over the tube's arc; acc[0] = max inner error estimate
+    seen, acc[1] = 1 when S(t) is degenerate."""
+    g, gd, A, norm, K, Vc, rho2, degenerate = _state(dp, dv, da, Sigma, t)
+    if degenerate:
+        acc[1] = 1.0
+        return 0.0
+    gn = math.sqrt(g[0] * g[0] + g[1] * g[1])
+    alpha = _arc_half_angle(R, gn, rho2)
+    if alpha < 0.0:
+        return 0.0
+    phig = math.atan2(g[1], g[0]) if gn > 0.0 else 0.0
+    # Only arc points with Mahalanobis distance q(x) <= k^2 matter: a path
+    # through x at time t has |z| >= sqrt(q(x)) (the whitened (dp, dv)
+    # projects onto X(t) - g(t) without growing), so entries at q > k^2 belong
+    # to paths outside the tube (already counted in the tail).  A scan of
+    # _SCAN + 1 points finds that window (one scan step of margin each side)
+    # and the local minima of q (the density's peaks: panel ends).
+    qs = np.empty(_SCAN + 1)
+    jmin = 0
+    for j in range(_SCAN + 1):
+        psi = -alpha + 2.0 * alpha * j / _SCAN
+        d0 = R * math.cos(phig + psi) - g[0]
+        d1 = R * math.sin(phig + psi) - g[1]
+        qs[j] = A[0, 0] * d0 * d0 + (A[0, 1] + A[1, 0]) * d0 * d1 + A[1, 1] * d1 * d1
+        if qs[j] < qs[jmin]:
+            jmin = j
+    j0 = _SCAN
+    j1 = 0
+    for j in range(_SCAN + 1):
+        if qs[j] <= BROAD_K2:
+            j0 = min(j0, j)
+            j1 = max(j1, j)
+    if j0 > j1:  # no scan point inside: the narrowest window about the minimum
+        j0 = jmin
+        j1 = jmin
+    j0 = max(j0 - 1, 0)
+    j1 = min(j1 + 1, _SCAN)
+    ends = np.empty(_SCAN + 3)
+    ne = 0
+    ends[ne] = -alpha + 2.0 * alpha * j0 / _SCAN
+    ne += 1
+    for j in range(j0 + 1, j1):
+        if qs[j] <= qs[j - 1] and qs[j] < qs[j + 1]:
+            ends[ne] = -alpha + 2.0 * alpha * j / _SCAN
+            ne += 1
+    ends[ne] = -alpha + 2.0 * alpha * j1 / _SCAN
+    ne += 1
+    prm = (R, phig, g, gd, A, norm, K, Vc)
+    total = 0.0
+    err = 0.0
+    for j in range(ne - 1):
+        v, e = _arc_adaptive(prm, ends[j], ends[j + 1], tol / (ne - 1))
+        total += v
+        err += e
+    acc[0] = max(acc[0], err)
+    return total
+
+
+# ---- 3-D: the cap integral at one t ---------------------------------------------
+# prm = (R, theta, u, e1, e2, g, gd, A, norm, K, Vc)
+
+
+@njit(cache=True, error_model="numpy")
+def _ring_integrand(psi, prm):
+    R = prm[0]
+    th = prm[1]
+    u = prm[2]
+    e1 = prm[3]
+    e2 = prm[4]
+    ct = math.cos(th)
+    st = math.sin(th)
+    cp = math.cos(psi)
+    sp = math.sin(psi)
+    n = np.empty(3)
+    for i in range(3):
+        n[i] = ct * u[i] + st * (cp * e1[i] + sp * e2[i])
+    x = R * n
+    return _surface_integrand(x, n, prm[5], prm[6], prm[7], prm[8], prm[9], prm[10])
+
+
+_ring_adaptive = make_adaptive(_ring_integrand)
+
+
+@njit(cache=True, error_model="numpy")
+def _cap_integrand(th, prm):
+    """R^2 sin(theta) * ring integral at polar angle theta."""
+    R = prm[0]
+    p2 = (R, th, prm[1], prm[2], prm[3], prm[4], prm[5], prm[6], prm[7], prm[8], prm[9])
+    tol = prm[10]
+    v1, e1 = _ring_adaptive(p2, 0.0, math.pi, tol)
+    v2, e2 = _ring_adaptive(p2, math.pi, 2.0 * math.pi, tol)
+    acc = prm[11]
+    st = R * R * math.sin(th)
+    acc[0] = max(acc[0], (e1 + e2) * st)
+    return (v1 + v2) * st
+
+
+_cap_adaptive = make_adaptive(_cap_integrand)
+
+
+@njit(cache=True, error_model="numpy")
+def nu_plus_3d(dp, dv, da, R, Sigma, t, tol, acc):
+    """nu+(t) in 3-D over the tube's cap (same conventions as nu_plus_2d)."""
+    g, gd, A, norm, K, Vc, rho2, degenerate = _state(dp, dv, da, Sigma, t)
+    if degenerate:
+        acc[1] = 1.0
+        return 0.0
+    gn = math.sqrt(g[0] * g[0] + g[1] * g[1] + g[2] * g[2])
+    alpha = _arc_half_angle(R, gn, rho2)
+    if alpha < 0.0:
+        return 0.0
+    u = np.empty(3)
+    if gn > 0.0:
+        u[:] = g / gn
+    else:
+        u[0] = 0.0
+        u[1] = 0.0
+        u[2] = 1.0
+    # e1, e2: an orthonormal basis of u's complement
+    w = np.zeros(3)
+    w[np.argmin(np.abs(u))] = 1.0
+    e1 = np.empty(3)
+    e1[0] = u[1] * w[2] - u[2] * w[1]
+    e1[1] = u[2] * w[0] - u[0] * w[2]
+    e1[2] = u[0] * w[1] - u[1] * w[0]
+    e1 /= math.sqrt(e1[0] ** 2 + e1[1] ** 2 + e1[2] ** 2)
+    e2 = np.empty(3)
+    e2[0] = u[1] * e1[2] - u[2] * e1[1]
+    e2[1] = u[2] * e1[0] - u[0] * e1[2]
+    e2[2] = u[0] * e1[1] - u[1] * e1[0]
+    inner_tol = tol / (2.0 * math.pi * R * R + 1e-300)
+    prm = (R, u, e1, e2, g, gd, A, norm, K, Vc, inner_tol, acc)
+    v, e = _cap_adaptive(prm, 0.0, alpha, tol)
+    acc[0] = max(acc[0], e)
+    return v
+
+
+# ---- the t integral ------------------------------------------------------------
+# prm = (dp, dv, da, R, Sigma, inner_tol, acc)
+
+
+@njit(cache=True, error_model="numpy")
+def _nu_2d(t, prm):
+    return nu_plus_2d(prm[0], prm[1], prm[2], prm[3], prm[4], t, prm[5], prm[6])
+
+
+@njit(cache=True, error_model="numpy")
+def _nu_3d(t, prm):
+    return nu_plus_3d(prm[0], prm[1], prm[2], prm[3], prm[4], t, prm[5], prm[6])
+
+
+_t_adaptive_2d = make_adaptive(_nu_2d)
+_t_adaptive_3d = make_adaptive(_nu_3d)
+
+
+@njit(cache=True, error_model="numpy")
+def entry_rate_integral(dp, dv, da, R, Sigma, ta, tb, tol, acc):
+    """(int_ta^tb nu+ dt over the tube's arc/cap, error estimate).
+
+    acc (2,) float64 scratch: acc[1] is set to 1 if S(t) was degenerate at a
+    node (the value is then not usable).  The error estimate is the t-rule's
+    |K15 - G7| sum plus (tb - ta) times the largest inner estimate."""
+    acc[0] = 0.0
+    inner_tol = tol / max(tb - ta, 1e-300)
+    prm = (dp, dv, da, R, Sigma, inner_tol, acc)
+    if dp.shape[0] == 2:
+        v, e = _t_adaptive_2d(prm, ta, tb, tol)
+    else:
+        v, e = _t_adaptive_3d(prm, ta, tb, tol)
+    return v, e + (tb - ta) * acc[0]
+
+
+@njit(cache=True, error_model="numpy")
+def entry_rate_gauss3(dp, dv, da, R, Sigma, ta, tb, tol, acc):
+    """(int_ta^tb nu+ dt by the 3-point Gauss rule, error estimate) for short
+    intervals (the plausible-time search): the estimate is |G3 - midpoint
+    rule| (the midpoint is G3's centre node, so no extra evaluation; for a
+    smooth nu+ a large over-estimate of G3's error) plus (tb - ta) times the
+    largest inner estimate.  acc as in ``entry_rate_integral``."""
+    acc[0] = 0.0
+    h = 0.5 * (tb - ta)
+    c = ta + h
+    x = h * math.sqrt(0.6)
+    itol = tol / max(tb - ta, 1e-300)
+    if dp.shape[0] == 2:
+        f0 = nu_plus_2d(dp, dv, da, R, Sigma, c - x, itol, acc)
+        f1 = nu_plus_2d(dp, dv, da, R, Sigma, c, itol, acc)
+        f2 = nu_plus_2d(dp, dv, da, R, Sigma, c + x, itol, acc)
+    else:
+        f0 = nu_plus_3d(dp, dv, da, R, Sigma, c - x, itol, acc)
+        f1 = nu_plus_3d(dp, dv, da, R, Sigma, c, itol, acc)
+        f2 = nu_plus_3d(dp, dv, da, R, Sigma, c + x, itol, acc)
+    g3 = h * (5.0 * f0 + 8.0 * f1 + 5.0 * f2) / 9.0
+    g1 = 2.0 * h * f1
+    return g3, abs(g3 - g1) + (tb - ta) * acc[0]
