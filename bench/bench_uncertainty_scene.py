@@ -13,8 +13,10 @@ alike. Timed per frame, node-side work without DDS:
   plus ``Scene.uncertain_pairs``: inflated broad phase and the core's probabilities at R);
 - "pipeline": the same + ``to_cdr()`` (the bytes the node publishes).
 
-Prints medians, the ratio covariance/exact (target <= 3x), and how many pairs the uncertain
-path evaluated and reported. The node latency with covariance through DDS is
+Prints medians, the ratio covariance/exact (target <= 3x), how much of the covariance run is
+the core's ``uncertain_pairs`` (the per-pair mathematics) and how much the node side (inflated
+broad phase, propagation to R, joining the rows), and how many pairs the uncertain path
+evaluated and reported. The node latency with covariance through DDS is
 ``bench/bench_node.py --covariance SIGMA`` (same run, on and off).
 """
 from __future__ import annotations
@@ -26,6 +28,7 @@ import time
 
 import numpy as np
 
+from circle_collision_ros.core import uncertainty
 from circle_collision_ros.demo.demo_scene import SyntheticScene
 from circle_collision_ros.pipeline.predictor import CollisionPredictor, PredictorConfig
 from circle_collision_ros.pipeline.state_batch import StateBatch
@@ -63,12 +66,25 @@ def main() -> int:
     exact, uncertain = CollisionPredictor(config), CollisionPredictor(config)
     cov = covariance_rows(n, opts.sigma, opts.velocity_sigma)
     times = {"exact scene": [], "covariance scene": [], "exact pipeline": [], "covariance pipeline": []}
+    core_s = [0.0]
+    core_call = uncertainty.uncertain_pairs
+
+    def timed_core(*args, **kwargs):  # the scene calls it through the module: time the core's share
+        t = time.perf_counter()
+        try:
+            return core_call(*args, **kwargs)
+        finally:
+            core_s[0] += time.perf_counter() - t
+
+    uncertainty.uncertain_pairs = timed_core
+    core_per_frame = []
     evaluated, reported, contacts = [], [], []
     for k in range(frames + 2):  # two warm-up frames (numba caches, first allocation), not counted
         stamp = BASE_NS + k * 33_000_000
         scene.step(0.033)
         for name, predictor, c in (("exact", exact, None), ("covariance", uncertain, cov)):
             batch = frame(scene, stamp, c)
+            core_s[0] = 0.0
             t0 = time.perf_counter()
             predictor.receive_batch(batch, stamp)
             prediction = predictor.predict()
@@ -79,6 +95,7 @@ def main() -> int:
                 times[f"{name} scene"].append(t1 - t0)
                 times[f"{name} pipeline"].append(t2 - t0)
                 if c is not None:
+                    core_per_frame.append(core_s[0])
                     u = prediction.uncertainty
                     evaluated.append(len(u))
                     reported.append(len(prediction.columns))
@@ -92,6 +109,10 @@ def main() -> int:
     for step in ("scene", "pipeline"):
         e, c = med[f"exact {step}"], med[f"covariance {step}"]
         print(f"| {step} | {e:.2f} | {c:.2f} | {c / e:.2f}x | <= 3x |")
+    core_ms = statistics.median(core_per_frame) * 1e3
+    print(f"of the covariance scene step: core.uncertainty.uncertain_pairs {core_ms:.2f} ms, the rest "
+          f"(exact path + inflated broad phase + propagation + rows) {med['covariance scene'] - core_ms:.2f} ms "
+          f"= {(med['covariance scene'] - core_ms) / med['exact scene']:.2f}x the exact step")
     print(f"uncertain pairs evaluated per frame (median): {statistics.median(evaluated):.0f}; rows "
           f"published: {statistics.median(reported):.0f} (of which mean contacts "
           f"{statistics.median(contacts):.0f})")
