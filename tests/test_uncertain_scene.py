@@ -177,3 +177,27 @@ def test_any_covariance_content_is_used_or_rejected_with_a_reason(covariances, d
         assert not np.isnan(getattr(c, name)).any(), name
     assert ((c.probability >= 0.0) & (c.probability <= 1.0)).all()
     prediction.to_cdr()
+
+
+def test_raw_bytes_beyond_the_bound_are_decoded_then_rejected_or_refused() -> None:
+    """rclpy cannot send more than 36 values, but raw bytes can claim any count: a count whose
+    values are present is decoded and the state rejected with its reason; a count the buffer
+    cannot hold is a CdrError (nothing allocated for it)."""
+    from circle_collision_msgs.msg import CircleState, CircleStateArray
+    from circle_collision_ros.pipeline.cdr_codec import CdrError, decode_states
+    from circle_collision_ros.pipeline.state_validation import check_batch
+    from tests.reliability.wire import Body, encode_array, encode_state
+
+    good = Body("g", stamp_ns=BASE, covariance=tuple(np.eye(6).ravel() * 0.01))
+    long = Body("x", stamp_ns=BASE, covariance=(0.01,) * 40)
+    for big_endian in (False, True):
+        batch = decode_states(encode_array([good, long, Body("h", stamp_ns=BASE)], BASE, big_endian=big_endian),
+                              CircleStateArray)
+        assert batch.covariance_size.tolist() == [36, 40, 0]
+        check = check_batch(batch, frame_id="map", now_ns=None, dimensions=2)
+        assert check.good.tolist() == [True, False, True] and check.uncertain.tolist() == [True, False, False]
+        assert check.rejections[0].reason == "covariance has 40 values (expected 0 or 36: 6x6 row-major)"
+    data = bytearray(encode_state(Body("x", stamp_ns=BASE)))
+    data[-4:] = (2**32 - 1).to_bytes(4, "little")  # the covariance count
+    with pytest.raises(CdrError):
+        decode_states(bytes(data), CircleState)
