@@ -201,3 +201,35 @@ def test_raw_bytes_beyond_the_bound_are_decoded_then_rejected_or_refused() -> No
     data[-4:] = (2**32 - 1).to_bytes(4, "little")  # the covariance count
     with pytest.raises(CdrError):
         decode_states(bytes(data), CircleState)
+
+
+def test_markers_show_probability_as_opacity() -> None:
+    """Bodies of a probable pair (mean paths miss) take the band of the plausible time with
+    alpha scaled by the probability; exact contacts look as before (full band alpha)."""
+    from rclpy.serialization import deserialize_message
+    from visualization_msgs.msg import MarkerArray
+
+    from circle_collision_ros.node.markers import MarkerBuilder, Urgency
+
+    n = 4
+    cov = np.zeros((n, 36))
+    cov[2] = cov[3] = np.diag([0.09] * 3 + [0.0] * 3).ravel()
+    batch = StateBatch(ids=["a", "b", "c", "d"], frames=["map"] * n, stamp_ns=np.full(n, BASE, dtype=np.int64),
+                       radius=np.full(n, 0.5), position=np.array([[0, 0, 0], [3, 0, 0], [0, 20, 0], [2, 21.1, 0.0]]),
+                       velocity=np.array([[1.0, 0, 0], [0, 0, 0], [1.0, 0, 0], [0, 0, 0]]),
+                       acceleration=np.zeros((n, 3)), remove=np.zeros(n, dtype=bool), covariance=cov,
+                       covariance_size=np.full(n, 36, dtype=np.int64))
+    _, prediction = _predict(batch)
+    rows = {(r.id_a, r.id_b): r for r in prediction.rows()}
+    assert rows[("a", "b")].collision_probability == 1.0 and rows[("c", "d")].status == 0
+    p = rows[("c", "d")].collision_probability
+    assert 0.0 < p < 1.0
+    markers = deserialize_message(MarkerBuilder(2).build(prediction), MarkerArray).markers
+    bodies = {m.id: m.color for m in markers if m.ns == "bodies"}
+    colours = list(bodies.values())  # ids follow the id order a, b, c, d
+    assert colours[0].a == pytest.approx(Urgency.WARNING[3]) and colours[1].a == pytest.approx(Urgency.WARNING[3])
+    band = Urgency.colours(np.array([rows[("c", "d")].plausible_time_to_collision]))[0]
+    for c in colours[2:]:
+        assert (c.r, c.g, c.b) == pytest.approx(tuple(band[:3]))
+        assert c.a == pytest.approx(band[3] * Urgency.opacity(np.array([p]))[0], rel=1e-6)
+        assert c.a < band[3]
