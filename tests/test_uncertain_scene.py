@@ -12,6 +12,7 @@ Guarantees proved here:
   pair, brute force) is above 1e-9 is evaluated by the scene;
 - any covariance content (NaN, inf, huge, wrong length, asymmetric, indefinite) is used or
   rejected with a reason naming the covariance; nothing raises, nothing published is NaN;
+- markers: probable pairs in the band of their plausible time, alpha scaled by probability;
 - the reporting rule: contacts always; other uncertain pairs iff probability >=
   probability_threshold (a run-time change applies), as NO_CONTACT rows after the contacts
   ordered by plausible time; exact rows carry 1.0 / 0.0 / time_to_collision.
