@@ -254,7 +254,7 @@ def instant_probability(dp, dv, da, R, Sigma, t):
 # Ambiguous tube intervals are cut into _PANELS panels for the entry-rate
 # integral; the plausible-time search certifies panel by panel.
 _PANELS = 2
-_RICE_TOL = 2e-5  # quadrature tolerance of the entry-rate integral per panel
+_RICE_TOL = 1e-4  # quadrature tolerance of the entry-rate integral per panel
 _P0_ERR = 1e-9  # error of one instantaneous probability (overlap_probability)
 PLAUSIBLE_RTOL = 1e-7  # the plausible time's bracket width, relative to H
 BRACKET_MAX = 0.01  # with da != 0: widest [lower, upper] reported from the bounds alone
@@ -311,22 +311,29 @@ class _Pair:
         return v, e
 
 
+_SEARCH_STEPS = 64  # certified steps per panel before the conservative exit
+
+
 def _first_crossing(pair, a, pa, b, thr, dt):
     """First t in [a, b] with P(|X(t)| <= R) >= thr given P(a) = pa < thr,
     or None when certified absent.
 
     Invariant: P < thr on [a, lo] is certified (each step by
-    sup_[lo, c] P <= P(lo) + int_lo^c nu+ + errors < thr); when a point hi
-    with P(hi) >= thr is known, the first crossing lies in (lo, hi].  Next
-    candidate: the secant of P between lo and hi (bisection when a side
-    stalls), so a simple crossing takes a handful of steps.  Returns hi once
-    hi - lo <= dt; if the interval left of an uncertified candidate shrinks
-    below dt, returns lo (conservative: an earlier plausible time)."""
+    sup_[lo, c] P <= P(lo) + int_lo^c nu+ + errors < thr).  Until a point
+    with P >= thr is known the candidate c walks right with a step that
+    doubles after a certified step and halves after a failed one; once
+    P(hi) >= thr is known, the first crossing lies in (lo, hi] and c is the
+    secant of P between lo and hi (bisection when a side stalls).  Returns hi
+    once hi - lo <= dt.  Conservative exits (an earlier time than the true
+    first crossing, never a later one): lo when the step shrinks below dt,
+    or after _SEARCH_STEPS steps (P within the certificate's resolution of
+    the threshold over a long stretch)."""
     lo, plo = a, pa
     hi, phi = math.inf, -1.0
+    step = b - a
     c = b
     stall = 0
-    for _ in range(400):
+    for _ in range(_SEARCH_STEPS):
         if hi - lo <= dt:
             return hi
         if c - lo <= dt:
@@ -340,6 +347,7 @@ def _first_crossing(pair, a, pa, b, thr, dt):
         if plo + v + e + _P0_ERR < thr:  # certified: no crossing in [lo, c]
             if c == b:
                 return None
+            step = 2.0 * (c - lo)
             lo, plo = c, pair.prob_at(c)
             stall = stall + 1 if stall >= 0 else 1
         else:
@@ -347,11 +355,12 @@ def _first_crossing(pair, a, pa, b, thr, dt):
             if pc >= thr:
                 hi, phi = c, pc
                 stall = stall - 1 if stall <= 0 else -1
-            else:  # neither certified nor above: look closer to lo
-                c = lo + 0.5 * (c - lo)
+            else:  # neither certified nor above: a shorter step
+                step = 0.5 * (c - lo)
+                c = lo + step
                 continue
         if hi == math.inf:
-            c = b
+            c = min(lo + step, b)
             continue
         if abs(stall) >= 2 or not (phi > plo):
             c = 0.5 * (lo + hi)
