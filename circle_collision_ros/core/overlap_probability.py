@@ -16,12 +16,15 @@ one level down).  Choices, each for a reason:
   of width ~1 in u (the other factor varies on the scale s_2 >= s_1);
 * w is formed as sqrt((R - x)(R + x)) with R - m_1 and R + m_1 computed once,
   so sigma << R loses no digits; where the window reaches the disc's edge
-  x = +-R the substitution u = u_end -+ v^2 removes the sqrt singularity of w;
+  x = +-R, a piece of at most one sigma next to the edge uses the
+  substitution u = u_end -+ v^2, which removes the sqrt singularity of w;
 * the window is split at u = 0 (the density's peak) so every panel of the
   adaptive Gauss-Kronrod rule sees the peak at an end.
 
 Error: truncation 2.3e-19 per level plus the quadrature's |K15 - G7| sum,
-held below ``_TOL`` per level; tests/core/test_uncertainty_overlap.py checks
+held below ``_TOL`` = 1e-10 per level (|K15 - G7| over-estimates the
+error of K15 by orders of magnitude on these smooth integrands);
+tests/core/test_uncertainty_overlap.py checks
 1e-9 absolute against mpmath on random cases (anisotropic, singular,
 sigma << R, sigma >> R, mean far outside).
 
