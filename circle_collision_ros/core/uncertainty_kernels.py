@@ -13,7 +13,7 @@ import numpy as np
 from numba import njit
 
 from circle_collision_ros.core.entry_rate import BROAD_K2, entry_rate_gauss3, entry_rate_integral
-from circle_collision_ros.core.narrow_phase import _ttc_scalar, _ttc_scalar2
+from circle_collision_ros.core.narrow_phase import _ttc_kernel_h
 from circle_collision_ros.core.overlap_probability import eig_sym, overlap_probability
 from circle_collision_ros.core.sobol import scrambled_directions, sobol_points
 
@@ -202,43 +202,27 @@ def _factor(Sigma):
     return L
 
 
-@njit(cache=True, error_model="numpy")
 def qmc_probability(dp, dv, da, R, Sigma, H, Z):
     """(mean, standard error) of P(contact within [0, H]) over the randomized
     QMC replicates Z (r, m, 2D): each sample's (dp, dv) = mean + L z goes
-    through the exact solver (_ttc_scalar2/_ttc_scalar, same contract as
-    time_to_collision)."""
+    through the exact solver's serial batch kernel (same contract and bits as
+    ``time_to_collision``; rows are independent, so the answer does not
+    depend on anything but this pair)."""
     D = dp.shape[0]
-    L = _factor(Sigma)
-    r = Z.shape[0]
-    m = Z.shape[1]
-    est = np.empty(r)
-    y = np.empty(2 * D)
-    for q in range(r):
-        hits = 0
-        for s in range(m):
-            for i in range(2 * D):
-                acc = 0.0
-                for j in range(2 * D):
-                    acc += L[i, j] * Z[q, s, j]
-                y[i] = acc
-            if D == 2:
-                t = _ttc_scalar2(dp[0] + y[0], dp[1] + y[1], dv[0] + y[2], dv[1] + y[3],
-                                 da[0], da[1], R, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, H)
-            else:
-                t = _ttc_scalar(dp[0] + y[0], dp[1] + y[1], dp[2] + y[2],
-                                dv[0] + y[3], dv[1] + y[4], dv[2] + y[5],
-                                da[0], da[1], da[2], R,
-                                0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, H)
-            if t <= H:
-                hits += 1
-        est[q] = hits / m
-    mean = est.mean()
-    var = 0.0
-    for q in range(r):
-        var += (est[q] - mean) ** 2
-    se = math.sqrt(var / (r - 1) / r)
-    return mean, se
+    r, m, _ = Z.shape
+    L = _factor(np.ascontiguousarray(Sigma))
+    Zf = Z.reshape(r * m, 2 * D)
+    Y = np.zeros((r * m, 2 * D))
+    for j in range(2 * D):  # elementwise, not BLAS: the same bits on every machine/thread count
+        Y += Zf[:, j:j + 1] * L[:, j]
+    n = r * m
+    zeros = np.zeros((n, D))
+    t = np.empty(n)
+    _ttc_kernel_h(np.ascontiguousarray(dp + Y[:, :D]), np.ascontiguousarray(dv + Y[:, D:]),
+                  np.ascontiguousarray(np.broadcast_to(da, (n, D))), np.full(n, R),
+                  zeros, zeros, zeros, np.zeros(n), H, t)
+    est = (t <= H).reshape(r, m).mean(axis=1)
+    return float(est.mean()), float(est.std(ddof=1) / math.sqrt(r))
 
 
 @njit(cache=True, error_model="numpy")
