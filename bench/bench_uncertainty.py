@@ -14,7 +14,7 @@ Carlo with 1e3, 1e4, 1e5 samples (seeded numpy normals through the exact
 batched solver ``time_to_collision``); the reference is MC with 1e6 samples
 (other seed) and its standard error SE_ref = sqrt(p (1 - p) / 1e6).  Times
 are per pair, the best of 3 calls for ours and one call for MC (sampling
-included), all measured in the same run (the machine is shared: compare
+included), single-threaded (numba.set_num_threads(1)), all measured in the same run (the machine is shared: compare
 ratios, not absolute times).
 
 Targets checked per family: |ours - ref| <= max(0.005, 3 SE_ref) on every
@@ -30,6 +30,7 @@ import math
 import time
 from pathlib import Path
 
+import numba
 import numpy as np
 
 import _common  # noqa: F401  (sys.path for the repo root and bench/)
@@ -197,6 +198,10 @@ def main(argv=None):
     ap.add_argument("--out", type=Path, default=ROOT / "docs" / "uncertainty_bench.png")
     a = ap.parse_args(argv)
     pairs = 2 if a.quick else a.pairs
+    # one thread for every method: ours is serial per pair, and on a shared
+    # machine the threaded solver's launches wait for time slices, which
+    # would make MC look slower than it is
+    numba.set_num_threads(1)
     # warm-up: compile every kernel outside the timings
     for name, D in FAMILIES:
         ours(_family(name.replace(" 3-D", ""), np.random.default_rng(0), D))

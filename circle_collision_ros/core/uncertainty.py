@@ -135,6 +135,11 @@ def uncertain_pairs(pa, va, aa, ra, cov_a, pb, vb, ab, rb, cov_b,
         dv = va[i] - vb[i]
         da = aa[i] - ab[i]
         R = ra[i] + rb[i]
+        # X -> -X leaves the problem unchanged (the ball and S are symmetric):
+        # one sign per pair, so swapping a and b gives bitwise the same result
+        nz = np.flatnonzero(np.concatenate((dp, dv, da)))
+        if nz.size and np.concatenate((dp, dv, da))[nz[0]] < 0.0:
+            dp, dv, da = -dp, -dv, -da
         prob[i], bound[i], tpl[i] = pair_probability(dp, dv, da, R, np.ascontiguousarray(sigma[i]),
                                                      H, thr)
     return UncertainPairs(prob, bound, tpl)

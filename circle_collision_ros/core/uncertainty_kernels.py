@@ -13,7 +13,7 @@ import numpy as np
 from numba import njit
 
 from circle_collision_ros.core.entry_rate import BROAD_K2, entry_rate_gauss3, entry_rate_integral
-from circle_collision_ros.core.narrow_phase import _ttc_scalar, _ttc_scalar2
+from circle_collision_ros.core.narrow_phase import _ttc_kernel_h
 from circle_collision_ros.core.overlap_probability import eig_sym, overlap_probability
 from circle_collision_ros.core.sobol import scrambled_directions, sobol_points
 
@@ -202,43 +202,27 @@ def _factor(Sigma):
     return L
 
 
-@njit(cache=True, error_model="numpy")
 def qmc_probability(dp, dv, da, R, Sigma, H, Z):
     """(mean, standard error) of P(contact within [0, H]) over the randomized
     QMC replicates Z (r, m, 2D): each sample's (dp, dv) = mean + L z goes
-    through the exact solver (_ttc_scalar2/_ttc_scalar, same contract as
-    time_to_collision)."""
+    through the exact solver's serial batch kernel (same contract and bits as
+    ``time_to_collision``; rows are independent, so the answer does not
+    depend on anything but this pair)."""
     D = dp.shape[0]
-    L = _factor(Sigma)
-    r = Z.shape[0]
-    m = Z.shape[1]
-    est = np.empty(r)
-    y = np.empty(2 * D)
-    for q in range(r):
-        hits = 0
-        for s in range(m):
-            for i in range(2 * D):
-                acc = 0.0
-                for j in range(2 * D):
-                    acc += L[i, j] * Z[q, s, j]
-                y[i] = acc
-            if D == 2:
-                t = _ttc_scalar2(dp[0] + y[0], dp[1] + y[1], dv[0] + y[2], dv[1] + y[3],
-                                 da[0], da[1], R, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, H)
-            else:
-                t = _ttc_scalar(dp[0] + y[0], dp[1] + y[1], dp[2] + y[2],
-                                dv[0] + y[3], dv[1] + y[4], dv[2] + y[5],
-                                da[0], da[1], da[2], R,
-                                0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, H)
-            if t <= H:
-                hits += 1
-        est[q] = hits / m
-    mean = est.mean()
-    var = 0.0
-    for q in range(r):
-        var += (est[q] - mean) ** 2
-    se = math.sqrt(var / (r - 1) / r)
-    return mean, se
+    r, m, _ = Z.shape
+    L = _factor(np.ascontiguousarray(Sigma))
+    Zf = Z.reshape(r * m, 2 * D)
+    Y = np.zeros((r * m, 2 * D))
+    for j in range(2 * D):  # elementwise, not BLAS: the same bits on every machine/thread count
+        Y += Zf[:, j:j + 1] * L[:, j]
+    n = r * m
+    zeros = np.zeros((n, D))
+    t = np.empty(n)
+    _ttc_kernel_h(np.ascontiguousarray(dp + Y[:, :D]), np.ascontiguousarray(dv + Y[:, D:]),
+                  np.ascontiguousarray(np.broadcast_to(da, (n, D))), np.full(n, R),
+                  zeros, zeros, zeros, np.zeros(n), H, t)
+    est = (t <= H).reshape(r, m).mean(axis=1)
+    return float(est.mean()), float(est.std(ddof=1) / math.sqrt(r))
 
 
 @njit(cache=True, error_model="numpy")
@@ -254,7 +238,7 @@ def instant_probability(dp, dv, da, R, Sigma, t):
 # Ambiguous tube intervals are cut into _PANELS panels for the entry-rate
 # integral; the plausible-time search certifies panel by panel.
 _PANELS = 2
-_RICE_TOL = 2e-5  # quadrature tolerance of the entry-rate integral per panel
+_RICE_TOL = 1e-4  # quadrature tolerance of the entry-rate integral per panel
 _P0_ERR = 1e-9  # error of one instantaneous probability (overlap_probability)
 PLAUSIBLE_RTOL = 1e-7  # the plausible time's bracket width, relative to H
 BRACKET_MAX = 0.01  # with da != 0: widest [lower, upper] reported from the bounds alone
@@ -311,22 +295,29 @@ class _Pair:
         return v, e
 
 
+_SEARCH_STEPS = 64  # certified steps per panel before the conservative exit
+
+
 def _first_crossing(pair, a, pa, b, thr, dt):
     """First t in [a, b] with P(|X(t)| <= R) >= thr given P(a) = pa < thr,
     or None when certified absent.
 
     Invariant: P < thr on [a, lo] is certified (each step by
-    sup_[lo, c] P <= P(lo) + int_lo^c nu+ + errors < thr); when a point hi
-    with P(hi) >= thr is known, the first crossing lies in (lo, hi].  Next
-    candidate: the secant of P between lo and hi (bisection when a side
-    stalls), so a simple crossing takes a handful of steps.  Returns hi once
-    hi - lo <= dt; if the interval left of an uncertified candidate shrinks
-    below dt, returns lo (conservative: an earlier plausible time)."""
+    sup_[lo, c] P <= P(lo) + int_lo^c nu+ + errors < thr).  Until a point
+    with P >= thr is known the candidate c walks right with a step that
+    doubles after a certified step and halves after a failed one; once
+    P(hi) >= thr is known, the first crossing lies in (lo, hi] and c is the
+    secant of P between lo and hi (bisection when a side stalls).  Returns hi
+    once hi - lo <= dt.  Conservative exits (an earlier time than the true
+    first crossing, never a later one): lo when the step shrinks below dt,
+    or after _SEARCH_STEPS steps (P within the certificate's resolution of
+    the threshold over a long stretch)."""
     lo, plo = a, pa
     hi, phi = math.inf, -1.0
+    step = b - a
     c = b
     stall = 0
-    for _ in range(400):
+    for _ in range(_SEARCH_STEPS):
         if hi - lo <= dt:
             return hi
         if c - lo <= dt:
@@ -340,6 +331,7 @@ def _first_crossing(pair, a, pa, b, thr, dt):
         if plo + v + e + _P0_ERR < thr:  # certified: no crossing in [lo, c]
             if c == b:
                 return None
+            step = 2.0 * (c - lo)
             lo, plo = c, pair.prob_at(c)
             stall = stall + 1 if stall >= 0 else 1
         else:
@@ -347,11 +339,12 @@ def _first_crossing(pair, a, pa, b, thr, dt):
             if pc >= thr:
                 hi, phi = c, pc
                 stall = stall - 1 if stall <= 0 else -1
-            else:  # neither certified nor above: look closer to lo
-                c = lo + 0.5 * (c - lo)
+            else:  # neither certified nor above: a shorter step
+                step = 0.5 * (c - lo)
+                c = lo + step
                 continue
         if hi == math.inf:
-            c = b
+            c = min(lo + step, b)
             continue
         if abs(stall) >= 2 or not (phi > plo):
             c = 0.5 * (lo + hi)

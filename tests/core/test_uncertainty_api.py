@@ -118,3 +118,32 @@ def test_covariance_problem_accepts_rounding():
     A[2, 2] = -1e-12  # rounding-sized negative eigenvalue
     assert covariance_problem(A) is None
     assert covariance_problem(np.zeros((4, 4))) is None
+
+
+def test_k_sigma_tail_and_the_cauchy_schwarz_step():
+    """The two facts behind BROAD_PHASE_SIGMAS (docs/uncertainty.md, "k"):
+    P(chi^2_6 > k^2) = TUBE_TAIL (mpmath), and for any whitened z the
+    deviation |M_t L z| of a body's centre is <= sqrt(lambda_max(S(t))) |z|
+    <= inflation_radius / k * |z| at every t in [0, H]."""
+    import mpmath as mp
+
+    from circle_collision_ros.core.uncertainty_kernels import chi2_tail_even
+
+    ref = float(mp.gammainc(3, BROAD_PHASE_SIGMAS ** 2 / 2, mp.inf, regularized=True))
+    assert abs(TUBE_TAIL - ref) <= 1e-24
+    assert abs(chi2_tail_even(BROAD_PHASE_SIGMAS ** 2, 4)
+               - float(mp.gammainc(2, BROAD_PHASE_SIGMAS ** 2 / 2, mp.inf, regularized=True))) <= 1e-24
+    rng = np.random.default_rng(2)
+    H = 4.0
+    for D in (2, 3):
+        B = rng.normal(size=(50, 2 * D, 2 * D)) * rng.uniform(0.01, 1, size=(50, 2 * D, 1))
+        cov = B @ B.transpose(0, 2, 1)
+        r = inflation_radius(cov, H)
+        for i in range(50):
+            lam, V = np.linalg.eigh(cov[i])
+            L = V * np.sqrt(np.clip(lam, 0, None))
+            z = rng.normal(size=(200, 2 * D))
+            for t in np.linspace(0, H, 17):
+                M = np.hstack([np.eye(D), t * np.eye(D)])
+                dev = np.linalg.norm(z @ (M @ L).T, axis=1)
+                assert np.all(dev <= r[i] / BROAD_PHASE_SIGMAS * np.linalg.norm(z, axis=1) * (1 + 1e-12))
