@@ -22,6 +22,7 @@ Printed figures (same run, so ratios are comparable on a busy machine):
 from __future__ import annotations
 
 import argparse
+import gc
 import os
 import statistics
 import sys
@@ -52,7 +53,10 @@ def _state_bytes(scene: SyntheticScene, k: int, stamp_ns: int) -> bytes:
 
 
 def node_side(predictor: CollisionPredictor, data: bytes, msg_type: type, now_ns: int) -> tuple:
-    """The callback's work on one message; (seconds per stage, output bytes)."""
+    """The callback's work on one message; (wall seconds per stage + CPU seconds in all, prediction,
+    output bytes).  CPU time (this process, all threads) is what the work costs on a busy machine
+    without the time spent waiting for a core."""
+    c0 = time.process_time()
     t0 = time.perf_counter()
     batch = decode_states(data, msg_type)
     t1 = time.perf_counter()
@@ -62,7 +66,8 @@ def node_side(predictor: CollisionPredictor, data: bytes, msg_type: type, now_ns
     t3 = time.perf_counter()
     out = prediction.to_cdr()
     t4 = time.perf_counter()
-    return (t1 - t0, t2 - t1, t3 - t2, t4 - t3, t4 - t0), prediction, out
+    c1 = time.process_time()
+    return (t1 - t0, t2 - t1, t3 - t2, t4 - t3, t4 - t0, c1 - c0), prediction, out
 
 
 def _ms(values) -> str:
@@ -92,6 +97,8 @@ def main() -> int:
     stamp += 1
     print(f"scene: {n} bodies, {len(first.contacts)} contacts within {config.horizon:g} s, "
           f"{predictor.stats.candidate_pairs} pairs evaluated on the full path")
+    gc.collect()
+    gc.freeze()  # as collision_node does after start-up (node/collision_node.py, _started_node)
 
     # 1 + 2: one-body updates (newer stamps, inside one epoch), then the same via full recomputation.
     rng = np.random.default_rng(1)
@@ -117,6 +124,7 @@ def main() -> int:
     st = np.array(stages)
     print(f"\n1. one-body update, N = {n} (CircleState, newer stamp): decode + receive_batch + predict + to_cdr")
     print(f"   total:        {_ms(st[:, 4])}   (target <= 0.3 ms at N = 10,000)")
+    print(f"   total CPU:    {_ms(st[:, 5])}")
     for name, col in (("decode", 0), ("receive_batch", 1), ("predict", 2), ("to_cdr", 3)):
         print(f"   {name:13s} {_ms(st[:, col])}")
     print(f"   narrow-phase pairs per update: median {statistics.median(evaluated):.0f}")
@@ -133,6 +141,7 @@ def main() -> int:
         arr.append(node_side(predictor, data, CircleStateArray, stamp)[0])
     at = np.array(arr)
     print(f"\n3. whole {n}-body CircleStateArray (every body moved): {_ms(at[:, 4])}")
+    print(f"   total CPU:    {_ms(at[:, 5])}")
     for name, col in (("decode", 0), ("receive_batch", 1), ("predict", 2), ("to_cdr", 3)):
         print(f"   {name:13s} {_ms(at[:, col])}")
     print(f"   one-body update / whole array (medians): {np.median(st[:, 4]) / np.median(at[:, 4]):.4f}")

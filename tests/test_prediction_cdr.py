@@ -117,3 +117,29 @@ def test_cases_cover_empty_contacts_and_no_contact_rows() -> None:
     assert any(len(p.contacts) > 20 for p in kinds)
     assert any((p.columns.status == 0).any() for p in kinds)  # NO_CONTACT rows
     assert any((p.columns.status == 2).any() for p in kinds)  # OVERLAPPING rows
+
+
+def test_encoded_ids_survive_churn() -> None:
+    """The scene keeps ids UTF-8-encoded for the encoder (core/scene.py, SceneContacts.id_utf8) in a
+    blob that grows and drops the ids of removed bodies: through 60 rounds of bodies replaced by
+    new (ASCII and non-ASCII) ids, every publication equals the reference writer, and an older
+    prediction encodes the same bytes after the scene has moved on."""
+    predictor = CollisionPredictor(PredictorConfig(horizon=5.0, frame_id="map", stale_timeout=1e-3))
+    rng = np.random.default_rng(7)
+    kept = []
+    for k in range(60):
+        states = random_states(40, seed=k, spread=8.0, stamp_ns=BASE_NS + k * 10_000_000)
+        for j, s in enumerate(states):
+            s.id = f"{'ü' * int(rng.integers(0, 3))}r{k}_{j}" + "x" * int(rng.integers(0, 30))
+            s.header.frame_id = "map"
+        # stale_timeout 1 ms: the last round's bodies expire, their ids' bytes become garbage
+        predictor.receive_batch(StateBatch.from_messages(states), BASE_NS + k * 10_000_000)
+        prediction = predictor.predict()
+        data = prediction.to_cdr()
+        assert len(prediction.contacts) > 0
+        assert data == reference_encoding(prediction.stamp, prediction.frame_id, prediction.horizon,
+                                          prediction.rows())[0]
+        if k % 20 == 0:
+            kept.append((prediction, data))
+    for prediction, data in kept:
+        assert prediction.to_cdr() == data

@@ -29,6 +29,7 @@ Stream rules (README, "Real-time behaviour"):
 from __future__ import annotations
 
 import functools
+import gc
 import json
 import os
 import sys
@@ -151,8 +152,9 @@ class Unanswered:
     oldest_received_ns: int | None = None  # rmw receive time (system clock)
     changed: bool = False
 
-    def note(self, received_ns: int, changed: bool) -> None:
-        self.inputs += 1
+    def note(self, received_ns: int, changed: bool, inputs: int = 1) -> None:
+        """`inputs` inputs ingested, the first of them received at `received_ns`."""
+        self.inputs += inputs
         if self.oldest_received_ns is None:
             self.oldest_received_ns = received_ns
         self.changed = self.changed or changed
@@ -192,6 +194,7 @@ class CollisionNode(Node):
         self._transport_profile = (os.environ.get(TransportProfile.ENV)
                                    or os.environ.get(TransportProfile.DEPRECATED_ENV) or "")
         self._unmatched_publishers: list[str] = []
+        self._publisher_info: dict[str, tuple[int, float, dict[str, int]]] = {}  # (count, read at, kinds)
         self._last_warning: dict[str, float] = {}
 
         overrides = QoSOverridingOptions.with_default_policies()
@@ -279,16 +282,20 @@ class CollisionNode(Node):
         while budget > 0:
             before = len(taken)
             for source in self._inputs:
-                sub = source.subscription
-                while len(taken) - before < budget:
-                    try:
-                        with sub.handle:
-                            message = sub.handle.take_message(source.msg_type, True)
-                    except InvalidHandle:  # destroyed during shutdown
-                        return
-                    if message is None:
-                        break
-                    taken.append((source, message[0], message[1]))
+                handle = source.subscription.handle
+                room = budget - (len(taken) - before)
+                try:
+                    with handle:  # held for the whole run of takes (entering costs more than a take)
+                        take = handle.take_message
+                        msg_type = source.msg_type
+                        while room > 0:
+                            message = take(msg_type, True)
+                            if message is None:
+                                break
+                            taken.append((source, message[0], message[1]))
+                            room -= 1
+                except InvalidHandle:  # destroyed during shutdown
+                    return
             if len(taken) == before:
                 return
             budget -= len(taken) - before
@@ -336,14 +343,14 @@ class CollisionNode(Node):
                 if error is not None:
                     self.counters.rejected += 1
                     self._warn(source.topic, f"{source.topic}: rejected CircleState: {error}")
-                else:
+                elif report.accepted or report.removed or report.ignored or report.rejected \
+                        or report.expired:  # (a wave's counts sit on its first message)
                     changed = changed or report.changed
                     self._account(source.topic, report)
         except Exception as exc:  # a bug must cost these messages, not the node
             self.counters.errors += 1
             self._warn("receive", f"{len(run)} single-state message(s) skipped: {exc!r}")
-        for _, _, received_ns in run:
-            self._unanswered.note(received_ns, changed)
+        self._unanswered.note(run[0][2], changed, len(run))
 
     def _account(self, topic: str, report: IntakeReport) -> None:
         c = self.counters
@@ -486,10 +493,7 @@ class CollisionNode(Node):
         reliable = node_parameters.value_of(self, "state_reliability") == "reliable"
         summary, unmatched = [], []
         for source in self._inputs:
-            kinds: dict[str, int] = {}
-            for info in self.get_publishers_info_by_topic(source.topic):
-                kind = info.qos_profile.reliability.name.lower()
-                kinds[kind] = kinds.get(kind, 0) + 1
+            kinds = self._publisher_kinds(source.topic)
             shown = ", ".join(f"{n} {k}" for k, n in sorted(kinds.items())) or "none"
             summary.append(f"{source.topic}: {shown}")
             if reliable and kinds.get("best_effort"):
@@ -500,6 +504,24 @@ class CollisionNode(Node):
         return {"transport_profile": self._transport_profile or "Fast DDS defaults",
                 "largest_input_kb": f"{largest / 1024:.1f}",
                 "input_publishers": "; ".join(summary)}
+
+    #: Publisher QoS lists older than this are read again even if the count is unchanged, s.
+    PUBLISHER_INFO_REFRESH_S = 10.0
+
+    def _publisher_kinds(self, topic: str) -> dict[str, int]:
+        """How many publishers on `topic` offer each reliability, listed again only when their
+        count changed (or every PUBLISHER_INFO_REFRESH_S): listing 300 per-body publishers'
+        QoS took ~20-50 ms, once a second on the prediction thread."""
+        count = self.count_publishers(topic)
+        now = time.monotonic()
+        cached = self._publisher_info.get(topic)
+        if cached is None or cached[0] != count or now - cached[1] > self.PUBLISHER_INFO_REFRESH_S:
+            kinds: dict[str, int] = {}
+            for info in self.get_publishers_info_by_topic(topic):
+                kind = info.qos_profile.reliability.name.lower()
+                kinds[kind] = kinds.get(kind, 0) + 1
+            cached = self._publisher_info[topic] = (count, now, kinds)
+        return cached[2]
 
     # -- recording ------------------------------------------------------------------------------
     def _start_recording(self, path: str) -> None:
@@ -613,7 +635,20 @@ def main(args: list[str] | None = None) -> int:
     # the marker thread computes) gets it after at most this long instead of 5 ms.
     sys.setswitchinterval(0.0005)
     parse_args(argv, __doc__.splitlines()[0])
-    return spin_node(CollisionNode, argv, "collision_node")
+    return spin_node(_started_node, argv, "collision_node")
+
+
+def _started_node() -> CollisionNode:
+    """The node, with everything alive at start-up moved out of the cyclic collector's sight.
+
+    rclpy and numba's compiled kernels leave ~10^5 objects that live until exit; one full
+    collection scanning them took ~0.4 s on this machine, a stall of the stream whenever it
+    struck. Frozen (gc.freeze), collections scan only what the stream itself allocates.
+    """
+    node = CollisionNode()
+    gc.collect()
+    gc.freeze()
+    return node
 
 
 def _ros_type_name(msg_type: type) -> str:

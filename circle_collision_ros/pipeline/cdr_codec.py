@@ -353,8 +353,8 @@ def _encoded_names(names: list[str]) -> tuple[np.ndarray, np.ndarray, np.ndarray
     return np.frombuffer(joined.encode(), dtype=np.uint8), starts, lengths
 
 
-def encode_prediction_array(stamp: tuple[int, int], frame_id: str, horizon: float, columns, *,
-                            uncertainty: bool = True) -> bytes:
+def encode_prediction_array(stamp: tuple[int, int], frame_id: str, horizon: float, columns,
+                            utf8_ids: tuple | None = None, *, uncertainty: bool = True) -> bytes:
     """Serialized CollisionPredictionArray, written by one compiled loop.
 
     columns : a prediction_messages.PredictionColumns (id_a, id_b lists; status
@@ -362,15 +362,24 @@ def encode_prediction_array(stamp: tuple[int, int], frame_id: str, horizon: floa
         probability, probability_bound, plausible_ttc), in publication order.
         Padding bytes are zero; int32 seconds wrap as struct's "<i" would
         refuse, so callers keep times inside int32 range.
+    utf8_ids : the same ids already encoded, ``(blob, start_a, len_a, start_b,
+        len_b)`` (core.scene.SceneContacts.id_utf8): no per-name work here.
     uncertainty : False writes the layout before issue 18 (no probability
         fields), as recordings of that time hold it (replay).
     """
     if sys.byteorder != "little":  # the views below write native floats
         raise NotImplementedError("the compiled CDR encoder needs a little-endian machine")
-    count = len(columns.id_a)
-    names = [None] * (2 * count)
-    names[0::2], names[1::2] = columns.id_a, columns.id_b
-    blob, starts, lengths = _encoded_names(names)
+    count = len(columns.ttc)
+    if utf8_ids is not None:
+        blob, start_a, len_a, start_b, len_b = utf8_ids
+        starts = np.empty(2 * count, dtype=np.int64)
+        lengths = np.empty(2 * count, dtype=np.int64)
+        starts[0::2], starts[1::2] = start_a, start_b
+        lengths[0::2], lengths[1::2] = len_a, len_b
+    else:
+        names = [None] * (2 * count)
+        names[0::2], names[1::2] = columns.id_a, columns.id_b
+        blob, starts, lengths = _encoded_names(names)
     frame = np.frombuffer(frame_id.encode(), dtype=np.uint8)
     end = int(_prediction_array_end(frame.shape[0], lengths, count, uncertainty))
     words = -(-(end - _ORIGIN) // 8)  # whole float64 words after the header

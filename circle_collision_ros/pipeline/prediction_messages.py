@@ -114,12 +114,8 @@ class ScenePrediction:
         report_all_pairs (and at most ReportAll.MAX_BODIES bodies) every other
         pair follows as NO_CONTACT in id order."""
         c = self.contacts
-        # The scene reports only finite contacts with finite details; this mask is the
-        # last line of defence behind the "never publishes NaN" guarantee.
-        finite = np.isfinite(c.ttc) & np.isfinite(c.closing_speed) \
-            & np.isfinite(c.point).all(axis=1) & np.isfinite(c.normal).all(axis=1)
-        k = np.flatnonzero(finite) if not finite.all() else slice(None)
-        n = int(np.count_nonzero(finite))
+        k = self._finite_rows
+        n = len(c) if isinstance(k, slice) else k.size
         d = c.point.shape[1]
         point, normal = np.zeros((n, 3)), np.zeros((n, 3))
         point[:, :d], normal[:, :d] = c.point[k], c.normal[k]
@@ -176,6 +172,18 @@ class ScenePrediction:
                                  col["normal"], f64(col["closing"]), f64(col["probability"]), f64(col["bound"]),
                                  f64(col["plausible"]))
 
+    @cached_property
+    def _finite_rows(self):
+        """The contacts' rows with finite values (slice(None): all of them)."""
+        c = self.contacts
+        # The scene reports only finite contacts with finite details; this mask is the
+        # last line of defence behind the "never publishes NaN" guarantee.
+        if all(np.isfinite(x).all() for x in (c.ttc, c.closing_speed, c.point, c.normal)):
+            return slice(None)  # the common case, without per-row reductions
+        finite = np.isfinite(c.ttc) & np.isfinite(c.closing_speed) \
+            & np.isfinite(c.point).all(axis=1) & np.isfinite(c.normal).all(axis=1)
+        return np.flatnonzero(finite)
+
     def rows(self) -> Iterator[PredictionRow]:
         """The entries one by one, in publication order (see `columns`)."""
         c = self.columns
@@ -210,5 +218,8 @@ class ScenePrediction:
 
         uncertainty=False: the layout before the probability fields (replay of old recordings).
         """
-        return encode_prediction_array(self.stamp, self.frame_id, float(self.horizon), self.columns,
-                                       uncertainty=uncertainty)
+        columns = self.columns
+        # No contact row dropped and none appended: the scene's encoded ids fit the columns.
+        same_rows = isinstance(self._finite_rows, slice) and len(columns) == len(self.contacts)
+        return encode_prediction_array(self.stamp, self.frame_id, float(self.horizon), columns,
+                                       self.contacts.id_utf8 if same_rows else None, uncertainty=uncertainty)

@@ -1,0 +1,312 @@
+"""Compiled steps of the scene's small-update path (core/scene.py).
+
+Each kernel repeats, row by row, the IEEE operations of the vectorised numpy
+code it replaces, in the same order, so its results are bitwise those of:
+
+* ``evaluate_rows``: ``scene._propagate_ns`` to the evaluation time, the narrow
+  phase (``narrow_phase._ttc_scalar``, bitwise ``time_to_collision``),
+  ``contact.contact_details`` at the contact time, and the overlap test of
+  ``Scene._resolve`` (``norm(p_a - p_b) - (r_a + r_b) < 0`` at that time);
+* ``order_rows``: the order of ``Scene._sort`` (``(ttc, rank_a, rank_b)``
+  ascending) for rows that were sorted at the previous reference time.
+
+tests/core/test_scene_kernels.py compares them bit for bit with the numpy
+code (negative zeros, coincident centres, NaN cases included); the scene's
+incremental-equals-full tests compare the whole path.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+from circle_collision_ros.core.broad_phase import _ABS_MARGIN, _COORD_MARGIN, _REL_MARGIN
+from circle_collision_ros.core.kinematics import arc_position
+from circle_collision_ros.core.narrow_phase import _ttc_scalar
+
+__all__ = ["evaluate_rows", "order_rows", "split_past", "pair_keys", "assemble", "swept_bound_rows"]
+
+#: Overlap decided without the narrow phase: only for values well inside the
+#: narrow phase's input range, so no rounding bound below can fail.
+_SAFE = 1e100
+#: |p_a - p_b|^2 computed in floats is within ~6 units in the last place of
+#: the exact value, (r_a + r_b)^2 within ~3: below (1 - 2^-30) of it, the
+#: exact f(0) = |p_a - p_b|^2 - (r_a + r_b)^2 is certainly negative.
+_OVERLAP_MARGIN = 1.0 - 2.0 ** -30
+
+
+@njit(cache=True, error_model="numpy")
+def _details(pa, va, aa, ra, pb, vb, ab, t, point, normal):
+    """contact_details of one pair at t into point/normal (length D); the closing speed.
+
+    Same operations as core/contact.py on one row (sums over the axis run
+    x0 + x1 (+ x2), as numpy reduces a short contiguous axis).
+    """
+    D = pa.shape[0]
+    h = 0.5 * t
+    g = np.empty(D)
+    w = np.empty(D)
+    for d in range(D):
+        g[d] = (pb[d] - pa[d]) + t * ((vb[d] - va[d]) + h * (ab[d] - aa[d]))
+        w[d] = (va[d] - vb[d]) + t * (aa[d] - ab[d])
+    sg = g[0] * g[0]
+    sw = w[0] * w[0]
+    for d in range(1, D):
+        sg += g[d] * g[d]
+        sw += w[d] * w[d]
+    ng = math.sqrt(sg)
+    nw = math.sqrt(sw)
+    for d in range(D):
+        if ng > 0:
+            normal[d] = g[d] / ng
+        elif nw > 0:
+            normal[d] = w[d] / nw
+        else:
+            normal[d] = 1.0 if d == 0 else 0.0
+    finite = True
+    for d in range(D):
+        point[d] = (pa[d] + t * (va[d] + h * aa[d])) + ra * normal[d]
+        finite = finite and math.isfinite(point[d])
+    closing = w[0] * normal[0]
+    for d in range(1, D):
+        closing += w[d] * normal[d]
+    if not (math.isfinite(t) and math.isfinite(closing) and finite and ra >= 0):
+        for d in range(D):
+            point[d] = np.nan
+            normal[d] = np.nan
+        closing = np.nan
+    return closing
+
+
+@njit(cache=True, error_model="numpy")
+def evaluate_rows(P, V, A, Rad, T, ia, ib, t_eval, horizon, tau, point, normal, closing, overlap):
+    """Pairs (ia[k], ib[k]) propagated to t_eval[k] (ns), narrow phase with `horizon`.
+
+    Writes tau[k]; for rows with tau <= horizon also point[k], normal[k],
+    closing[k] (contact details at tau) and overlap[k] (tau == 0 and the
+    propagated gap is negative).  Returns the number of narrow-phase rows.
+    """
+    D = P.shape[1]
+    pa = np.zeros(3)
+    va = np.zeros(3)
+    aa = np.zeros(3)
+    pb = np.zeros(3)
+    vb = np.zeros(3)
+    ab = np.zeros(3)
+    for k in range(ia.shape[0]):
+        a = ia[k]
+        b = ib[k]
+        dta = np.float64(t_eval[k] - T[a]) * 1e-9
+        dtb = np.float64(t_eval[k] - T[b]) * 1e-9
+        for d in range(D):
+            pa[d] = P[a, d] + dta * (V[a, d] + (0.5 * dta) * A[a, d])
+            va[d] = V[a, d] + dta * A[a, d]
+            aa[d] = A[a, d]
+            pb[d] = P[b, d] + dtb * (V[b, d] + (0.5 * dtb) * A[b, d])
+            vb[d] = V[b, d] + dtb * A[b, d]
+            ab[d] = A[b, d]
+        s = (pa[0] - pb[0]) * (pa[0] - pb[0])
+        big = 0.0
+        for d in range(D):
+            if d > 0:
+                s += (pa[d] - pb[d]) * (pa[d] - pb[d])
+            big = max(big, abs(pa[d]), abs(pb[d]), abs(va[d]), abs(vb[d]), abs(aa[d]), abs(ab[d]))
+        rs = Rad[a] + Rad[b]
+        if big < _SAFE and 1.0 / _SAFE < rs < _SAFE and s < (rs * rs) * _OVERLAP_MARGIN:
+            # f(0) < 0 for certain: the narrow phase's contract answers 0.0 (overlap at 0)
+            t = 0.0
+        else:
+            t = _ttc_scalar(pa[0], pa[1], pa[2], va[0], va[1], va[2], aa[0], aa[1], aa[2], Rad[a],
+                            pb[0], pb[1], pb[2], vb[0], vb[1], vb[2], ab[0], ab[1], ab[2], Rad[b],
+                            horizon)
+        tau[k] = t
+        overlap[k] = False
+        if t <= horizon:
+            closing[k] = _details(pa[:D], va[:D], aa[:D], Rad[a], pb[:D], vb[:D], ab[:D], t,
+                                  point[k], normal[k])
+            if t == 0.0:  # the overlap test of Scene._resolve: norm(p_a - p_b) - (r_a + r_b) < 0
+                overlap[k] = math.sqrt(s) - rs < 0.0
+    return ia.shape[0]
+
+
+@njit(cache=True)
+def split_past(recs, live, rtp, rtau, R, ttc_out, fut_out, past_out, n_fut, n_past):
+    """Sort live records `recs` into future rows (ttc at R) and past ones.
+
+    A record at pair time tp reports ttc = tau (tp == R) or tau - (R - tp)
+    s; if its contact began before R (tp < R and tau <= R - tp) it is past
+    (evaluated again at R).  Appends to fut_out/ttc_out from n_fut and to
+    past_out from n_past; returns the new counts.
+    """
+    for x in range(recs.shape[0]):
+        r = recs[x]
+        if not live[r]:
+            continue
+        tp = rtp[r]
+        tau = rtau[r]
+        if tp == R:
+            ttc = tau
+        else:
+            d = np.float64(R - tp) * 1e-9
+            if tau <= d:
+                past_out[n_past] = r
+                n_past += 1
+                continue
+            ttc = tau - d
+        fut_out[n_fut] = r
+        ttc_out[n_fut] = ttc
+        n_fut += 1
+    return n_fut, n_past
+
+
+@njit(cache=True)
+def _less(t1, k1, t2, k2):
+    return t1 < t2 or (t1 == t2 and k1 < k2)
+
+
+@njit(cache=True)
+def order_rows(rec, ttc, key, n_sorted, max_moves):
+    """Sort rec/ttc/key[:n] in place by (ttc, key) where the first n_sorted
+    rows are nearly sorted (insertion sort) and the rest are new (sorted, then
+    merged).  Returns False, leaving the arrays unspecified, if the nearly
+    sorted part needed more than max_moves moves (the caller sorts from scratch).
+    """
+    moves = 0
+    for i in range(1, n_sorted):
+        t, k, r = ttc[i], key[i], rec[i]
+        j = i
+        while j > 0 and _less(t, k, ttc[j - 1], key[j - 1]):
+            ttc[j] = ttc[j - 1]
+            key[j] = key[j - 1]
+            rec[j] = rec[j - 1]
+            j -= 1
+            moves += 1
+        ttc[j], key[j], rec[j] = t, k, r
+        if moves > max_moves:
+            return False
+    n = rec.shape[0]
+    m = n - n_sorted
+    if m == 0:
+        return True
+    # the new rows: key order, then stable by ttc
+    o = np.argsort(key[n_sorted:], kind="mergesort")
+    o = o[np.argsort(ttc[n_sorted:][o], kind="mergesort")]
+    nt = ttc[n_sorted:][o].copy()
+    nk = key[n_sorted:][o].copy()
+    nr = rec[n_sorted:][o].copy()
+    # merge from the back into the full arrays
+    i = n_sorted - 1
+    j = m - 1
+    for out in range(n - 1, -1, -1):
+        if j < 0:
+            break
+        if i >= 0 and _less(nt[j], nk[j], ttc[i], key[i]):
+            ttc[out], key[out], rec[out] = ttc[i], key[i], rec[i]
+            i -= 1
+        else:
+            ttc[out], key[out], rec[out] = nt[j], nk[j], nr[j]
+            j -= 1
+    return True
+
+
+@njit(cache=True)
+def pair_keys(recs, ra, rb, rank, cap):
+    """(rank of a) * cap + (rank of b) of each record: unique per pair, id order."""
+    out = np.empty(recs.shape[0], dtype=np.int64)
+    for x in range(recs.shape[0]):
+        r = recs[x]
+        out[x] = rank[ra[r]] * cap + rank[rb[r]]
+    return out
+
+
+@njit(cache=True)
+def assemble(F, ttc_f, ra, rb, rtp, rtau, rov, rpt, rnm, rcs,
+             Ap, Bp, tau2, ov2, pt2, nm2, cs2, R, rank, cap):
+    """The reported rows: future records F (sorted, with their ttc) and the past
+    pairs evaluated at R (hits, any order), merged by (ttc, id_a, id_b).
+
+    contact_ns = t_p + round(tau 1e9) for a record, R + round(tau 1e9) for a
+    pair evaluated at R (round half to even, as numpy's round).
+    """
+    kf = F.shape[0]
+    m = kf + Ap.shape[0]
+    D = rpt.shape[1]
+    o = np.arange(m)
+    t_all = np.empty(m)
+    k_all = np.empty(m, dtype=np.int64)
+    for x in range(kf):
+        r = F[x]
+        t_all[x] = ttc_f[x]
+        k_all[x] = rank[ra[r]] * cap + rank[rb[r]]
+    for x in range(Ap.shape[0]):
+        t_all[kf + x] = tau2[x]
+        k_all[kf + x] = rank[Ap[x]] * cap + rank[Bp[x]]
+    order_rows(o, t_all, k_all, kf, m * m)  # F is sorted: no moves; never gives up
+    A = np.empty(m, dtype=np.int64)
+    B = np.empty(m, dtype=np.int64)
+    cns = np.empty(m, dtype=np.int64)
+    over = np.empty(m, dtype=np.bool_)
+    pt = np.empty((m, D))
+    nm = np.empty((m, D))
+    cs = np.empty(m)
+    for x in range(m):
+        y = o[x]
+        if y < kf:
+            r = F[y]
+            A[x] = ra[r]
+            B[x] = rb[r]
+            cns[x] = rtp[r] + np.int64(np.rint(rtau[r] * 1e9))
+            over[x] = rov[r]
+            for d in range(D):
+                pt[x, d] = rpt[r, d]
+                nm[x, d] = rnm[r, d]
+            cs[x] = rcs[r]
+        else:
+            y -= kf
+            A[x] = Ap[y]
+            B[x] = Bp[y]
+            cns[x] = R + np.int64(np.rint(tau2[y] * 1e9))
+            over[x] = ov2[y]
+            for d in range(D):
+                pt[x, d] = pt2[y, d]
+                nm[x, d] = nm2[y, d]
+            cs[x] = cs2[y]
+    return A, B, t_all, cns, over, pt, nm, cs
+
+
+@njit(cache=True, error_model="numpy")
+def swept_bound_rows(P, V, A, Rad, slots, t0, t1, lo, hi):
+    """broad_phase.swept_bounds of the rows `slots` (windows t0[k], t1[k]) into lo/hi[slots]:
+    the same operations per row, for a few bodies at a time (no numpy set-up)."""
+    D = P.shape[1]
+    for k in range(slots.shape[0]):
+        s = slots[k]
+        a0 = t0[k]
+        a1 = t1[k]
+        tm = max(abs(a0), abs(a1))
+        motion = 0.0
+        coord = 0.0
+        for d in range(D):
+            p, v, a = P[s, d], V[s, d], A[s, d]
+            x0 = arc_position(p, v, a, a0)
+            x1 = arc_position(p, v, a, a1)
+            l = min(x0, x1)
+            h = max(x0, x1)
+            if a != 0.0:
+                ts = -v / a
+                if ts > a0 and ts < a1:
+                    xs = arc_position(p, v, a, ts)
+                    l = min(l, xs)
+                    h = max(h, xs)
+            lo[s, d] = l
+            hi[s, d] = h
+            m = abs(v) * tm + 0.5 * abs(a) * tm * tm
+            motion = m if d == 0 else motion + m
+            coord = abs(p) if d == 0 else max(coord, abs(p))
+        coord = coord + motion
+        r = Rad[s]
+        pad = r + _REL_MARGIN * (r + motion) + _COORD_MARGIN * coord + _ABS_MARGIN
+        for d in range(D):
+            lo[s, d] = lo[s, d] - pad
+            hi[s, d] = hi[s, d] + pad
