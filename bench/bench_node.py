@@ -28,6 +28,11 @@ client's publish call to the node's publication of the first prediction that
 answers it (the prediction's rmw source timestamp; queue wait and coalescing
 included), so the figure contains receive-to-publish and the inbound DDS hop.
 Ingested / coalesced / missing come from the node's /diagnostics.
+
+    .venv/bin/python bench/bench_node.py --covariance 0.2 [--bodies 1000] [--seconds 10]
+
+runs each size twice in the same run, without and with a covariance on every body
+(position sigma 0.2 m, velocity sigma half that), and prints both rows (issue 18).
 """
 from __future__ import annotations
 
@@ -122,12 +127,28 @@ class ArrayFrames:
 _FRAMES: dict[int, ArrayFrames] = {}
 
 
-def scene_bytes(scene: SyntheticScene, stamp_ns: int) -> bytes:
-    """The scene as serialized CircleStateArray bytes, every state stamped `stamp_ns`."""
+def scene_bytes(scene: SyntheticScene, stamp_ns: int, sigma: float = 0.0) -> bytes:
+    """The scene as serialized CircleStateArray bytes, every state stamped `stamp_ns`; sigma > 0:
+    every body with a diagonal covariance (position sigma, velocity sigma / 2), encoded afresh."""
+    if sigma:
+        return covariance_scene_bytes(scene, stamp_ns, sigma)
     frames = _FRAMES.get(id(scene))
     if frames is None or frames.count != scene.count:
         frames = _FRAMES[id(scene)] = ArrayFrames(scene)
     return frames.bytes(scene, stamp_ns)
+
+
+def covariance_scene_bytes(scene: SyntheticScene, stamp_ns: int, sigma: float) -> bytes:
+    """The scene as serialized CircleStateArray bytes, every state stamped `stamp_ns`; sigma > 0:
+    every body with a diagonal covariance (position sigma, velocity sigma / 2)."""
+    n = scene.count
+    cov = np.tile(np.diag([sigma ** 2] * 3 + [(sigma / 2) ** 2] * 3).ravel(), (n, 1)) if sigma else None
+    batch = StateBatch(ids=[f"b{k:05d}" for k in range(n)], frames=["map"] * n,
+                       stamp_ns=np.full(n, stamp_ns, dtype=np.int64), radius=scene.radii,
+                       position=scene.p, velocity=scene.v, acceleration=scene.a,
+                       remove=np.zeros(n, dtype=bool), covariance=cov,
+                       covariance_size=None if cov is None else np.full(n, 36, dtype=np.int64))
+    return encode_state_array(batch, stamp_ns, "map")
 
 
 def _stamp_of(data: bytes) -> int:
@@ -143,7 +164,7 @@ def _percentiles(values: list[float]) -> tuple[float, float]:
     return float(np.percentile(arr, 50)), float(np.percentile(arr, 99))
 
 
-def measure(bodies: int, seconds: float, rate: float) -> dict:
+def measure(bodies: int, seconds: float, rate: float, sigma: float = 0.0) -> dict:
     """One scene size: start a node, drive it, collect latencies."""
     exe = os.path.join(sys.prefix, "lib", "circle_collision_ros", "collision_node")
     node_proc = subprocess.Popen([exe, "--ros-args", "-p", "marker_rate:=0.0", "-p", "max_bodies:=100000",
@@ -163,7 +184,7 @@ def measure(bodies: int, seconds: float, rate: float) -> dict:
         received.append(now)
 
     def publish(stamp_ns: int) -> None:
-        data = scene_bytes(scene, stamp_ns)
+        data = scene_bytes(scene, stamp_ns, sigma)
         published_at[stamp_ns] = time.time_ns()
         pub.publish(data)
 
@@ -555,6 +576,8 @@ def main() -> int:
     parser.add_argument("--qos", action="store_true",
                         help="compare best-effort and reliable KEEP_LAST 1 state subscriptions at "
                              "1,000/5,000/10,000 bodies (issue 19)")
+    parser.add_argument("--covariance", type=float, default=0.0, metavar="SIGMA",
+                        help="also run each size with a covariance on every body (position sigma, m)")
     opts = parser.parse_args()
     seconds = 3.0 if opts.quick else opts.seconds
     if opts.receive:
@@ -565,7 +588,12 @@ def main() -> int:
         if opts.json:
             Path(opts.json).write_text(json.dumps(rows, indent=2))
         return 0
-    rows = [measure(n, seconds, opts.rate) for n in opts.bodies]
+    sigmas = [0.0, opts.covariance] if opts.covariance else [0.0]
+    rows = [dict(measure(n, seconds, opts.rate, sigma), covariance_sigma=sigma)
+            for n in opts.bodies for sigma in sigmas]
+    if opts.covariance:
+        for r in rows:
+            r["bodies"] = f"{r['bodies']} ({'sigma ' + format(r['covariance_sigma'], 'g') + ' m' if r['covariance_sigma'] else 'exact'})"
     print(f"| bodies | input Hz | answered/sent | end-to-end p50 ms | p99 ms | node p50 ms | node p99 ms"
           f" | candidate pairs | burst in/s | burst out/s |")
     print("|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|")

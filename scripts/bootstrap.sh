@@ -183,6 +183,11 @@ for d in (2, 3):
     r = np.ones(PARALLEL_MIN_ROWS)
     time_to_collision(zz, zz, zz, r, zz + 3.0, zz, zz, r, 1.0)
     time_to_collision(zz, zz, zz, r, zz + 3.0, zz, zz, r, r)
+    # the uncertain path (issue 18): one uncertain pair and the broad-phase inflation
+    from circle_collision_ros.core.uncertainty import inflation_radius, uncertain_pairs
+    c = np.eye(2 * d)[None] * 0.01
+    uncertain_pairs(z[:1], z[:1], z[:1], np.ones(1), c, z[:1] + 1.5, z[:1], z[:1], np.ones(1), c, 1.0, 0.01)
+    inflation_radius(c, 1.0)
 ')
   mark numba "$h"
 fi

@@ -44,8 +44,10 @@ def odometry(p=(1.0, 2.0, 0.0), q=(0.0, 0.0, 0.0, 1.0), v=(0.5, 0.0, 0.0), stamp
     o.x, o.y, o.z, o.w = q
     msg.twist.twist.linear.x, msg.twist.twist.linear.y, msg.twist.twist.linear.z = v
     msg.twist.twist.angular.z = 0.25
-    msg.pose.covariance = [float(k) for k in range(36)]
-    msg.twist.covariance = [float(-k) for k in range(36)]
+    # Symmetric PSD with (nearly) all-distinct entries: a misplaced offset shows.
+    a = np.arange(36.0).reshape(6, 6) / 10.0
+    msg.pose.covariance = (a @ a.T).ravel().tolist()
+    msg.twist.covariance = (a.T @ a / 7.0).ravel().tolist()
     return msg
 
 
@@ -77,7 +79,8 @@ def big_endian(msg: Odometry) -> bytes:
 def _fields_of(msg: Odometry):
     p, o, v = msg.pose.pose.position, msg.pose.pose.orientation, msg.twist.twist.linear
     return (msg.header.stamp.sec * 10**9 + msg.header.stamp.nanosec, msg.header.frame_id, msg.child_frame_id,
-            (p.x, p.y, p.z), (o.x, o.y, o.z, o.w), (v.x, v.y, v.z))
+            (p.x, p.y, p.z), (o.x, o.y, o.z, o.w), (v.x, v.y, v.z), tuple(msg.pose.covariance),
+            tuple(msg.twist.covariance))
 
 
 @pytest.mark.parametrize("frame, child", [("map", "base_link"), ("", ""), ("odom", "robot_7/base_footprint"),
@@ -162,3 +165,49 @@ def test_ids_and_radii_from_topics() -> None:
         odometry_sources(["/a/odom", "/b/odom"], 0.5, [1.0])
     with pytest.raises(ValueError, match="same body id 'a'"):
         odometry_sources(["/a/odom", "/a/odometry"], 0.5, [])
+
+
+def test_covariance_position_block_and_rotated_twist_block() -> None:
+    """Issue 18: pose.covariance's x/y/z block as is (header frame); twist.covariance's linear
+    block rotated into the header frame (R S R^T, R from an independent mpmath rotation about z
+    by the yaw); no cross terms."""
+    yaw = 0.7
+    q = (0.0, 0.0, math.sin(yaw / 2), math.cos(yaw / 2))
+    msg = odometry(q=q)
+    pose = np.zeros((6, 6))
+    pose[:3, :3] = [[0.04, 0.01, 0.0], [0.01, 0.09, 0.0], [0.0, 0.0, 0.01]]
+    pose[3:, 3:] = np.eye(3) * 5.0  # orientation variances: not used
+    twist = np.zeros((6, 6))
+    twist[:3, :3] = [[0.25, 0.0, 0.0], [0.0, 0.01, 0.0], [0.0, 0.0, 0.0]]  # along the body's x
+    twist[3:, 3:] = np.eye(3) * 7.0  # angular rates: not used
+    msg.pose.covariance, msg.twist.covariance = pose.ravel().tolist(), twist.ravel().tolist()
+    batch = odometry_batch(serialize_message(msg), SOURCE)
+    got = batch.covariance[0].reshape(6, 6)
+    assert batch.covariance_size.tolist() == [36]
+    assert np.array_equal(got[:3, :3], pose[:3, :3])
+    assert not got[:3, 3:].any() and not got[3:, :3].any()
+    c, s_ = mpmath.cos(mpmath.mpf(yaw)), mpmath.sin(mpmath.mpf(yaw))
+    rot = mpmath.matrix([[c, -s_, 0], [s_, c, 0], [0, 0, 1]])
+    want = rot * mpmath.matrix(twist[:3, :3].tolist()) * rot.T
+    for i in range(3):
+        for j in range(3):
+            assert abs(got[3 + i, 3 + j] - float(want[i, j])) <= 1e-15
+    assert np.array_equal(got[3:, 3:], got[3:, 3:].T)  # exactly symmetric
+    # the velocity's main uncertainty now lies along the rotated body x axis
+    w, v = np.linalg.eigh(got[3:5, 3:5])
+    assert abs(abs(v[:, 1] @ [math.cos(yaw), math.sin(yaw)]) - 1.0) < 1e-12
+
+
+def test_zero_covariance_is_exact_and_bad_blocks_name_their_field() -> None:
+    msg = odometry()
+    msg.pose.covariance, msg.twist.covariance = [0.0] * 36, [0.0] * 36
+    assert odometry_batch(serialize_message(msg), SOURCE).covariance is None
+    for field, values, reason in [
+            ("pose", np.diag([1.0, -1.0, 1.0, 0, 0, 0]), "not positive semi-definite"),
+            ("twist", np.triu(np.ones((6, 6))), "not symmetric"),
+            ("pose", np.diag([math.nan, 1.0, 1.0, 0, 0, 0]), "not finite")]:
+        msg = odometry()
+        msg.pose.covariance, msg.twist.covariance = [0.0] * 36, [0.0] * 36
+        getattr(msg, field).covariance = values.ravel().tolist()
+        with pytest.raises(OdometryError, match=rf"{field}\.covariance .*{reason}"):
+            odometry_batch(serialize_message(msg), SOURCE)

@@ -4,6 +4,8 @@ Guarantees proved here, on random predictions (2-D and 3-D, empty, with
 report_all_pairs NO_CONTACT rows, non-ASCII and empty ids, empty and long frame ids):
 - the bytes equal those of the straightforward struct-based writer the node used
   before (kept below as the reference), byte for byte, padding included;
+- the layout before issue 18 (uncertainty=False, what old recordings hold) is the
+  same bytes without the three probability fields;
 - the bytes equal rclpy's serialize_message of the same message object (except
   alignment padding, which Fast CDR leaves uninitialised; ours is zero), and
   rclpy's deserialize_message gives back exactly that message.
@@ -22,7 +24,8 @@ from circle_collision_ros.pipeline.state_batch import StateBatch
 from tests.ros.node_helpers import BASE_NS, random_states
 
 
-def reference_encoding(stamp, frame_id: str, horizon: float, rows) -> tuple[bytes, list[int]]:
+def reference_encoding(stamp, frame_id: str, horizon: float, rows,
+                       uncertainty: bool = True) -> tuple[bytes, list[int]]:
     """Little-endian XCDR1 written field by field with struct (the pre-compiled encoder),
     and the positions of its alignment padding."""
     buf = bytearray(b"\x00\x01\x00\x00")
@@ -62,6 +65,8 @@ def reference_encoding(stamp, frame_id: str, horizon: float, rows) -> tuple[byte
         f64s(r.time_to_collision)
         time(*r.contact_time)
         f64s(*r.contact_point, *r.normal, r.closing_speed)
+        if uncertainty:
+            f64s(r.collision_probability, r.collision_probability_bound, r.plausible_time_to_collision)
     return bytes(buf), padding
 
 
@@ -94,6 +99,9 @@ def test_compiled_encoder_equals_reference_and_rclpy(seed, n, dim, report_all, f
     reference, padding = reference_encoding(prediction.stamp, prediction.frame_id, prediction.horizon,
                                             prediction.rows())
     assert data == reference
+    old, _ = reference_encoding(prediction.stamp, prediction.frame_id, prediction.horizon,
+                                prediction.rows(), uncertainty=False)
+    assert prediction.to_cdr(uncertainty=False) == old
     message = prediction.to_message()
     # Fast CDR leaves alignment padding uninitialised: compare every other byte.
     theirs = bytearray(serialize_message(message))

@@ -21,9 +21,10 @@ from tests.ros.node_helpers import BASE_NS, random_states, state
 
 def _as_row(data: bytes) -> tuple:
     b = decode_states(data, CircleState)
+    cov = () if b.covariance is None else tuple(b.covariance[0].tolist())[:int(b.covariance_size[0])]
     return (int(b.stamp_ns[0]), b.frames[0], b.ids[0],
             tuple(np.concatenate([b.radius, b.position[0], b.velocity[0], b.acceleration[0]]).tolist()),
-            bool(b.remove[0]))
+            bool(b.remove[0]), cov)
 
 
 def test_group_decoder_matches_decode_states_on_valid_messages() -> None:
@@ -32,12 +33,14 @@ def test_group_decoder_matches_decode_states_on_valid_messages() -> None:
         s.header.frame_id = "m" * (k % 9)  # every string length residue
         s.id = "x" * (1 + k % 11)
         s.remove = bool(k % 5 == 0)
+        if k % 3 == 0:  # every residue of the covariance's alignment, with and without values
+            s.covariance = np.random.default_rng(k).normal(size=36).tolist()
     for s in states:
         data = serialize_message(s)
-        row = _decode_one(data)
+        row = _decode_one(data, True)
         assert row is not None
         expected = _as_row(data)
-        assert row[:3] == expected[:3] and row[4] == expected[4]
+        assert row[:3] == expected[:3] and row[4:] == expected[4:]
         assert np.array_equal(np.array(row[3]).view(np.int64), np.array(expected[3]).view(np.int64))
 
 
@@ -53,7 +56,7 @@ def test_group_decoder_refuses_what_decode_states_refuses() -> None:
             expected = _as_row(data)
         except CdrError:
             expected = None
-        row = _decode_one(data)
+        row = _decode_one(data, True)
         if row is None:
             continue  # the group falls back to decode_states: same outcome by construction
         assert expected is not None, data

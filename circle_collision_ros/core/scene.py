@@ -79,7 +79,7 @@ from circle_collision_ros.core import scene_kernels as _sk
 from circle_collision_ros.core.pair_predictions import (
     details_on_pairs, narrow_on_pairs, validate_bodies, _check_horizon)
 
-__all__ = ["Scene", "SceneContacts", "SceneSnapshot", "MergeResult"]
+__all__ = ["Scene", "SceneContacts", "SceneSnapshot", "SceneUncertainty", "MergeResult"]
 
 
 class MergeResult(NamedTuple):
@@ -119,6 +119,29 @@ class SceneContacts:
 
 
 @dataclass(frozen=True)
+class SceneUncertainty:
+    """Pairs with an uncertain body that may touch within ``[R, R + H]``, evaluated at ``R``.
+
+    Every pair with at least one uncertain body (non-zero covariance) that the broad phase,
+    with radii inflated by ``core.uncertainty.inflation_radius``, cannot rule out, plus every
+    such pair with a mean contact; each evaluated by ``core.uncertainty.uncertain_pairs`` on
+    the states and covariances propagated to ``R`` (``Sigma' = M Sigma M^T``). Arrays (K,):
+    id_a (sorts first), id_b, probability, probability_bound, plausible_ttc (s from R, +inf
+    if never).  Pairs of two exact bodies are never listed (the exact path answers them).
+    """
+
+    reference_ns: int
+    id_a: np.ndarray
+    id_b: np.ndarray
+    probability: np.ndarray
+    probability_bound: np.ndarray
+    plausible_ttc: np.ndarray
+
+    def __len__(self) -> int:
+        return int(self.probability.shape[0])
+
+
+@dataclass(frozen=True)
 class SceneSnapshot:
     """All bodies propagated to ``reference_ns``, ordered by id; arrays (N, D) and (N,)."""
 
@@ -135,6 +158,20 @@ def _propagate_ns(P, V, A, dt_ns):
     # Integer subtraction first (by the caller): stamps ~1.7e18 ns would lose detail as floats.
     dt = (np.asarray(dt_ns).astype(np.float64) * 1e-9)[:, None]
     return P + dt * (V + (0.5 * dt) * A), V + dt * A
+
+
+def _propagate_covariance(C, dt_ns):
+    """Joint (position, velocity) covariances (n, 2D, 2D) moved by ``dt_ns``: ``M C M^T``,
+    ``M = [[I, dt I], [0, I]]`` (acceleration is exact, so it adds no uncertainty)."""
+    D = C.shape[1] // 2
+    dt = (np.asarray(dt_ns).astype(np.float64) * 1e-9)[:, None, None]
+    pp, pv, vp, vv = C[:, :D, :D], C[:, :D, D:], C[:, D:, :D], C[:, D:, D:]
+    out = np.empty_like(C)
+    out[:, :D, :D] = pp + dt * (pv + vp) + (dt * dt) * vv
+    out[:, :D, D:] = pv + dt * vv
+    out[:, D:, :D] = vp + dt * vv
+    out[:, D:, D:] = vv
+    return out
 
 
 _EMPTY_I = np.empty(0, dtype=np.int64)
@@ -195,6 +232,8 @@ class Scene:
         self._V = np.zeros((cap, D))
         self._A = np.zeros((cap, D))
         self._R = np.zeros(cap)
+        self._C = np.zeros((cap, 2 * D, 2 * D))      # covariance of (p, v) at the stamp
+        self._U = np.zeros(cap, dtype=bool)           # covariance not all zero (an uncertain body)
         self._T = np.zeros(cap, dtype=np.int64)      # stamp, ns
         self._Tf = np.zeros(cap)                      # (T - E) s, for the broad phase
         self._recv = np.zeros(cap, dtype=np.int64)   # receive clock, ns
@@ -228,6 +267,7 @@ class Scene:
         self._cache = None
         self.evaluated_pairs = 0  # narrow-phase pair evaluations of the last predictions() call
         self._captures = weakref.WeakSet()  # live captures sharing the state arrays
+        self._uncertain_cache = None
 
     # Pair records: one row per pair with a contact within H + S of its t_p, in
     # growable buffers; rows of updated bodies are marked dead (compacted when
@@ -330,13 +370,15 @@ class Scene:
 
     # ---------------------------------------------------------------- updates
     def merge(self, ids: Sequence[Hashable], stamps_ns, positions, velocities, accelerations,
-              radii, remove, received_ns: int) -> MergeResult:
+              radii, remove, received_ns: int, covariances=None) -> MergeResult:
         """Apply one message: removals first, then states (rules in the module docstring).
 
         ids : k distinct ids.  stamps_ns : (k,) int ns > 0.  positions, velocities,
         accelerations : (k, >= dim) (extra columns ignored).  radii : (k,).
         remove : (k,) bool; a removal's geometry is ignored.  received_ns : the
         receive clock for expiry.  Rows must be valid (finite, radius >= 0).
+        covariances : None (all exact) or (k, 2 dim, 2 dim) joint covariances of
+        (position, velocity), symmetric PSD (all zero = exact); see uncertain_pairs.
         """
         self._detach_captures()
         stamps = np.asarray(stamps_ns, dtype=np.int64)
@@ -396,6 +438,11 @@ class Scene:
             self._V[sl] = np.asarray(velocities)[src, :D]
             self._A[sl] = np.asarray(accelerations)[src, :D]
             self._R[sl] = np.asarray(radii)[src]
+            if covariances is None:
+                self._U[sl] = False
+            else:
+                self._C[sl] = np.asarray(covariances)[src]
+                self._U[sl] = (self._C[sl] != 0.0).any(axis=(1, 2))
             self._T[sl] = stamps[src]
             self._recv[sl] = received_ns
             self._dirty.update(sl.tolist())
@@ -453,6 +500,7 @@ class Scene:
         self._rank_remove(s)
         self._ids[s] = None
         self._alive[s] = False
+        self._U[s] = False
         self._dirty.add(s)
         self._free.append(s)
         self._version += 1
@@ -471,9 +519,12 @@ class Scene:
                 grown = np.zeros((new, self._dim))
                 grown[:old] = getattr(self, name)
                 setattr(self, name, grown)
+            grown = np.zeros((new,) + self._C.shape[1:])
+            grown[:old] = self._C
+            self._C = grown
             for name, dt in (("_R", np.float64), ("_T", np.int64), ("_Tf", np.float64),
                              ("_recv", np.int64), ("_alive", bool), ("_rank", np.int64),
-                             ("_id_start", np.int64), ("_id_len", np.int64)):
+                             ("_id_start", np.int64), ("_id_len", np.int64), ("_U", bool)):
                 grown = np.full(new, -1 if name == "_rank" else 0, dtype=dt)
                 grown[:old] = getattr(self, name)
                 setattr(self, name, grown)
@@ -967,6 +1018,62 @@ class Scene:
                                                           compiled=False)))
         finally:
             self._epoch, self._lo, self._hi, self._Tf = saved_epoch, saved_lo, saved_hi, saved_tf
+
+
+    # ------------------------------------------------------------ uncertain pairs
+    def uncertain_pairs(self, threshold: float, contacts: SceneContacts | None = None) -> SceneUncertainty:
+        """Probabilities of the pairs with an uncertain body, at the reference time R over [0, H].
+
+        Evaluated afresh at R on every call that follows a change (the exact path's
+        shift-by-d rule does not hold for probabilities); cached while the scene and
+        `threshold` are unchanged.  `contacts` (the exact path's rows) adds their
+        uncertain pairs should the inflated broad phase not list them.  See SceneUncertainty.
+        """
+        key = (self._version, float(threshold))
+        if self._uncertain_cache is not None and self._uncertain_cache[0] == key:
+            return self._uncertain_cache[1]
+        res = self._uncertain_pairs(float(threshold), contacts)
+        self._uncertain_cache = (key, res)
+        return res
+
+    def _uncertain_pairs(self, threshold: float, contacts: SceneContacts | None) -> SceneUncertainty:
+        R = self.reference_ns
+        e = np.empty(0)
+        if R is None or not (self._alive & self._U).any():
+            return SceneUncertainty(R or 0, np.empty(0, dtype=object), np.empty(0, dtype=object), e, e, e)
+        from circle_collision_ros.core import uncertainty as unc  # heavy kernels: loaded on first use
+        slots = self._sorted_slots()
+        dtn = R - self._T[slots]
+        P, V = _propagate_ns(self._P[slots], self._V[slots], self._A[slots], dtn)
+        A, Rad = self._A[slots], self._R[slots]
+        u = self._U[slots]
+        C = np.zeros((slots.size,) + self._C.shape[1:])
+        C[u] = _propagate_covariance(self._C[slots[u]], dtn[u])
+        grow = np.zeros(slots.size)
+        grow[u] = unc.inflation_radius(C[u], self._h)
+        zero = np.zeros(slots.size)
+        lo, hi = _bp.swept_bounds(P, V, A, Rad + grow, zero, zero + self._h)
+        I, J, _ = _bp.candidate_pairs(lo, hi, p=P, v=V, a=A, r=Rad + grow, tref=zero, t_start=0.0,
+                                      t_end=self._h, method=self._method)
+        keep = u[I] | u[J]
+        I, J = I[keep], J[keep]
+        if contacts is not None and len(contacts):
+            local = {self._ids[s]: k for k, s in enumerate(slots.tolist())}
+            ca = np.fromiter(map(local.__getitem__, contacts.id_a.tolist()), np.int64, len(contacts))
+            cb = np.fromiter(map(local.__getitem__, contacts.id_b.tolist()), np.int64, len(contacts))
+            m = u[ca] | u[cb]
+            I, J = np.concatenate([I, ca[m]]), np.concatenate([J, cb[m]])
+        # local order is id order: (min, max) puts the id that sorts first in front
+        n = np.int64(slots.size)
+        key = np.unique(np.minimum(I, J) * n + np.maximum(I, J))
+        I, J = key // n, key % n
+        if I.size == 0:
+            return SceneUncertainty(R, np.empty(0, dtype=object), np.empty(0, dtype=object), e, e, e)
+        res = unc.uncertain_pairs(P[I], V[I], A[I], Rad[I], C[I], P[J], V[J], A[J], Rad[J], C[J],
+                                  self._h, threshold)
+        ids = self._ids[slots]
+        return SceneUncertainty(R, ids[I], ids[J], res.collision_probability,
+                                res.collision_probability_bound, res.plausible_time)
 
 
 class _Capture:

@@ -182,7 +182,7 @@ class CollisionNode(Node):
         self.predictor = CollisionPredictor(PredictorConfig(
             horizon=p("horizon"), dimensions=p("dimensions"), frame_id=p("frame_id"),
             stale_timeout=p("stale_timeout"), report_all_pairs=p("report_all_pairs"),
-            max_bodies=p("max_bodies")))
+            max_bodies=p("max_bodies"), probability_threshold=p("probability_threshold")))
         self.predictor.warm_up()  # pay numba's compile/cache load before the first message
         self.counters = Counters()
         # Receive (rmw timestamp of the oldest input answered) to publish, s.

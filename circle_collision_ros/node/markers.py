@@ -2,7 +2,11 @@
 
 Namespaces: `bodies` (one cylinder or sphere per body, coloured by its most
 urgent contact) and `contacts` (a small sphere at each predicted contact
-point). A body or pair keeps its marker id while it is in the scene; when it
+point). Probability (issue 18) is opacity: a body's colour band comes from its
+earliest plausible contact (= the contact time for exact states) and its alpha
+is scaled by Urgency.opacity of its most probable listed pair; a contact
+sphere's alpha by its pair's probability. Exact contacts (probability 1) look
+as before. A body or pair keeps its marker id while it is in the scene; when it
 leaves, its id returns to a free list (smallest first), so the id tables hold
 exactly the live scene and ids stay below the largest scene seen. Each array
 starts with a DELETEALL and lists the whole scene, so it is complete on its
@@ -47,13 +51,25 @@ class Urgency:
     NOTICE = (0.95, 0.85, 0.1, 0.7)
     CLEAR = (0.3, 0.6, 0.9, 0.5)
 
+    MIN_OPACITY = 0.25  # fraction of the band's alpha at probability 0 (still visible)
+
     @classmethod
-    def colours(cls, ttc: np.ndarray) -> np.ndarray:
-        """(N, 4) float32 colours for times to collision (inf = no contact)."""
+    def colours(cls, ttc: np.ndarray, probability: np.ndarray | None = None) -> np.ndarray:
+        """(N, 4) float32 colours for times to collision (inf = no contact); with
+        `probability`, each alpha is scaled by opacity(probability) where ttc is finite."""
         bands = np.array([cls.CRITICAL, cls.WARNING, cls.NOTICE, cls.CLEAR], dtype=np.float32)
         band = np.where(ttc < cls.CRITICAL_S, 0, np.where(ttc < cls.WARNING_S, 1,
                                                            np.where(np.isfinite(ttc), 2, 3)))
-        return bands[band]
+        out = bands[band]
+        if probability is not None:
+            scale = np.where(np.isfinite(ttc), cls.opacity(probability), 1.0)
+            out[:, 3] *= scale.astype(np.float32)
+        return out
+
+    @classmethod
+    def opacity(cls, probability: np.ndarray) -> np.ndarray:
+        """Alpha factor for a probability of contact: MIN_OPACITY at 0 up to 1 at 1."""
+        return cls.MIN_OPACITY + (1.0 - cls.MIN_OPACITY) * np.clip(probability, 0.0, 1.0)
 
 
 class MarkerIds:
@@ -284,13 +300,19 @@ class MarkerBuilder:
         snapshot = prediction.snapshot
         ids = list(snapshot.ids)
         n = len(ids)
-        contacts = [row for row in prediction.rows() if row[2] != CollisionPrediction.NO_CONTACT]
+        rows = list(prediction.rows())
+        contacts = [row for row in rows if row.status != CollisionPrediction.NO_CONTACT]
+        # listed pairs: mean contacts and (uncertain states) probable ones; not report_all_pairs' rest
+        listed = [row for row in rows if row.status != CollisionPrediction.NO_CONTACT
+                  or row.collision_probability > 0.0]
         pause()
         index = dict(zip(ids, range(n)))
         body_ttc = np.full(n, np.inf)
-        if contacts:
-            ends = np.array([index[row[k]] for row in contacts for k in (0, 1)], dtype=np.int64)
-            np.minimum.at(body_ttc, ends, np.repeat([row[3] for row in contacts], 2))
+        body_probability = np.zeros(n)
+        if listed:
+            ends = np.array([index[row[k]] for row in listed for k in (0, 1)], dtype=np.int64)
+            np.minimum.at(body_ttc, ends, np.repeat([row.plausible_time_to_collision for row in listed], 2))
+            np.maximum.at(body_probability, ends, np.repeat([row.collision_probability for row in listed], 2))
         positions = np.zeros((n, 3))
         if n:
             d = min(snapshot.positions.shape[1], 3)
@@ -303,16 +325,17 @@ class MarkerBuilder:
         gone_bodies = self._departed(self.body_ids, ids)
         pause()
         bodies = MarkerSegment("bodies", shape, ADD, self._assign(self.body_ids, ids, pause), positions,
-                               scales, Urgency.colours(body_ttc))
+                               scales, Urgency.colours(body_ttc, body_probability))
         pause()
         pairs = [(row[0], row[1]) for row in contacts]
         m = len(pairs)
         gone_pairs = self._departed(self.pair_ids, pairs)
         contact_points = np.array([row[5] for row in contacts], dtype=np.float64).reshape(m, 3)
         contact_ttc = np.array([row[3] for row in contacts], dtype=np.float64)
+        contact_probability = np.array([row.collision_probability for row in contacts], dtype=np.float64)
         contacts_segment = MarkerSegment("contacts", SPHERE, ADD, self._assign(self.pair_ids, pairs, pause),
                                          contact_points, np.full((m, 3), self.CONTACT_DIAMETER_M),
-                                         Urgency.colours(contact_ttc))
+                                         Urgency.colours(contact_ttc, contact_probability))
         pause()
         # Each array starts with a DELETEALL, so it is complete on its own: a display that missed
         # an array (the publisher keeps only the newest) or joined late shows no ghosts. The

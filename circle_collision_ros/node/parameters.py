@@ -82,6 +82,10 @@ PARAMS: tuple[ParamSpec, ...] = (
     ParamSpec("horizon", Parameter.Type.DOUBLE, 5.0,
               "Prediction horizon in s: later contacts are not reported.",
               float_range=(HorizonLimits.MIN_S, HorizonLimits.MAX_S)),
+    ParamSpec("probability_threshold", Parameter.Type.DOUBLE, 0.01,
+              "In (0, 1]: an uncertain pair (covariance given) whose mean paths miss is reported when "
+              "its probability of contact within the horizon reaches this; plausible_time_to_collision "
+              "is the first time the overlap probability does.", float_range=(0.0, 1.0)),
     ParamSpec("report_all_pairs", Parameter.Type.BOOL, False,
               "Also list NO_CONTACT pairs (time +inf); only for scenes of at most 100 bodies."),
     ParamSpec("stale_timeout", Parameter.Type.DOUBLE, 2.0,
@@ -192,6 +196,8 @@ def validate(name: str, value: Any) -> str | None:
         low, high = spec.float_range
         if not (low <= value <= high):
             return f"{name} must be in [{low}, {high}], got {value}"
+        if name == "probability_threshold" and value <= 0.0:  # a probability of 0 is always reached
+            return f"probability_threshold must be in (0, 1], got {value}"
     elements = _ELEMENT_TYPES.get(spec.type_)
     if elements is not None:
         if not isinstance(value, (list, tuple)) or not all(

@@ -9,7 +9,15 @@ the ROS 2 wire format (OMG XCDR1, little endian, as Fast DDS writes it):
   alignment is counted from the end of that header;
 - primitives are aligned to their own size (float64 to 8);
 - a string is a uint32 length that counts the trailing NUL, then the bytes;
-- a sequence is a uint32 count, then the elements.
+- a sequence is a uint32 count, then the elements (aligned to their own size
+  only when there is at least one: an empty sequence is the count alone).
+
+Two layouts of our interfaces exist on the wire and in recordings: the current
+one (CircleState ends with `float64[<=36] covariance`; CollisionPrediction ends
+with collision_probability, collision_probability_bound,
+plausible_time_to_collision) and the one before issue 18 (neither). The node
+speaks the current one; replay reads and writes the one a recording's schema
+names (`uncertainty=False`), so old bags replay bit-identically.
 
 Big-endian CDR (00 00) is decoded by the same kernels with the byte order
 swapped; any other encapsulation is refused (CdrError). Untrusted bytes are
@@ -71,13 +79,19 @@ def _string(buf, pos, be):
     return start, size - 1, start + size
 
 
+COVARIANCE_SIZE = 36  # values of a CircleState covariance (6x6 row-major); 0 = none given
+
+
 @njit(cache=True)
-def _decode_states(buf, f64, pos, count, times, strings, numbers, remove, be):
+def _decode_states(buf, f64, pos, count, times, strings, numbers, remove, be, with_cov, cov_size, cov):
     """Decode `count` CircleStates starting at `pos`; returns the end position or -1.
 
     f64 is the buffer viewed as float64 from _ORIGIN on (in the message's byte
     order, converted to native): a float64 field sits at a position 8-aligned
     relative to _ORIGIN, i.e. exactly at f64[(pos - _ORIGIN) // 8]. be: big endian.
+    with_cov: the layout has the covariance sequence; its length goes to
+    cov_size[k] (any length is skipped bounds-checked: validation rejects it),
+    its values to cov[k] when it has COVARIANCE_SIZE of them, else cov[k] = 0.
     """
     n = buf.shape[0]
     for k in range(count):
@@ -106,19 +120,39 @@ def _decode_states(buf, f64, pos, count, times, strings, numbers, remove, be):
         pos += 80
         remove[k] = buf[pos] != 0
         pos += 1
+        if with_cov:
+            pos = _align(pos, 4)
+            if pos + 4 > n:
+                return -1
+            size = _u32(buf, pos, be)
+            pos += 4
+            cov_size[k] = size
+            if size > 0:
+                pos = _align(pos, 8)
+                if pos + 8 * size > n:
+                    return -1
+            first = (pos - _ORIGIN) // 8
+            full = size == COVARIANCE_SIZE
+            for j in range(COVARIANCE_SIZE):
+                cov[k, j] = f64[first + j] if full else 0.0
+            pos += 8 * size
     return pos
 
 
 def _batch(data: bytes, buf: np.ndarray, count: int, start: int, array_frame: str,
-           be: bool) -> StateBatch:
+           be: bool, uncertainty: bool) -> StateBatch:
     times = np.empty((count, 2), dtype=np.int64)
     strings = np.empty((count, 4), dtype=np.int64)
     numbers = np.empty((count, 10), dtype=np.float64)
     remove = np.empty(count, dtype=np.bool_)
+    cov_size = np.zeros(count if uncertainty else 0, dtype=np.int64)
+    cov = np.empty((count if uncertainty else 0, COVARIANCE_SIZE), dtype=np.float64)
     f64 = np.frombuffer(data, dtype=">f8" if be else "<f8", offset=_ORIGIN,
                         count=(len(data) - _ORIGIN) // 8).astype(np.float64, copy=False)
-    if _decode_states(buf, f64, start, count, times, strings, numbers, remove, be) < 0:
+    if _decode_states(buf, f64, start, count, times, strings, numbers, remove, be, uncertainty,
+                      cov_size, cov) < 0:
         raise CdrError("truncated or malformed CircleState data")
+    given = bool(cov_size.any())
     try:
         ids = [data[o:o + n].decode() for o, n in zip(strings[:, 2].tolist(), strings[:, 3].tolist())]
         frames = [data[o:o + n].decode() or array_frame
@@ -127,11 +161,15 @@ def _batch(data: bytes, buf: np.ndarray, count: int, start: int, array_frame: st
         raise CdrError(f"a string is not UTF-8 ({exc.reason})") from exc
     return StateBatch(ids=ids, frames=frames, stamp_ns=times[:, 0] * 1_000_000_000 + times[:, 1],
                       radius=numbers[:, 0], position=numbers[:, 1:4], velocity=numbers[:, 4:7],
-                      acceleration=numbers[:, 7:10], remove=remove)
+                      acceleration=numbers[:, 7:10], remove=remove,
+                      covariance=cov if given else None, covariance_size=cov_size if given else None)
 
 
-def decode_states(data: bytes, msg_type: type) -> StateBatch:
+def decode_states(data: bytes, msg_type: type, *, uncertainty: bool = True) -> StateBatch:
     """StateBatch from serialized CircleStateArray or CircleState bytes.
+
+    uncertainty : False decodes the layout before CircleState had `covariance`
+        (recordings made before issue 18; replay reads the recorded schema).
 
     Raises
     ------
@@ -145,7 +183,7 @@ def decode_states(data: bytes, msg_type: type) -> StateBatch:
     be = data[:2] == CDR_BE
     buf = np.frombuffer(data, dtype=np.uint8)
     if msg_type is CircleState:
-        return _batch(data, buf, 1, _ORIGIN, "", be)
+        return _batch(data, buf, 1, _ORIGIN, "", be, uncertainty)
     # Array header: stamp (8 bytes), frame_id, then the sequence count.
     off, ln, pos = _string(buf, _ORIGIN + 8, be) if len(buf) >= _ORIGIN + 8 else (-1, 0, 0)
     if off < 0:
@@ -154,15 +192,15 @@ def decode_states(data: bytes, msg_type: type) -> StateBatch:
     if pos + 4 > len(buf):
         raise CdrError("truncated CircleStateArray (no sequence length)")
     count = int(_u32(buf, pos, be))
-    # Each state needs at least 97 bytes (empty strings, no padding): a larger
-    # count is a lie, not something to allocate for.
-    if count * 97 > len(buf) - pos:
+    # Each state needs at least 97 bytes (empty strings, no padding; 101 with the
+    # covariance length): a larger count is a lie, not something to allocate for.
+    if count * (101 if uncertainty else 97) > len(buf) - pos:
         raise CdrError(f"sequence length {count} does not fit in {len(buf)} bytes")
     try:
         array_frame = data[off:off + ln].decode()
     except UnicodeDecodeError as exc:
         raise CdrError(f"frame_id is not UTF-8 ({exc.reason})") from exc
-    return _batch(data, buf, count, pos + 4, array_frame, be)
+    return _batch(data, buf, count, pos + 4, array_frame, be, uncertainty)
 
 
 class _Writer:
@@ -197,27 +235,49 @@ class _Writer:
 def encode_state_array(batch: StateBatch, stamp_ns: int, frame_id: str) -> bytes:
     """Serialized CircleStateArray of `batch` (header stamp/frame as given).
 
-    Each state's header carries its own stamp and frame. Used by load
-    generators (benchmarks, soak) that must publish thousands of states at
-    30 Hz without building message objects.
+    Each state's header carries its own stamp and frame; its covariance is
+    batch.covariance's row when batch.covariance_size says 36, else empty. Used
+    by load generators (benchmarks, soak) that must publish thousands of states
+    at 30 Hz without building message objects.
     """
     w = _Writer()
     w.time(*divmod(int(stamp_ns), 1_000_000_000))
     w.string(frame_id.encode())
     w.u32(len(batch))
+    _write_states(w, batch)
+    return bytes(w.buf)
+
+
+def encode_state(batch: StateBatch) -> bytes:
+    """Serialized CircleState of a one-state batch (as encode_state_array writes each state)."""
+    if len(batch) != 1:
+        raise ValueError(f"encode_state takes one state, got {len(batch)}")
+    w = _Writer()
+    _write_states(w, batch)
+    return bytes(w.buf)
+
+
+def _write_states(w: _Writer, batch: StateBatch) -> None:
     numbers = np.column_stack([batch.radius, batch.position, batch.velocity, batch.acceleration]).tolist()
-    for body_id, frame, stamp, values, remove in zip(batch.ids, batch.frames, batch.stamp_ns.tolist(),
-                                                     numbers, batch.remove.tolist()):
+    if batch.covariance is None:
+        covariances = [()] * len(batch)
+    else:
+        covariances = [row if size == COVARIANCE_SIZE else ()
+                       for row, size in zip(batch.covariance.tolist(), batch.covariance_size.tolist())]
+    for body_id, frame, stamp, values, remove, cov in zip(batch.ids, batch.frames, batch.stamp_ns.tolist(),
+                                                          numbers, batch.remove.tolist(), covariances):
         w.time(*divmod(stamp, 1_000_000_000))
         w.string(frame.encode())
         w.string(body_id.encode())
         w.f64s(*values)
         w.u8(1 if remove else 0)
-    return bytes(w.buf)
+        w.u32(len(cov))
+        if cov:
+            w.f64s(*cov)
 
 
 @njit(cache=True)
-def _prediction_array_end(frame_len, name_len, count):
+def _prediction_array_end(frame_len, name_len, count, uncertainty):
     """End position of a CollisionPredictionArray with these string lengths (no NULs)."""
     pos = _align(_ORIGIN + 8, 4) + 4 + frame_len + 1  # stamp, frame_id
     pos = _align(pos, 8) + 8                           # horizon
@@ -227,6 +287,8 @@ def _prediction_array_end(frame_len, name_len, count):
         pos = _align(pos, 4) + 4 + name_len[2 * k + 1] + 1
         pos = _align(pos + 1, 8) + 8                   # status, time_to_collision
         pos += 8 + 56                                  # contact_time; point, normal, closing
+        if uncertainty:
+            pos += 24                                  # probability, its bound, plausible time
     return pos
 
 
@@ -243,7 +305,8 @@ def _put_string(buf, u32, pos, src, start, n):
 
 @njit(cache=True)
 def _encode_predictions(buf, u32, f64, sec, nanosec, frame, horizon, names, name_start, name_len,
-                        status, ttc, contact_sec, contact_nanosec, point, normal, closing):
+                        status, ttc, contact_sec, contact_nanosec, point, normal, closing,
+                        uncertainty, probability, bound, plausible):
     """Write a CollisionPredictionArray into zeroed `buf`; u32/f64 view it from _ORIGIN on."""
     u32[0] = np.uint32(sec & 0xFFFFFFFF)
     u32[1] = nanosec
@@ -270,6 +333,11 @@ def _encode_predictions(buf, u32, f64, sec, nanosec, frame, horizon, names, name
             f64[q + 3 + j] = normal[k, j]
         f64[q + 6] = closing[k]
         pos += 56
+        if uncertainty:
+            f64[q + 7] = probability[k]
+            f64[q + 8] = bound[k]
+            f64[q + 9] = plausible[k]
+            pos += 24
     return pos
 
 
@@ -286,15 +354,18 @@ def _encoded_names(names: list[str]) -> tuple[np.ndarray, np.ndarray, np.ndarray
 
 
 def encode_prediction_array(stamp: tuple[int, int], frame_id: str, horizon: float, columns,
-                            utf8_ids: tuple | None = None) -> bytes:
+                            utf8_ids: tuple | None = None, *, uncertainty: bool = True) -> bytes:
     """Serialized CollisionPredictionArray, written by one compiled loop.
 
     columns : a prediction_messages.PredictionColumns (id_a, id_b lists; status
-        uint8; ttc; contact_ns int64; point, normal (K, 3); closing_speed), in
-        publication order. Padding bytes are zero; int32 seconds wrap as
-        struct's "<i" would refuse, so callers keep times inside int32 range.
+        uint8; ttc; contact_ns int64; point, normal (K, 3); closing_speed;
+        probability, probability_bound, plausible_ttc), in publication order.
+        Padding bytes are zero; int32 seconds wrap as struct's "<i" would
+        refuse, so callers keep times inside int32 range.
     utf8_ids : the same ids already encoded, ``(blob, start_a, len_a, start_b,
         len_b)`` (core.scene.SceneContacts.id_utf8): no per-name work here.
+    uncertainty : False writes the layout before issue 18 (no probability
+        fields), as recordings of that time hold it (replay).
     """
     if sys.byteorder != "little":  # the views below write native floats
         raise NotImplementedError("the compiled CDR encoder needs a little-endian machine")
@@ -310,7 +381,7 @@ def encode_prediction_array(stamp: tuple[int, int], frame_id: str, horizon: floa
         names[0::2], names[1::2] = columns.id_a, columns.id_b
         blob, starts, lengths = _encoded_names(names)
     frame = np.frombuffer(frame_id.encode(), dtype=np.uint8)
-    end = int(_prediction_array_end(frame.shape[0], lengths, count))
+    end = int(_prediction_array_end(frame.shape[0], lengths, count, uncertainty))
     words = -(-(end - _ORIGIN) // 8)  # whole float64 words after the header
     buf = np.zeros(_ORIGIN + 8 * words, dtype=np.uint8)
     buf[:_ORIGIN] = np.frombuffer(CDR_LE + b"\x00\x00", dtype=np.uint8)
@@ -319,5 +390,6 @@ def encode_prediction_array(stamp: tuple[int, int], frame_id: str, horizon: floa
     _encode_predictions(buf, body.view(np.uint32), body.view(np.float64), int(stamp[0]), int(stamp[1]),
                         frame, float(horizon), blob, starts, lengths, columns.status, columns.ttc,
                         contact_sec, contact_nanosec, np.ascontiguousarray(columns.point),
-                        np.ascontiguousarray(columns.normal), columns.closing_speed)
+                        np.ascontiguousarray(columns.normal), columns.closing_speed, uncertainty,
+                        columns.probability, columns.probability_bound, columns.plausible_ttc)
     return buf[:end].tobytes()

@@ -14,6 +14,13 @@ frame check, latest-by-stamp merge, recording, replay):
 - velocity: `twist.twist.linear`, which REP-105 gives in the `child_frame_id`
   (body) frame, rotated by `pose.pose.orientation` into `header.frame_id`.
   Acceleration: zero (Odometry has none).
+- covariance (issue 18): the position block (x, y, z rows and columns) of
+  `pose.covariance`, which is in header.frame_id like the pose; the linear
+  block of `twist.covariance`, which is in child_frame_id like the twist,
+  rotated into header.frame_id as R S R^T by the same orientation; no cross
+  terms (Odometry carries none). Each block must be finite, symmetric and PSD
+  (core.uncertainty.covariance_problem), else the message is rejected naming
+  the field. Both blocks zero (most drivers) is an exact state, as before.
 - orientation: a quaternion whose norm is within QuaternionRule.TOLERANCE of 1
   is normalised (float32 round trips and integration drift stay usable); zero,
   non-finite or further from unit is rejected as a whole message (OdometryError):
@@ -31,6 +38,7 @@ from typing import NamedTuple
 
 import numpy as np
 
+from circle_collision_ros.core.uncertainty import covariance_problem
 from circle_collision_ros.pipeline.cdr_codec import CDR_BE, CDR_LE, CdrError, _align, _string, _u32
 from circle_collision_ros.pipeline.state_batch import StateBatch
 
@@ -40,6 +48,7 @@ _ORIGIN = 4
 # twist (linear 3, angular 3), covariance 36: 85 float64, fixed-size arrays without a length.
 _DOUBLES = 85
 _POSITION, _ORIENTATION, _LINEAR = slice(0, 3), slice(3, 7), slice(43, 46)
+_POSE_COVARIANCE, _TWIST_COVARIANCE = slice(7, 43), slice(49, 85)
 
 
 class OdometryError(CdrError):
@@ -61,6 +70,8 @@ class OdometryFields(NamedTuple):
     position: tuple[float, float, float]
     orientation: tuple[float, float, float, float]  # x, y, z, w as received
     linear: tuple[float, float, float]              # m/s in child_frame_id
+    pose_covariance: tuple[float, ...] = (0.0,) * 36   # 6x6 row-major (x, y, z, rot x, rot y, rot z)
+    twist_covariance: tuple[float, ...] = (0.0,) * 36  # 6x6 row-major, in child_frame_id
 
 
 @dataclass(frozen=True)
@@ -104,7 +115,8 @@ def decode_odometry(data: bytes) -> OdometryFields:
     except UnicodeDecodeError as exc:
         raise CdrError(f"an Odometry frame id is not UTF-8 ({exc.reason})") from exc
     return OdometryFields(sec * 1_000_000_000 + nanosec, frame, child, tuple(values[_POSITION]),
-                          tuple(values[_ORIENTATION]), tuple(values[_LINEAR]))
+                          tuple(values[_ORIENTATION]), tuple(values[_LINEAR]),
+                          tuple(values[_POSE_COVARIANCE]), tuple(values[_TWIST_COVARIANCE]))
 
 
 def unit_quaternion(q: tuple[float, float, float, float]) -> tuple[float, float, float, float]:
@@ -127,6 +139,35 @@ def rotate(q: tuple[float, float, float, float], v: tuple[float, float, float]) 
             v[2] + w * tz + (x * ty - y * tx))
 
 
+def rotation_matrix(q: tuple[float, float, float, float]) -> np.ndarray:
+    """3x3 matrix of the unit quaternion q = (x, y, z, w): R v = rotate(q, v)."""
+    x, y, z, w = q
+    return np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+                     [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+                     [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)]])
+
+
+def odometry_covariance(odom: OdometryFields, q: tuple[float, float, float, float]) -> np.ndarray | None:
+    """(36,) row-major 6x6 covariance of (position, velocity) in header.frame_id, or None if exact.
+
+    Raises OdometryError naming the field whose block is not finite/symmetric/PSD.
+    """
+    pose = np.array(odom.pose_covariance).reshape(6, 6)[:3, :3]
+    twist = np.array(odom.twist_covariance).reshape(6, 6)[:3, :3]
+    if not pose.any() and not twist.any():
+        return None
+    for field, block in (("pose.covariance", pose), ("twist.covariance", twist)):
+        problem = covariance_problem(block)
+        if problem:
+            raise OdometryError(f"{field} (x, y, z block) {problem.removeprefix('covariance ')}")
+    rot = rotation_matrix(q)
+    velocity = rot @ twist @ rot.T
+    out = np.zeros((6, 6))
+    out[:3, :3] = pose
+    out[3:, 3:] = 0.5 * (velocity + velocity.T)  # exactly symmetric after rounding
+    return out.reshape(36)
+
+
 def odometry_batch(data: bytes, source: OdometrySource) -> StateBatch:
     """A one-state StateBatch from Odometry bytes (see the module docstring for the rules).
 
@@ -136,14 +177,18 @@ def odometry_batch(data: bytes, source: OdometrySource) -> StateBatch:
         Malformed bytes; OdometryError (a CdrError) for an unusable orientation.
     """
     odom = decode_odometry(data)
-    velocity = rotate(unit_quaternion(odom.orientation), odom.linear)
+    q = unit_quaternion(odom.orientation)
+    velocity = rotate(q, odom.linear)
+    covariance = odometry_covariance(odom, q)
     return StateBatch(ids=[source.body_id], frames=[odom.frame_id],
                       stamp_ns=np.array([odom.stamp_ns], dtype=np.int64),
                       radius=np.array([source.radius], dtype=np.float64),
                       position=np.array([odom.position], dtype=np.float64),
                       velocity=np.array([velocity], dtype=np.float64),
                       acceleration=np.zeros((1, 3), dtype=np.float64),
-                      remove=np.zeros(1, dtype=bool))
+                      remove=np.zeros(1, dtype=bool),
+                      covariance=None if covariance is None else covariance[None, :],
+                      covariance_size=None if covariance is None else np.array([36], dtype=np.int64))
 
 
 def body_id_of_topic(resolved_topic: str) -> str:

@@ -7,6 +7,15 @@ publications), so they can never disagree.
 Guarantee: nothing published is NaN. Contacts carry finite times and details;
 NO_CONTACT entries carry time +inf and zeros elsewhere, as the message
 definition documents.
+
+Reporting rule (issue 18): a pair is listed iff its mean contact lies within the
+horizon (the exact path, unchanged), or it has an uncertain body and its
+collision_probability >= probability_threshold (then NO_CONTACT if the mean
+paths miss). Rows of exact pairs carry probability 1.0, bound 0.0 and
+plausible time = time_to_collision (NO_CONTACT rows of report_all_pairs: 0.0,
+0.0, +inf). Order: contacts by (time, id_a, id_b) as the scene keeps them;
+then uncertain NO_CONTACT rows by (plausible time, id_a, id_b); then the
+report_all_pairs rest in id order.
 """
 from __future__ import annotations
 
@@ -21,7 +30,7 @@ from geometry_msgs.msg import Point, Vector3
 from std_msgs.msg import Header
 
 from circle_collision_msgs.msg import CollisionPrediction, CollisionPredictionArray
-from circle_collision_ros.core.scene import SceneContacts, SceneSnapshot
+from circle_collision_ros.core.scene import SceneContacts, SceneSnapshot, SceneUncertainty
 from circle_collision_ros.pipeline.cdr_codec import encode_prediction_array
 
 _NS_PER_S = 1_000_000_000
@@ -49,6 +58,9 @@ class PredictionRow(NamedTuple):
     contact_point: tuple[float, float, float]
     normal: tuple[float, float, float]
     closing_speed: float
+    collision_probability: float
+    collision_probability_bound: float
+    plausible_time_to_collision: float  # s from the header stamp; +inf if never within the horizon
 
 
 @dataclass(frozen=True)
@@ -63,6 +75,9 @@ class PredictionColumns:
     point: np.ndarray          # (K, 3)
     normal: np.ndarray         # (K, 3)
     closing_speed: np.ndarray  # (K,)
+    probability: np.ndarray    # (K,) float64
+    probability_bound: np.ndarray  # (K,) float64
+    plausible_ttc: np.ndarray  # (K,) float64, s
 
     def __len__(self) -> int:
         return len(self.id_a)
@@ -77,6 +92,8 @@ class ScenePrediction:
     horizon: float
     frame_id: str
     report_all_pairs: bool
+    uncertainty: SceneUncertainty | None = None
+    probability_threshold: float = 1.0
 
     @property
     def snapshot(self) -> SceneSnapshot:
@@ -105,24 +122,55 @@ class ScenePrediction:
         status = np.where(c.overlapping[k], CollisionPrediction.OVERLAPPING,
                           CollisionPrediction.CONTACT).astype(np.uint8)
         id_a, id_b = c.id_a[k].tolist(), c.id_b[k].tolist()
-        ttc, contact_ns, closing = c.ttc[k], c.contact_ns[k], c.closing_speed[k]
+        ttc = c.ttc[k]
+        parts = {"status": [status], "ttc": [ttc], "contact_ns": [c.contact_ns[k]], "point": [point],
+                 "normal": [normal], "closing": [c.closing_speed[k]], "probability": [np.ones(n)],
+                 "bound": [np.zeros(n)], "plausible": [ttc]}
+
+        def no_contact_rows(a: list, b: list, probability, bound, plausible) -> None:
+            """Append NO_CONTACT rows (time +inf, zero details) with these probability fields."""
+            nonlocal id_a, id_b
+            m = len(a)
+            id_a, id_b = id_a + a, id_b + b
+            for name, value in (("status", np.full(m, CollisionPrediction.NO_CONTACT, np.uint8)),
+                                ("ttc", np.full(m, np.inf)), ("contact_ns", np.zeros(m, np.int64)),
+                                ("point", np.zeros((m, 3))), ("normal", np.zeros((m, 3))),
+                                ("closing", np.zeros(m)), ("probability", probability), ("bound", bound),
+                                ("plausible", plausible)):
+                parts[name].append(value)
+
+        u = self.uncertainty
+        if u is not None and len(u):
+            row = {pair: j for j, pair in enumerate(zip(u.id_a.tolist(), u.id_b.tolist()))}
+            found = np.array([row.get(pair, -1) for pair in zip(id_a, id_b)], dtype=np.int64).reshape(n)
+            has = found >= 0
+            parts["probability"][0][has] = u.probability[found[has]]
+            parts["bound"][0][has] = u.probability_bound[found[has]]
+            parts["plausible"][0] = plausible = ttc.copy()
+            plausible[has] = u.plausible_ttc[found[has]]
+            # Uncertain pairs whose mean paths miss within the horizon, listed when probable.
+            extra = np.ones(len(u), dtype=bool)
+            extra[found[has]] = False
+            extra &= (u.probability >= self.probability_threshold) & np.isfinite(u.probability) \
+                & np.isfinite(u.probability_bound)
+            keys = list(zip(u.plausible_ttc.tolist(), u.id_a.tolist(), u.id_b.tolist()))
+            e = np.array(sorted(np.flatnonzero(extra).tolist(), key=keys.__getitem__), dtype=np.int64)
+            no_contact_rows(u.id_a[e].tolist(), u.id_b[e].tolist(), u.probability[e], u.probability_bound[e],
+                            u.plausible_ttc[e])
         if self.report_all_pairs and len(self.capture) <= ReportAll.MAX_BODIES:
             ids = self.capture.ids()
             rank = {b: r for r, b in enumerate(ids)}
             pairs = set(zip(map(rank.__getitem__, id_a), map(rank.__getitem__, id_b)))
             rest = [(a, b) for a in range(len(ids)) for b in range(a + 1, len(ids)) if (a, b) not in pairs]
             m = len(rest)
-            id_a = id_a + [ids[a] for a, _ in rest]
-            id_b = id_b + [ids[b] for _, b in rest]
-            status = np.concatenate([status, np.full(m, CollisionPrediction.NO_CONTACT, np.uint8)])
-            ttc = np.concatenate([ttc, np.full(m, np.inf)])
-            contact_ns = np.concatenate([contact_ns, np.zeros(m, np.int64)])
-            point = np.concatenate([point, np.zeros((m, 3))])
-            normal = np.concatenate([normal, np.zeros((m, 3))])
-            closing = np.concatenate([closing, np.zeros(m)])
-        return PredictionColumns(id_a, id_b, status, np.ascontiguousarray(ttc, dtype=np.float64),
-                                 np.ascontiguousarray(contact_ns, dtype=np.int64), point, normal,
-                                 np.ascontiguousarray(closing, dtype=np.float64))
+            no_contact_rows([ids[a] for a, _ in rest], [ids[b] for _, b in rest], np.zeros(m), np.zeros(m),
+                            np.full(m, np.inf))
+        col = {name: np.concatenate(values) if len(values) > 1 else values[0] for name, values in parts.items()}
+        f64 = lambda x: np.ascontiguousarray(x, dtype=np.float64)  # noqa: E731
+        return PredictionColumns(id_a, id_b, col["status"], f64(col["ttc"]),
+                                 np.ascontiguousarray(col["contact_ns"], dtype=np.int64), col["point"],
+                                 col["normal"], f64(col["closing"]), f64(col["probability"]), f64(col["bound"]),
+                                 f64(col["plausible"]))
 
     @cached_property
     def _finite_rows(self):
@@ -140,10 +188,11 @@ class ScenePrediction:
         """The entries one by one, in publication order (see `columns`)."""
         c = self.columns
         sec, nanosec = np.divmod(c.contact_ns, _NS_PER_S)
-        for k, (a, b, status, ttc, s, ns, p, n, cs) in enumerate(zip(
+        for a, b, status, ttc, s, ns, p, n, cs, pr, pb, pt in zip(
                 c.id_a, c.id_b, c.status.tolist(), c.ttc.tolist(), sec.tolist(), nanosec.tolist(),
-                c.point.tolist(), c.normal.tolist(), c.closing_speed.tolist())):
-            yield PredictionRow(a, b, status, ttc, (s, ns), tuple(p), tuple(n), cs)
+                c.point.tolist(), c.normal.tolist(), c.closing_speed.tolist(), c.probability.tolist(),
+                c.probability_bound.tolist(), c.plausible_ttc.tolist()):
+            yield PredictionRow(a, b, status, ttc, (s, ns), tuple(p), tuple(n), cs, pr, pb, pt)
 
     def to_message(self) -> CollisionPredictionArray:
         """As a message object (service responses, tests)."""
@@ -154,17 +203,23 @@ class ScenePrediction:
                                 contact_point=Point(x=r.contact_point[0], y=r.contact_point[1],
                                                     z=r.contact_point[2]),
                                 normal=Vector3(x=r.normal[0], y=r.normal[1], z=r.normal[2]),
-                                closing_speed=r.closing_speed)
+                                closing_speed=r.closing_speed,
+                                collision_probability=r.collision_probability,
+                                collision_probability_bound=r.collision_probability_bound,
+                                plausible_time_to_collision=r.plausible_time_to_collision)
             for r in self.rows()]
         sec, nanosec = self.stamp
         return CollisionPredictionArray(header=Header(stamp=Time(sec=sec, nanosec=nanosec),
                                                       frame_id=self.frame_id),
                                         horizon=float(self.horizon), predictions=predictions)
 
-    def to_cdr(self) -> bytes:
-        """As serialized bytes, without building message objects (the node's path)."""
+    def to_cdr(self, *, uncertainty: bool = True) -> bytes:
+        """As serialized bytes, without building message objects (the node's path).
+
+        uncertainty=False: the layout before the probability fields (replay of old recordings).
+        """
         columns = self.columns
         # No contact row dropped and none appended: the scene's encoded ids fit the columns.
         same_rows = isinstance(self._finite_rows, slice) and len(columns) == len(self.contacts)
         return encode_prediction_array(self.stamp, self.frame_id, float(self.horizon), columns,
-                                       self.contacts.id_utf8 if same_rows else None)
+                                       self.contacts.id_utf8 if same_rows else None, uncertainty=uncertainty)

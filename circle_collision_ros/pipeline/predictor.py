@@ -24,7 +24,7 @@ import numpy as np
 from circle_collision_msgs.msg import CircleState
 from circle_collision_ros.core.scene import Scene, SceneSnapshot
 from circle_collision_ros.pipeline.prediction_messages import ScenePrediction
-from circle_collision_ros.pipeline.state_batch import StateBatch
+from circle_collision_ros.pipeline.state_batch import StateBatch, covariance_block
 from circle_collision_ros.pipeline.state_validation import Rejection, check_batch
 
 
@@ -34,7 +34,9 @@ class PredictorConfig:
 
     horizon : s, finite and > 0. stale_timeout : s (expiry of bodies and of
     remembered removals). dimensions : 2 (circles, z ignored) or 3 (spheres).
-    frame_id : "" adopts the first frame seen.
+    frame_id : "" adopts the first frame seen. probability_threshold : in (0, 1];
+    an uncertain pair whose mean paths miss is reported when its probability of
+    contact reaches it, and the plausible time is when the overlap probability does.
     """
 
     horizon: float = 5.0
@@ -43,11 +45,12 @@ class PredictorConfig:
     stale_timeout: float = 2.0
     report_all_pairs: bool = False
     max_bodies: int = 10_000
+    probability_threshold: float = 0.01
 
 
 #: The PredictorConfig fields that may change while running (node parameters
 #: applied at run time, and replayed from a recording's config records).
-RUNTIME_FIELDS = ("horizon", "stale_timeout", "report_all_pairs")
+RUNTIME_FIELDS = ("horizon", "stale_timeout", "report_all_pairs", "probability_threshold")
 
 
 @dataclass
@@ -118,6 +121,10 @@ class CollisionPredictor:
         d = self.config.dimensions
         scene.upsert_many(["a", "b"], np.eye(2, d), np.zeros((2, d)), np.zeros((2, d)), np.ones(2), 1)
         scene.predictions()
+        # and the uncertain path's kernels (a first uncertain state would otherwise wait for them)
+        scene.merge(["a"], [2], np.eye(1, d), np.zeros((1, d)), np.zeros((1, d)), [1.0], [False], 0,
+                    covariances=np.eye(2 * d)[None] * 0.01)
+        scene.uncertain_pairs(self.config.probability_threshold, scene.predictions())
 
     def reconfigure(self, **changes) -> None:
         """Apply run-time changes (RUNTIME_FIELDS)."""
@@ -133,7 +140,7 @@ class CollisionPredictor:
         now_ns : receiving clock (ns) used for the future-stamp check and as the
             bodies' receive time for expiry; None skips the future check (service).
         """
-        check = check_batch(batch, frame_id=self.frame_id, now_ns=now_ns)
+        check = check_batch(batch, frame_id=self.frame_id, now_ns=now_ns, dimensions=self.config.dimensions)
         report = IntakeReport(rejected=check.rejections)
         good = np.flatnonzero(check.good)
         if good.size and not self.frame_id:
@@ -141,10 +148,13 @@ class CollisionPredictor:
         if good.size == 0:
             return report
         ids = [batch.ids[k] for k in good.tolist()]
+        covariances = None  # exact states: the scene's exact path alone
+        if check.uncertain is not None and check.uncertain[good].any():
+            covariances = covariance_block(batch.covariance[good], self.config.dimensions)
         merged = self._scene.merge(ids, batch.stamp_ns[good], batch.position[good],
                                    batch.velocity[good], batch.acceleration[good],
                                    batch.radius[good], batch.remove[good],
-                                   now_ns if now_ns is not None else 0)
+                                   now_ns if now_ns is not None else 0, covariances)
         report.accepted = int(merged.accepted.size)
         report.removed = int(merged.removed.size)
         report.ignored = int(merged.not_newer.size + merged.removal_ignored.size)
@@ -173,8 +183,10 @@ class CollisionPredictor:
         horizon = self.config.horizon if horizon is None else float(horizon)
         self._scene.set_horizon(horizon)
         contacts = self._scene.predictions()
+        uncertainty = self._scene.uncertain_pairs(self.config.probability_threshold, contacts)
         prediction = ScenePrediction(contacts, self._scene.capture(), horizon, self.frame_id,
-                                     self.config.report_all_pairs)
+                                     self.config.report_all_pairs, uncertainty,
+                                     self.config.probability_threshold)
         self.stats = PredictionStats(bodies=len(self._scene), contacts=len(contacts),
                                      candidate_pairs=self._scene.evaluated_pairs,
                                      compute_s=time.perf_counter() - started)

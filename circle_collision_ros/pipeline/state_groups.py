@@ -24,9 +24,9 @@ from typing import NamedTuple
 import numpy as np
 
 from circle_collision_msgs.msg import CircleState
-from circle_collision_ros.pipeline.cdr_codec import CdrError, decode_states
+from circle_collision_ros.pipeline.cdr_codec import COVARIANCE_SIZE, CdrError, decode_states
 from circle_collision_ros.pipeline.predictor import CollisionPredictor, IntakeReport
-from circle_collision_ros.pipeline.state_batch import StateBatch
+from circle_collision_ros.pipeline.state_batch import StateBatch, covariance_columns
 
 _HEADER_LE = b"\x00\x01"
 _U32 = struct.Struct("<I")
@@ -47,8 +47,9 @@ def _string(data: bytes, pos: int) -> tuple[str, int] | None:
     return data[start:start + size - 1].decode(), start + size
 
 
-def _decode_one(data: bytes) -> tuple | None:
-    """(stamp ns, frame, id, 10 numbers, remove) of well-formed LE CircleState bytes, else None."""
+def _decode_one(data: bytes, uncertainty: bool) -> tuple | None:
+    """(stamp ns, frame, id, 10 numbers, remove, covariance values) of well-formed LE CircleState
+    bytes, else None. uncertainty: the layout has the covariance sequence (cdr_codec)."""
     if len(data) < 4 or data[:2] != _HEADER_LE:
         return None
     try:
@@ -66,7 +67,21 @@ def _decode_one(data: bytes) -> tuple | None:
         pos += (-(pos - 4)) % 8
         if pos + 81 > len(data):
             return None
-        return stamp_ns, frame[0], body[0], _NUMBERS.unpack_from(data, pos), data[pos + 80] != 0
+        cov: tuple = ()
+        if uncertainty:
+            end = pos + 81
+            end += (-(end - 4)) % 4
+            if end + 4 > len(data):
+                return None
+            (size,) = _U32.unpack_from(data, end)
+            end += 4
+            if size:
+                end += (-(end - 4)) % 8
+                if end + 8 * size > len(data):
+                    return None
+                cov = struct.unpack_from(f"<{size}d", data, end) if size <= COVARIANCE_SIZE \
+                    else (0.0,) * size  # any wrong length is rejected by validation, values unused
+        return stamp_ns, frame[0], body[0], _NUMBERS.unpack_from(data, pos), data[pos + 80] != 0, cov
     except UnicodeDecodeError:
         return None  # decode_states names the error
 
@@ -79,8 +94,11 @@ class GroupOutcome(NamedTuple):
 
 
 def ingest_single_states(predictor: CollisionPredictor, messages: list[bytes], now_ns: int,
-                         array_frame: str = "") -> GroupOutcome:
+                         array_frame: str = "", *, uncertainty: bool = True) -> GroupOutcome:
     """Decode and merge a run of serialized CircleState messages received at `now_ns`.
+
+    uncertainty : False for the layout before CircleState had `covariance` (replay
+        of old recordings; see cdr_codec).
 
     Returns per message the share of the intake it caused; expiry at `now_ns`
     is reported on the first message. Raises what predictor.receive_batch raises.
@@ -89,10 +107,10 @@ def ingest_single_states(predictor: CollisionPredictor, messages: list[bytes], n
     owner: list[int] = []
     errors: list[CdrError | None] = [None] * len(messages)
     for k, data in enumerate(messages):
-        row = _decode_one(data)
+        row = _decode_one(data, uncertainty)
         if row is None:
             try:
-                batch = decode_states(data, CircleState)
+                batch = decode_states(data, CircleState, uncertainty=uncertainty)
             except CdrError as exc:
                 errors[k] = exc
                 continue
@@ -101,7 +119,8 @@ def ingest_single_states(predictor: CollisionPredictor, messages: list[bytes], n
                 continue
             row = (int(batch.stamp_ns[0]), batch.frames[0], batch.ids[0],
                    (float(batch.radius[0]), *batch.position[0].tolist(), *batch.velocity[0].tolist(),
-                    *batch.acceleration[0].tolist()), bool(batch.remove[0]))
+                    *batch.acceleration[0].tolist()), bool(batch.remove[0]),
+                   _covariance_values(batch))
         rows.append(row)
         owner.append(k)
     reports: list[IntakeReport | None] = [None if errors[k] else IntakeReport()
@@ -113,26 +132,25 @@ def ingest_single_states(predictor: CollisionPredictor, messages: list[bytes], n
     ids = [r[2] for r in rows]
     batch = StateBatch(ids=ids, frames=[r[1] or array_frame for r in rows], stamp_ns=stamps,
                        radius=numbers[:, 0], position=numbers[:, 1:4], velocity=numbers[:, 4:7],
-                       acceleration=numbers[:, 7:10], remove=np.array([r[4] for r in rows], dtype=bool))
+                       acceleration=numbers[:, 7:10], remove=np.array([r[4] for r in rows], dtype=bool),
+                       **covariance_columns([r[5] for r in rows]))
     seen: dict[str, int] = {}
     wave = np.array([seen.__setitem__(i, seen.get(i, -1) + 1) or seen[i] for i in ids], dtype=np.int64)
     for w in range(int(wave.max()) + 1):
         take = np.flatnonzero(wave == w)
-        report = predictor.ingest(_select(batch, take), now_ns)
+        report = predictor.ingest(batch if take.size == len(batch) else batch.select(take), now_ns)
         _share(report, [owner[t] for t in take.tolist()], reports)
     expired = predictor.expire(now_ns)
     reports[owner[0]].expired = expired
     return GroupOutcome(reports, errors)
 
 
-def _select(batch: StateBatch, rows: np.ndarray) -> StateBatch:
-    if len(rows) == len(batch):
-        return batch
-    index = rows.tolist()
-    return StateBatch(ids=[batch.ids[k] for k in index], frames=[batch.frames[k] for k in index],
-                      stamp_ns=batch.stamp_ns[rows], radius=batch.radius[rows],
-                      position=batch.position[rows], velocity=batch.velocity[rows],
-                      acceleration=batch.acceleration[rows], remove=batch.remove[rows])
+def _covariance_values(batch: StateBatch) -> tuple:
+    """The one state's covariance as received: () if none, its 36 values, or a wrong-length stand-in."""
+    if batch.covariance is None:
+        return ()
+    size = int(batch.covariance_size[0])
+    return tuple(batch.covariance[0].tolist()) if size == COVARIANCE_SIZE else (0.0,) * size
 
 
 def _share(report: IntakeReport, owners: list[int], reports: list[IntakeReport | None]) -> None:

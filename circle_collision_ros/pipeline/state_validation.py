@@ -13,7 +13,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from circle_collision_ros.pipeline.state_batch import StateBatch
+from circle_collision_ros.core.uncertainty import COV_PSD_RTOL, COV_SYMMETRY_RTOL, covariance_problem
+from circle_collision_ros.pipeline.cdr_codec import COVARIANCE_SIZE
+from circle_collision_ros.pipeline.state_batch import StateBatch, covariance_block
 
 
 class StampLimits:
@@ -39,6 +41,26 @@ class ValueLimits:
     """
 
     MAX_MAGNITUDE = 1e12
+    # Covariance entries (m^2, m^2/s, m^2/s^2): the square of the above. Propagated over the
+    # largest stamp difference (dt^2 ~ 5e18) they stay finite (~1e43).
+    MAX_COVARIANCE = MAX_MAGNITUDE ** 2
+
+
+def covariance_rejected(blocks: np.ndarray) -> np.ndarray:
+    """(n,) bool: which (n, m, m) covariance blocks core.uncertainty.covariance_problem refuses,
+    vectorised with its tolerances (finite; symmetric to COV_SYMMETRY_RTOL x max|C|; smallest
+    eigenvalue >= -COV_PSD_RTOL x largest |eigenvalue|)."""
+    finite = np.isfinite(blocks).all(axis=(1, 2))
+    out = ~finite
+    k = np.flatnonzero(finite)
+    if k.size:
+        c = blocks[k]
+        scale = np.abs(c).max(axis=(1, 2))
+        asym = np.abs(c - c.transpose(0, 2, 1)).max(axis=(1, 2)) > COV_SYMMETRY_RTOL * scale
+        lam = np.linalg.eigvalsh(0.5 * (c + c.transpose(0, 2, 1)))
+        not_psd = lam[:, 0] < -COV_PSD_RTOL * np.maximum(np.abs(lam[:, 0]), np.abs(lam[:, -1]))
+        out[k] = (scale > 0) & (asym | not_psd)
+    return out
 
 
 @dataclass(frozen=True)
@@ -57,6 +79,7 @@ class BatchCheck:
     good: np.ndarray  # (N,) bool
     rejections: list[Rejection]
     frame_id: str
+    uncertain: np.ndarray | None = None  # (N,) bool: good states with a non-zero covariance
 
 
 _VECTORS = ("position", "velocity", "acceleration")
@@ -69,7 +92,48 @@ class StampHint:
             " (ros2 topic pub: header: {stamp: now})")
 
 
-def _reasons(batch: StateBatch, k: int, frame_id: str, now_ns: int | None, dup: bool) -> str:
+def covariance_checks(batch: StateBatch, dimensions: int) -> tuple[np.ndarray, np.ndarray]:
+    """(bad, uncertain): per state, whether its covariance is unusable, and whether it is usable
+    and not all zero on the used axes (a zero or absent covariance is an exact state).
+
+    Only the rows and columns a `dimensions`-D scene uses are checked (x, y, vx, vy in 2-D).
+    The rule and tolerances are the core's (core.uncertainty.covariance_problem), applied
+    vectorised here (covariance_rejected); the reason of a bad row is that function's text.
+    """
+    n = len(batch)
+    if batch.covariance is None:
+        return np.zeros(n, dtype=bool), np.zeros(n, dtype=bool)
+    size_bad = (batch.covariance_size != 0) & (batch.covariance_size != COVARIANCE_SIZE)
+    block = covariance_block(batch.covariance, dimensions)
+    given = (batch.covariance_size == COVARIANCE_SIZE) & (block != 0.0).any(axis=(1, 2))
+    bad = size_bad.copy()
+    rows = np.flatnonzero(given & ~batch.remove)
+    if rows.size:
+        huge = np.abs(block[rows]).max(axis=(1, 2)) > ValueLimits.MAX_COVARIANCE  # NaN: not here
+        bad[rows[huge]] = True
+        rows = rows[~huge]
+        flagged = rows[covariance_rejected(block[rows])]
+        # the core's own check decides (and words) each refusal: no row refused without its reason
+        bad[flagged] = [covariance_problem(block[k]) is not None for k in flagged.tolist()]
+    return bad & ~batch.remove, given & ~bad & ~batch.remove
+
+
+def _covariance_reason(batch: StateBatch, k: int, dimensions: int) -> str | None:
+    size = int(batch.covariance_size[k])
+    if size not in (0, COVARIANCE_SIZE):
+        return f"covariance has {size} values (expected 0 or {COVARIANCE_SIZE}: 6x6 row-major)"
+    block = covariance_block(batch.covariance[k:k + 1], dimensions)[0]
+    axes = "x, y, vx, vy" if dimensions == 2 else "x, y, z, vx, vy, vz"
+    largest = float(np.abs(block).max())
+    if largest > ValueLimits.MAX_COVARIANCE:
+        return f"covariance has a value of magnitude {largest:g}, beyond {ValueLimits.MAX_COVARIANCE:g}" \
+               f" (rows/columns {axes})"
+    problem = covariance_problem(block)
+    return None if problem is None else f"{problem} (rows/columns {axes})"
+
+
+def _reasons(batch: StateBatch, k: int, frame_id: str, now_ns: int | None, dup: bool,
+             dimensions: int = 3) -> str:
     """Every problem of row k, in a fixed order (so the message is deterministic), "; "-joined."""
     found: list[str] = []
     if not batch.ids[k]:
@@ -90,6 +154,10 @@ def _reasons(batch: StateBatch, k: int, frame_id: str, now_ns: int | None, dup: 
                     found.append(f"{name}.{axis} is {value}")
                 elif abs(value) > ValueLimits.MAX_MAGNITUDE:
                     found.append(f"{name}.{axis} is {value}, beyond +-{ValueLimits.MAX_MAGNITUDE:g}")
+        if batch.covariance is not None:
+            problem = _covariance_reason(batch, k, dimensions)
+            if problem:
+                found.append(problem)
         if frame_id and batch.frames[k] != frame_id:
             found.append(f"frame '{batch.frames[k]}' is not the scene frame '{frame_id}'"
                          f" (no tf here: publish in '{frame_id}')")
@@ -105,11 +173,13 @@ def _reasons(batch: StateBatch, k: int, frame_id: str, now_ns: int | None, dup: 
     return "; ".join(found)
 
 
-def check_batch(batch: StateBatch, *, frame_id: str, now_ns: int | None) -> BatchCheck:
+def check_batch(batch: StateBatch, *, frame_id: str, now_ns: int | None,
+                dimensions: int = 3) -> BatchCheck:
     """Which states are usable.
 
     Parameters
     ----------
+    dimensions : 2 or 3, the scene's; only the covariance rows/columns it uses are checked.
     frame_id : the scene frame; "" adopts the frame of the first otherwise-good
         state (returned in BatchCheck.frame_id).
     now_ns : receiving clock in ns for the future-stamp check; None skips it.
@@ -124,7 +194,8 @@ def check_batch(batch: StateBatch, *, frame_id: str, now_ns: int | None) -> Batc
     finite = (np.abs(batch.radius) <= limit) & (np.abs(batch.position) <= limit).all(axis=1) \
         & (np.abs(batch.velocity) <= limit).all(axis=1) \
         & (np.abs(batch.acceleration) <= limit).all(axis=1)
-    geometry_bad = ~batch.remove & (~finite | (batch.radius < 0.0))
+    covariance_bad, uncertain = covariance_checks(batch, dimensions)
+    geometry_bad = ~batch.remove & (~finite | (batch.radius < 0.0)) | covariance_bad
     stamp_bad = batch.stamp_ns <= 0
     if now_ns is not None:
         stamp_bad |= batch.stamp_ns - now_ns > StampLimits.MAX_FUTURE_NS
@@ -135,6 +206,7 @@ def check_batch(batch: StateBatch, *, frame_id: str, now_ns: int | None) -> Batc
             frame_id = batch.frames[int(candidates[0])]
     if frame_id:
         bad |= ~batch.remove & np.fromiter((f != frame_id for f in batch.frames), dtype=bool, count=n)
-    rejections = [Rejection(int(k), batch.ids[k], _reasons(batch, int(k), frame_id, now_ns, bool(dup[k])))
+    rejections = [Rejection(int(k), batch.ids[k], _reasons(batch, int(k), frame_id, now_ns, bool(dup[k]),
+                                                           dimensions))
                   for k in np.flatnonzero(bad)]
-    return BatchCheck(~bad, rejections, frame_id)
+    return BatchCheck(~bad, rejections, frame_id, uncertain & ~bad)

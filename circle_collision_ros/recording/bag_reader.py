@@ -41,8 +41,19 @@ class BagError(Exception):
     """A bag cannot be read; the one-line message names the file and the problem."""
 
 
-BagRecord = NamedTuple("BagRecord", [("topic", str), ("type_name", str), ("data", bytes),
-                                     ("log_time_ns", int), ("publish_time_ns", int)])
+class BagRecord(NamedTuple):
+    """One recorded message; schema: the ros2msg definition text its channel was recorded with
+    (the layout its bytes follow; replay decodes and re-encodes by it)."""
+
+    topic: str
+    type_name: str
+    data: bytes
+    log_time_ns: int
+    publish_time_ns: int
+    schema: str = ""
+
+
+
 TopicInfo = NamedTuple("TopicInfo", [("topic", str), ("type_name", str), ("definition", str),
                                      ("offered_qos", str), ("type_hash", str), ("message_count", int)])
 
@@ -201,7 +212,7 @@ def open_bag(path: str | os.PathLike[str], *, tolerant: bool = False,
 def _contents(path: Path, bag: dict, types: set[str], problem: str | None) -> BagContents:
     topics: dict[str, TopicInfo] = {}
     ignored: dict[str, str] = {}
-    selected: dict[int, tuple[str, str]] = {}
+    selected: dict[int, tuple[str, str, str]] = {}
     counts: dict[int, int] = {}
     for message in bag["messages"]:
         counts[message.channel_id] = counts.get(message.channel_id, 0) + 1
@@ -222,11 +233,12 @@ def _contents(path: Path, bag: dict, types: set[str], problem: str | None) -> Ba
             channel.topic, name, schema.data.decode("utf-8", errors="replace"),
             channel.metadata.get(BagFormat.CHANNEL_QOS_KEY, ""), channel.metadata.get(BagFormat.CHANNEL_TYPE_HASH_KEY, ""),
             counts.get(channel.id, 0) + (previous.message_count if previous else 0))
-        selected[channel.id] = (channel.topic, name)
+        selected[channel.id] = (channel.topic, name, schema.data.decode("utf-8", errors="replace"))
     if not topics:
         found = ", ".join(f"{t} ({n or 'no schema'})" for t, n in sorted(ignored.items())) or "none"
         note = f"; reading stopped early: {problem}" if problem else ""
         raise BagError(f"{path}: no channels of types {', '.join(sorted(types))} (found: {found}){note}")
-    records = sorted((BagRecord(*selected[m.channel_id], m.data, m.log_time, m.publish_time)
+    records = sorted((BagRecord(*selected[m.channel_id][:2], m.data, m.log_time, m.publish_time,
+                                selected[m.channel_id][2])
                       for m in bag["messages"] if m.channel_id in selected), key=lambda r: r.log_time_ns)
     return BagContents(path, topics, ignored, bag["config"], problem is not None, problem, records)

@@ -221,7 +221,8 @@ class BagRecorder:
         with self._lock:
             return {topic: stats.count for topic, stats in self._topics.items()}
 
-    def add_topic(self, topic: str, type_name: str, offered_qos: str = "") -> None:
+    def add_topic(self, topic: str, type_name: str, offered_qos: str = "",
+                  definition: str | None = None) -> None:
         """Declare a topic before writing to it.
 
         Parameters
@@ -233,6 +234,10 @@ class BagRecorder:
             must be installed.
         offered_qos
             rosbag2 ``offered_qos_profiles`` YAML (see :func:`qos_profiles_yaml`).
+        definition
+            The ``ros2msg`` schema text to record, when the bytes follow another
+            definition than the installed one (copying an older recording); None:
+            the installed definition.
 
         Raises
         ------
@@ -250,12 +255,13 @@ class BagRecorder:
                         f"not {type_name}")
                 return
             try:
-                schema_id = self._schemas.get(type_name)
+                key = type_name if definition is None else (type_name, definition)
+                schema_id = self._schemas.get(key)
                 if schema_id is None:
-                    definition = full_msg_definition(type_name)
+                    text = full_msg_definition(type_name) if definition is None else definition
                     schema_id = self._writer.register_schema(
-                        type_name, BagFormat.SCHEMA_ENCODING, definition.encode("utf-8"))
-                    self._schemas[type_name] = schema_id
+                        type_name, BagFormat.SCHEMA_ENCODING, text.encode("utf-8"))
+                    self._schemas[key] = schema_id
                 type_hash = type_description_hash(type_name)
                 channel_id = self._writer.register_channel(
                     topic, BagFormat.MESSAGE_ENCODING, schema_id,

@@ -24,6 +24,7 @@ _TIME = struct.Struct("<iI")
 _F64 = struct.Struct("<d")
 _U32 = struct.Struct("<I")
 _VECTORS = struct.Struct("<7d")  # contact_point xyz, normal xyz, closing_speed
+_UNCERTAINTY = struct.Struct("<3d")  # collision_probability, its bound, plausible_time_to_collision
 
 
 class PairPrediction(NamedTuple):
@@ -37,6 +38,10 @@ class PairPrediction(NamedTuple):
     contact_point: tuple[float, float, float]
     normal: tuple[float, float, float]
     closing_speed: float
+    # None in recordings made before the interface had them (see cdr_codec, "Two layouts").
+    collision_probability: float | None = None
+    collision_probability_bound: float | None = None
+    plausible_time_to_collision: float | None = None  # s after the array's stamp; +inf if never
 
 
 class PredictionArray(NamedTuple):
@@ -81,8 +86,11 @@ class _Reader:
         return self.data[self.pos - 1]
 
 
-def decode_prediction_array(data: bytes) -> PredictionArray:
-    """CollisionPredictionArray bytes -> PredictionArray; CdrError if malformed."""
+def decode_prediction_array(data: bytes, *, uncertainty: bool = True) -> PredictionArray:
+    """CollisionPredictionArray bytes -> PredictionArray; CdrError if malformed.
+
+    uncertainty=False: the layout before the probability fields (older recordings).
+    """
     r = _Reader(data)
     sec, nanosec = r.unpack(_TIME, 4)
     header = (sec, nanosec, r.string())
@@ -94,7 +102,8 @@ def decode_prediction_array(data: bytes) -> PredictionArray:
         (ttc,) = r.unpack(_F64, 8)
         contact_time = r.unpack(_TIME, 4)
         v = r.unpack(_VECTORS, 8)
-        predictions.append(PairPrediction(id_a, id_b, status, ttc, contact_time, v[0:3], v[3:6], v[6]))
+        u = r.unpack(_UNCERTAINTY, 8) if uncertainty else (None, None, None)
+        predictions.append(PairPrediction(id_a, id_b, status, ttc, contact_time, v[0:3], v[3:6], v[6], *u))
     return PredictionArray(header, horizon, tuple(predictions))
 
 

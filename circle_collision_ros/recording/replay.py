@@ -19,6 +19,7 @@ import argparse
 import json
 import math
 import os
+import struct
 import sys
 import time
 from collections.abc import Callable
@@ -29,12 +30,14 @@ from nav_msgs.msg import Odometry
 from circle_collision_msgs.msg import CircleState, CircleStateArray
 from circle_collision_ros.recording.bag_reader import (RECORDED_TYPES, BagContents, BagError, BagRecord,
                                                       open_bag)
-from circle_collision_ros.pipeline.cdr_codec import CdrError, decode_states
+from circle_collision_ros.pipeline.cdr_codec import (CDR_BE, CdrError, decode_states, encode_state,
+                                                    encode_state_array)
 from circle_collision_ros.pipeline.odometry import (ODOMETRY_TYPE, OdometrySource,
                                                    odometry_batch)
 from circle_collision_ros.pipeline.state_batch import StateBatch
 from circle_collision_ros.pipeline.predictor import RUNTIME_FIELDS, CollisionPredictor, PredictorConfig
 from circle_collision_ros.pipeline.state_groups import ingest_single_states
+from circle_collision_ros.recording.ros_type_definitions import DefinitionFormat
 from circle_collision_ros.recording.prediction_cdr import (PredictionArray, decode_prediction_array, decode_string,
                                                            peek_prediction_array)
 
@@ -50,6 +53,40 @@ class RecordedTypes:
     INPUTS = {STATE_ARRAY: CircleStateArray, STATE: CircleState, ODOMETRY: Odometry}
 
 
+class RecordedLayout:
+    """Which layout of our interfaces a recorded schema text describes (see cdr_codec, "Two layouts").
+
+    A recording made before issue 18 embeds CircleState without `covariance` and
+    CollisionPrediction without `collision_probability`; replay decodes its inputs and
+    writes its predictions in that layout, so it compares bit for bit. A schema that
+    names neither type (empty: not recorded by us) is taken as the current layout.
+    """
+
+    _FIELD = {"circle_collision_msgs/CircleState": "covariance",
+              "circle_collision_msgs/CollisionPrediction": "collision_probability"}
+    _cache: dict[str, bool] = {}
+
+    @classmethod
+    def has_uncertainty(cls, schema: str) -> bool:
+        known = cls._cache.get(schema)
+        if known is None:
+            known = cls._cache[schema] = cls._parse(schema)
+        return known
+
+    @classmethod
+    def _parse(cls, schema: str) -> bool:
+        sections = schema.split(DefinitionFormat.SEPARATOR + "\n")
+        for section in sections[1:]:
+            head, _, text = section.partition("\n")
+            field = cls._FIELD.get(head.removeprefix(DefinitionFormat.DEPENDENCY_PREFIX).strip())
+            if field is not None:
+                return any(line.split("#", 1)[0].split()[1:2] == [field] for line in text.splitlines())
+        # The root type is CircleState itself (single-state topics)
+        if any(line.split("#", 1)[0].split()[1:2] == ["remove"] for line in sections[0].splitlines()):
+            return any(line.split("#", 1)[0].split()[1:2] == ["covariance"] for line in sections[0].splitlines())
+        return True
+
+
 def odometry_from_json(text: str) -> dict[str, OdometrySource]:
     """Odometry topic -> OdometrySource from the node's recorded configuration."""
     return {topic: OdometrySource(**source) for topic, source in json.loads(text).get("odometry", {}).items()}
@@ -61,7 +98,8 @@ def decode_input(record: BagRecord, odometry: dict[str, OdometrySource]) -> Stat
         if record.type_name == RecordedTypes.ODOMETRY:
             source = odometry.get(record.topic)
             return odometry_batch(record.data, source) if source is not None else None
-        return decode_states(record.data, RecordedTypes.INPUTS[record.type_name])
+        return decode_states(record.data, RecordedTypes.INPUTS[record.type_name],
+                             uncertainty=RecordedLayout.has_uncertainty(record.schema))
     except CdrError:
         return None  # the node rejected it the same way; nothing entered the scene
 
@@ -137,11 +175,12 @@ def replay_offline(records, config: PredictorConfig | None = None,
     unanswered = 0  # inputs since the last prediction: the node coalesced them into the next one
     run: list[bytes] = []  # consecutive CircleState records of one log time: one node drain
     run_time = -1
+    run_layout = True
 
     def flush() -> None:
         nonlocal run
         if run:
-            ingest_single_states(predictor, run, run_time)
+            ingest_single_states(predictor, run, run_time, uncertainty=run_layout)
             run = []
 
     for record in records:
@@ -161,6 +200,7 @@ def replay_offline(records, config: PredictorConfig | None = None,
         if record.type_name == RecordedTypes.STATE:
             run.append(record.data)
             run_time = record.log_time_ns
+            run_layout = RecordedLayout.has_uncertainty(record.schema)
             report.inputs += 1
             unanswered += 1
         elif record.type_name in RecordedTypes.INPUTS:
@@ -178,16 +218,17 @@ def replay_offline(records, config: PredictorConfig | None = None,
             # The same bytes the node publishes. Equal bytes are equal fields (the node
             # records its own encoder's output, padding included); only a difference
             # needs decoding and the field-by-field comparison that says what differs.
-            replayed_bytes = predictor.predict(horizon=horizon).to_cdr()
+            layout = RecordedLayout.has_uncertainty(record.schema)
+            replayed_bytes = predictor.predict(horizon=horizon).to_cdr(uncertainty=layout)
             report.predictions += 1
             if replayed_bytes == record.data:
                 report.pairs_compared += entries
                 if on_prediction is not None:
-                    recorded = decode_prediction_array(record.data)
+                    recorded = decode_prediction_array(record.data, uncertainty=layout)
                     on_prediction(record.log_time_ns, recorded, recorded)
             else:
-                recorded = decode_prediction_array(record.data)
-                replayed = decode_prediction_array(replayed_bytes)
+                recorded = decode_prediction_array(record.data, uncertainty=layout)
+                replayed = decode_prediction_array(replayed_bytes, uncertainty=layout)
                 compare_predictions(recorded, replayed, f"prediction #{report.predictions}", report)
                 if on_prediction is not None:
                     on_prediction(record.log_time_ns, recorded, replayed)
@@ -219,6 +260,24 @@ def replay_bag(path: str | os.PathLike[str], *, tolerant: bool = False,
     return report
 
 
+def current_layout_bytes(record: BagRecord) -> bytes:
+    """The record's input bytes in the current interface layout (republishing an older recording).
+
+    A CircleState(Array) recorded before issue 18 is decoded by its recorded layout and
+    written again with an empty covariance (the same states; the array header's frame is
+    carried by each state, as the node reads it). Anything else is returned unchanged.
+    """
+    if record.type_name not in (RecordedTypes.STATE, RecordedTypes.STATE_ARRAY) \
+            or RecordedLayout.has_uncertainty(record.schema):
+        return record.data
+    batch = decode_states(record.data, RecordedTypes.INPUTS[record.type_name], uncertainty=False)
+    if record.type_name == RecordedTypes.STATE:
+        return encode_state(batch)
+    order = ">" if record.data[:2] == CDR_BE else "<"
+    sec, nanosec = struct.unpack_from(f"{order}iI", record.data, 4)
+    return encode_state_array(batch, sec * 1_000_000_000 + nanosec, "")
+
+
 def republish(records: list[BagRecord], rate: float) -> int:
     """Publish recorded inputs on their topics at recorded pace / rate; returns count."""
     import rclpy
@@ -244,7 +303,11 @@ def republish(records: list[BagRecord], rate: float) -> int:
             delay = (r.log_time_ns - start_log) * 1e-9 / rate - (time.monotonic() - start_wall)
             if delay > 0:
                 time.sleep(delay)
-            publishers[r.topic].publish(r.data)  # the recorded bytes, unchanged
+            try:
+                data = current_layout_bytes(r)  # the recorded bytes, unchanged unless recorded in
+            except CdrError:                    # an older layout (then the same states, re-encoded)
+                data = r.data  # malformed as recorded: sent as recorded, the node rejects it as before
+            publishers[r.topic].publish(data)
             sent += 1
     except KeyboardInterrupt:
         pass

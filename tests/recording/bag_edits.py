@@ -7,17 +7,29 @@ import numpy as np
 
 
 def nudge_first_contact(record) -> bytes:
-    """Move the first finite time_to_collision in a prediction record up by one ulp."""
-    from rclpy.serialization import deserialize_message, serialize_message
+    """Move the first finite time_to_collision in a prediction record up by one ulp.
 
-    from circle_collision_msgs.msg import CollisionPredictionArray
-    from circle_collision_ros.recording.replay import RecordedTypes
+    Edits the bytes in place, so the record keeps the layout of its recorded schema
+    (before or after issue 18's fields); checks that exactly that field changed.
+    """
+    import struct
+
+    from circle_collision_ros.recording.prediction_cdr import decode_prediction_array
+    from circle_collision_ros.recording.replay import RecordedLayout, RecordedTypes
 
     if record.type_name != RecordedTypes.PREDICTIONS:
         return record.data
-    msg = deserialize_message(record.data, CollisionPredictionArray)
-    finite = [p for p in msg.predictions if 0 < p.time_to_collision < math.inf]
-    if not finite:
+    layout = RecordedLayout.has_uncertainty(record.schema)
+    before = decode_prediction_array(record.data, uncertainty=layout)
+    k = next((k for k, p in enumerate(before.predictions) if 0 < p.time_to_collision < math.inf), None)
+    if k is None:
         return record.data
-    finite[0].time_to_collision = float(np.nextafter(finite[0].time_to_collision, math.inf))
-    return serialize_message(msg)
+    old = before.predictions[k].time_to_collision
+    new = float(np.nextafter(old, math.inf))
+    at = record.data.find(struct.pack("<d", old), 4)
+    data = record.data[:at] + struct.pack("<d", new) + record.data[at + 8:]
+    after = decode_prediction_array(data, uncertainty=layout)
+    rows = list(before.predictions)
+    rows[k] = rows[k]._replace(time_to_collision=new)
+    assert after == before._replace(predictions=tuple(rows)), "the nudge hit another field"
+    return data

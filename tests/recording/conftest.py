@@ -28,7 +28,7 @@ def copy_bag(source: Path, out: Path, keep_predictions: int | None = None,
     predictions = 0
     with BagRecorder(out) as rec:
         for info in contents.topics.values():
-            rec.add_topic(info.topic, info.type_name)
+            rec.add_topic(info.topic, info.type_name, definition=info.definition)  # the bytes' own layout
         for r in contents.records():
             if r.type_name == RecordedTypes.PREDICTIONS:
                 predictions += 1

@@ -62,6 +62,8 @@ def make_states(i: int) -> CircleStateArray:
         circle.velocity.x = 1.25
         circle.acceleration.z = -9.81
         circle.remove = k == 1
+        if k == 0:  # the bounded sequence float64[<=36]: empty on body1, 36 values on body0
+            circle.covariance = [i + j / 64.0 for j in range(36)]
         msg.circles.append(circle)
     return msg
 
@@ -79,6 +81,9 @@ def make_predictions(i: int) -> CollisionPredictionArray:
     prediction.contact_point.x = 1.5
     prediction.normal.y = 1.0
     prediction.closing_speed = 2.0
+    prediction.collision_probability = 0.5 + i / 1024.0
+    prediction.collision_probability_bound = 1e-9
+    prediction.plausible_time_to_collision = 0.125 * i
     msg.predictions.append(prediction)
     return msg
 
@@ -141,11 +146,15 @@ def test_mcap_ros2_decoder_reads_fields(tmp_path: Path) -> None:
     assert [c.id for c in decoded.circles] == ["body0", "body1"]
     assert decoded.circles[1].radius == 1.5 and decoded.circles[1].remove is True
     assert decoded.circles[0].position.x == 7.0 and decoded.circles[0].acceleration.z == -9.81
+    assert list(decoded.circles[0].covariance) == [7 + j / 64.0 for j in range(36)]
+    assert list(decoded.circles[1].covariance) == []
     _, prediction = predictions[3]
     assert prediction.horizon == 5.0
     assert prediction.predictions[0].status == 1
     assert prediction.predictions[0].time_to_collision == 0.75
     assert prediction.predictions[0].contact_time.sec == 104
+    assert (prediction.predictions[0].collision_probability, prediction.predictions[0].collision_probability_bound,
+            prediction.predictions[0].plausible_time_to_collision) == (0.5 + 3 / 1024.0, 1e-9, 0.375)
     config = metadata[BagFormat.CONFIG_METADATA_NAME]
     assert {k: yaml.safe_load(v) for k, v in config.items()} == CONFIG
     assert "serialized_metadata" in metadata[BagFormat.ROSBAG2_METADATA_NAME]
@@ -169,8 +178,12 @@ def test_rosbags_reads_with_embedded_definitions_only(tmp_path: Path, target: st
     states = [m for topic, _, m in decoded if topic == "/circles/a"]
     assert states[5].header.frame_id == "seq5"
     assert states[5].circles[0].velocity.x == 1.25
+    assert list(states[5].circles[0].covariance) == [5 + j / 64.0 for j in range(36)]
+    assert len(states[5].circles[1].covariance) == 0
     predictions = [m for topic, _, m in decoded if topic == "/collision_predictions"]
     assert predictions[2].predictions[0].id_b == "body1"
+    assert predictions[2].predictions[0].collision_probability == 0.5 + 2 / 1024.0
+    assert predictions[2].predictions[0].plausible_time_to_collision == 0.25
 
 
 def test_bytes_are_recorded_unchanged(tmp_path: Path) -> None:
@@ -178,7 +191,13 @@ def test_bytes_are_recorded_unchanged(tmp_path: Path) -> None:
     records = list(open_bag(bag))
     assert [deserialize_message(r.data, CircleStateArray) for r in records
             if r.topic == "/circles/a"] == [make_states(i) for i in range(5)]
-    assert records[0].data == serialize_message(make_states(0))
+    # Fast CDR leaves alignment padding uninitialised, so compare with the very bytes written.
+    written = [serialize_message(make_states(i)) for i in range(3)]
+    with BagRecorder(tmp_path / "exact") as exact:
+        exact.add_topic("/circles/a", STATES_TYPE)
+        for i, data in enumerate(written):
+            exact.write("/circles/a", data, T0 + i)
+    assert [r.data for r in open_bag(tmp_path / "exact").records()] == written
 
 
 def test_metadata_yaml_matches_rosbag2(tmp_path: Path) -> None:

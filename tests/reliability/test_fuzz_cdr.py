@@ -40,6 +40,10 @@ SHORT = [b"", b"\x00", b"\x00\x01", b"\x00\x01\x00", b"\x00\x00\x00"]
 FUZZ = settings(max_examples=1500, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 
 _VALID = [serialize_message(state_array(random_states(n, seed=n))) for n in (0, 1, 3, 7)]
+_WITH_COVARIANCE = state_array(random_states(4, seed=5))
+for _k, _s in enumerate(_WITH_COVARIANCE.circles):
+    _s.covariance = [float(_k + 1)] * (36 if _k % 2 else _k)
+_VALID.append(serialize_message(_WITH_COVARIANCE))
 _VALID += [serialize_message(s) for s in random_states(3, seed=99)]
 
 
@@ -66,8 +70,11 @@ def _same(batch: StateBatch, msg, msg_type) -> None:
     assert batch.ids == want.ids and batch.frames == want.frames
     assert np.array_equal(batch.stamp_ns, want.stamp_ns)
     assert np.array_equal(batch.remove, want.remove)
-    for name in ("radius", "position", "velocity", "acceleration"):
-        assert np.array_equal(getattr(batch, name), getattr(want, name), equal_nan=True), name
+    for name in ("radius", "position", "velocity", "acceleration", "covariance", "covariance_size"):
+        got, expected = getattr(batch, name), getattr(want, name)
+        assert (got is None) == (expected is None), name
+        if got is not None:
+            assert np.array_equal(got, expected, equal_nan=True), name
 
 
 @FUZZ
@@ -149,6 +156,9 @@ def _messages(draw):
         for vec in (s.position, s.velocity, s.acceleration):
             vec.x, vec.y, vec.z = (draw(_finite_or_special()) for _ in range(3))
         s.remove = draw(st.booleans())
+        # empty, the full 6x6, or a wrong length (decoded, then rejected by validation)
+        s.covariance = draw(st.one_of(st.just([]), st.lists(_finite_or_special(), min_size=36, max_size=36),
+                                      st.lists(_finite_or_special(), min_size=1, max_size=35)))
         circles.append(s)
     return CircleStateArray(header=Header(stamp=Time(sec=draw(st.integers(0, 2**31 - 1))),
                                           frame_id=draw(_text)), circles=circles)
@@ -176,7 +186,8 @@ def test_big_endian_decodes_like_little_endian(msg: CircleStateArray) -> None:
     bodies = [Body(s.id, s.radius, (s.position.x, s.position.y, s.position.z),
                    (s.velocity.x, s.velocity.y, s.velocity.z),
                    (s.acceleration.x, s.acceleration.y, s.acceleration.z),
-                   0, s.header.frame_id, s.remove, stamp=(s.header.stamp.sec, s.header.stamp.nanosec))
+                   0, s.header.frame_id, s.remove, stamp=(s.header.stamp.sec, s.header.stamp.nanosec),
+                   covariance=tuple(s.covariance))
               for s in msg.circles]
     be = encode_array(bodies, stamp, msg.header.frame_id, big_endian=True)
     le = serialize_message(msg)

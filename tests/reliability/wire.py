@@ -26,6 +26,7 @@ class Body:
     remove: bool = False
     id_bytes: bytes | None = field(default=None, repr=False)  # raw id (e.g. invalid UTF-8)
     stamp: tuple | None = None  # raw (sec, nanosec), e.g. nanosec >= 1e9; overrides stamp_ns
+    covariance: tuple = ()  # any length (the bounded sequence float64[<=36])
 
 
 class _Writer:
@@ -65,6 +66,9 @@ def _state(w: _Writer, b: Body) -> None:
     w.string(b.id_bytes if b.id_bytes is not None else b.id.encode("utf-8", "surrogatepass"))
     w.f64s((b.radius, *b.p, *b.v, *b.a))
     w.buf.append(1 if b.remove else 0)
+    w.u32(len(b.covariance))
+    if b.covariance:
+        w.f64s(b.covariance)
 
 
 def encode_array(bodies, stamp_ns: int, frame: str = "map", big_endian: bool = False) -> bytes:
@@ -108,4 +112,5 @@ def encode_scene(ids: list[bytes], radii, p, v, a, stamp_ns: int, frame: str = "
         buf += b"\x00" * ((-(len(buf) - 4)) % 8)
         buf += struct.pack("<10d", rows[0][k], *rows[1][k], *rows[2][k], *rows[3][k])
         buf.append(0)
+        buf += b"\x00" * ((-(len(buf) - 4)) % 4) + b"\x00\x00\x00\x00"  # empty covariance
     return bytes(buf)

@@ -29,14 +29,16 @@ def _state(i: int) -> CircleState:
         position=Point(x=1.0e6 + i, y=-2.5, z=0.125),
         velocity=Vector3(x=1.0, y=-1.0, z=0.0),
         acceleration=Vector3(x=0.0, y=-9.81, z=1e-12),
-        remove=bool(i % 2))
+        remove=bool(i % 2),
+        covariance=[0.01 * (i + 1) + k / 1024.0 for k in range(36)] if i % 3 else [])  # float64[<=36]
 
 
 def _prediction() -> CollisionPrediction:
     return CollisionPrediction(
         id_a="a", id_b="b", status=CollisionPrediction.CONTACT, time_to_collision=1.5,
         contact_time=Time(sec=7, nanosec=5), contact_point=Point(x=1.0, y=2.0, z=3.0),
-        normal=Vector3(x=0.0, y=1.0, z=0.0), closing_speed=2.25)
+        normal=Vector3(x=0.0, y=1.0, z=0.0), closing_speed=2.25, collision_probability=0.75,
+        collision_probability_bound=1e-9, plausible_time_to_collision=1.25)
 
 
 SAMPLES = [
@@ -47,11 +49,23 @@ SAMPLES = [
         header=Header(stamp=Time(sec=1, nanosec=2), frame_id="map"), horizon=5.0,
         predictions=[_prediction(),
                      CollisionPrediction(id_a="c", id_b="d", status=CollisionPrediction.NO_CONTACT,
-                                         time_to_collision=math.inf)]),
+                                         time_to_collision=math.inf, collision_probability=0.02,
+                                         plausible_time_to_collision=math.inf)]),
     PredictCollisions.Request(circles=[_state(1), _state(2)], horizon=0.0),
     PredictCollisions.Response(success=False, message="circles[1] (id 'x'): radius is -1",
                                predictions=[_prediction()]),
 ]
+
+
+def test_covariance_is_a_sequence_of_at_most_36() -> None:
+    """The bound is enforced where bytes are made: rclpy refuses to serialize (so to publish or
+    call with) 37 values; assignment checks it only with ROS_PYTHON_CHECK_FIELDS. Raw bytes
+    claiming more are the decoder's business (tests/reliability/test_fuzz_cdr.py)."""
+    state = CircleState(covariance=[1.0] * 36)
+    assert len(state.covariance) == 36 and len(CircleState().covariance) == 0
+    assert len(deserialize_message(serialize_message(state), CircleState).covariance) == 36
+    with pytest.raises(Exception, match="serialize"):
+        serialize_message(CircleState(covariance=[1.0] * 37))
 
 
 def test_status_constants() -> None:

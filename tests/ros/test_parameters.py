@@ -13,6 +13,8 @@ Guarantees proved here (rclpy clients doing what ros2cli does):
 """
 from __future__ import annotations
 
+import math
+
 from pathlib import Path
 
 import pytest
@@ -99,7 +101,7 @@ def test_dump_has_every_value_and_round_trips_through_params_file(ros_node, tmp_
         node.destroy_node()
         context.try_shutdown()
     assert first["single_state_topics"] == [] and first["state_topics"] == ["circle_states"]
-    assert first["horizon"] == 5.0
+    assert first["horizon"] == 5.0 and first["probability_threshold"] == 0.01
     path = tmp_path / "dump.yaml"
     path.write_text(dump_yaml(first))
     context, node = _start(["--params-file", str(path)])
@@ -115,7 +117,7 @@ def test_dump_has_every_value_and_round_trips_through_params_file(ros_node, tmp_
 def test_non_default_dump_round_trips(ros_node, tmp_path: Path) -> None:
     """Non-empty list and changed values survive the round trip too."""
     context, node = _start(["-p", "single_state_topics:=[robot_1/circle_state]", "-p", "horizon:=2.5",
-                            "-p", "frame_id:=map"])
+                            "-p", "frame_id:=map", "-p", "probability_threshold:=0.25"])
     try:
         first = param_dump(ros_node, node)
     finally:
@@ -186,3 +188,29 @@ def test_string_or_bool_for_double_refused_at_start(value: str) -> None:
                          timeout=120)
     assert run.returncode == 2, run.stdout + run.stderr
     assert "horizon must be a finite number" in run.stderr and "Traceback" not in run.stderr
+
+
+def test_probability_threshold_is_in_zero_exclusive_to_one(ros_node) -> None:
+    """Issue 18: (0, 1], validated like the other doubles (an integer 1 is the double 1.0);
+    a valid change reaches the predictor, a refused one changes nothing."""
+    context, node = _start(["-p", "probability_threshold:=0.05"])
+    try:
+        assert node.predictor.config.probability_threshold == 0.05
+
+        def set_value(value: ParameterValue):
+            request = SetParameters.Request(parameters=[ParameterMsg(name="probability_threshold", value=value)])
+            return _call(ros_node, node, SetParameters, f"{NODE}/set_parameters", request).results[0]
+
+        for bad in (0.0, -0.1, 1.5, math.nan):
+            result = set_value(ParameterValue(type=ParameterType.PARAMETER_DOUBLE, double_value=bad))
+            assert not result.successful and "probability_threshold" in result.reason, bad
+        zero = set_value(ParameterValue(type=ParameterType.PARAMETER_DOUBLE, double_value=0.0))
+        assert "(0, 1]" in zero.reason
+        assert node.predictor.config.probability_threshold == 0.05
+        one = set_value(ParameterValue(type=ParameterType.PARAMETER_INTEGER, integer_value=1))
+        assert one.successful, one.reason
+        assert node.predictor.config.probability_threshold == 1.0
+        assert node.get_parameter("probability_threshold").type_.name == "DOUBLE"
+    finally:
+        node.destroy_node()
+        context.try_shutdown()

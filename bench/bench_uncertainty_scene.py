@@ -1,0 +1,123 @@
+#!/usr/bin/env python3
+"""Issue 18 scene figure: a 1,000-body scene with covariance on every body vs the same scene exact.
+
+    .venv/bin/python bench/bench_uncertainty_scene.py [--bodies 1000] [--frames 30] [--sigma 0.2]
+                                                      [--velocity-sigma 0.1] [--horizon 5]
+
+Both runs see the same frames of the same synthetic scene (the node benchmark's density,
+~333 m^2 per body, every body moved and stamped anew each frame, so every frame is a full
+recomputation), in the same process, interleaved frame by frame so machine load hits both
+alike. Timed per frame, node-side work without DDS:
+
+- "scene": ``CollisionPredictor.receive_batch`` + ``predict`` (covariance on: the exact path
+  plus ``Scene.uncertain_pairs``: inflated broad phase and the core's probabilities at R);
+- "pipeline": the same + ``to_cdr()`` (the bytes the node publishes).
+
+Prints medians, the ratio covariance/exact (target <= 3x), how much of the covariance run is
+the core's ``uncertain_pairs`` (the per-pair mathematics) and how much the node side (inflated
+broad phase, propagation to R, joining the rows), and how many pairs the uncertain path
+evaluated and reported. The node latency with covariance through DDS is
+``bench/bench_node.py --covariance SIGMA`` (same run, on and off).
+"""
+from __future__ import annotations
+
+import argparse
+import statistics
+import sys
+import time
+
+import numpy as np
+
+from circle_collision_ros.core import uncertainty
+from circle_collision_ros.demo.demo_scene import SyntheticScene
+from circle_collision_ros.pipeline.predictor import CollisionPredictor, PredictorConfig
+from circle_collision_ros.pipeline.state_batch import StateBatch
+
+BASE_NS = 1_700_000_000 * 1_000_000_000
+
+
+def covariance_rows(n: int, sigma: float, velocity_sigma: float) -> np.ndarray:
+    """(n, 36): diagonal position variance sigma^2 and velocity variance velocity_sigma^2."""
+    return np.tile(np.diag([sigma ** 2] * 3 + [velocity_sigma ** 2] * 3).ravel(), (n, 1))
+
+
+def frame(scene: SyntheticScene, stamp_ns: int, covariance: np.ndarray | None) -> StateBatch:
+    n = scene.count
+    return StateBatch(ids=[f"b{k:05d}" for k in range(n)], frames=["map"] * n,
+                      stamp_ns=np.full(n, stamp_ns, dtype=np.int64), radius=scene.radii.copy(),
+                      position=scene.p.copy(), velocity=scene.v.copy(), acceleration=scene.a.copy(),
+                      remove=np.zeros(n, dtype=bool), covariance=covariance,
+                      covariance_size=None if covariance is None else np.full(n, 36, dtype=np.int64))
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--bodies", type=int, default=1000)
+    parser.add_argument("--frames", type=int, default=30)
+    parser.add_argument("--sigma", type=float, default=0.2, help="position sigma, m (every axis)")
+    parser.add_argument("--velocity-sigma", type=float, default=0.1, help="velocity sigma, m/s")
+    parser.add_argument("--horizon", type=float, default=5.0)
+    parser.add_argument("--quick", action="store_true", help="5 frames")
+    opts = parser.parse_args()
+    frames = 5 if opts.quick else opts.frames
+    n = opts.bodies
+    scene = SyntheticScene(n, size=float(np.sqrt(n * 333.0)), dimensions=2, seed=n)
+    config = PredictorConfig(horizon=opts.horizon, max_bodies=max(10_000, n), stale_timeout=3600.0)
+    exact, uncertain = CollisionPredictor(config), CollisionPredictor(config)
+    cov = covariance_rows(n, opts.sigma, opts.velocity_sigma)
+    times = {"exact scene": [], "covariance scene": [], "exact pipeline": [], "covariance pipeline": []}
+    core_s = [0.0]
+    core_call = uncertainty.uncertain_pairs
+
+    def timed_core(*args, **kwargs):  # the scene calls it through the module: time the core's share
+        t = time.perf_counter()
+        try:
+            return core_call(*args, **kwargs)
+        finally:
+            core_s[0] += time.perf_counter() - t
+
+    uncertainty.uncertain_pairs = timed_core
+    core_per_frame = []
+    evaluated, reported, contacts = [], [], []
+    for k in range(frames + 2):  # two warm-up frames (numba caches, first allocation), not counted
+        stamp = BASE_NS + k * 33_000_000
+        scene.step(0.033)
+        for name, predictor, c in (("exact", exact, None), ("covariance", uncertain, cov)):
+            batch = frame(scene, stamp, c)
+            core_s[0] = 0.0
+            t0 = time.perf_counter()
+            predictor.receive_batch(batch, stamp)
+            prediction = predictor.predict()
+            t1 = time.perf_counter()
+            prediction.to_cdr()
+            t2 = time.perf_counter()
+            if k >= 2:
+                times[f"{name} scene"].append(t1 - t0)
+                times[f"{name} pipeline"].append(t2 - t0)
+                if c is not None:
+                    core_per_frame.append(core_s[0])
+                    u = prediction.uncertainty
+                    evaluated.append(len(u))
+                    reported.append(len(prediction.columns))
+                    contacts.append(len(prediction.contacts))
+    med = {k: statistics.median(v) * 1e3 for k, v in times.items()}
+    print(f"{n} bodies, {frames} frames (every body moved and restamped each frame), horizon "
+          f"{opts.horizon} s, covariance: position sigma {opts.sigma} m, velocity sigma "
+          f"{opts.velocity_sigma} m/s on every body")
+    print("| step | exact ms (median) | covariance ms (median) | ratio | target |")
+    print("|---|---:|---:|---:|---:|")
+    for step in ("scene", "pipeline"):
+        e, c = med[f"exact {step}"], med[f"covariance {step}"]
+        print(f"| {step} | {e:.2f} | {c:.2f} | {c / e:.2f}x | <= 3x |")
+    core_ms = statistics.median(core_per_frame) * 1e3
+    print(f"of the covariance scene step: core.uncertainty.uncertain_pairs {core_ms:.2f} ms, the rest "
+          f"(exact path + inflated broad phase + propagation + rows) {med['covariance scene'] - core_ms:.2f} ms "
+          f"= {(med['covariance scene'] - core_ms) / med['exact scene']:.2f}x the exact step")
+    print(f"uncertain pairs evaluated per frame (median): {statistics.median(evaluated):.0f}; rows "
+          f"published: {statistics.median(reported):.0f} (of which mean contacts "
+          f"{statistics.median(contacts):.0f})")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,236 @@
+"""The uncertain path of the scene and the published rows (issue 18), without ROS.
+
+Guarantees proved here:
+- the exact path is untouched: with covariance on some bodies, the scene's contacts
+  (times, details, order) equal those of the same scene without covariance, bit for bit;
+- an all-zero covariance is an exact state (the published bytes equal those without it);
+- states and covariances are propagated to the reference time R before the core sees them:
+  a body stamped earlier gives exactly the core's answer on its state moved by
+  p + dt (v + dt/2 a), v + dt a and its covariance moved by M C M^T (computed here with
+  exact rationals), M = [[I, dt I], [0, I]];
+- the inflated broad phase loses nothing: every pair whose probability (the core on every
+  pair, brute force) is above 1e-9 is evaluated by the scene;
+- any covariance content (NaN, inf, huge, wrong length, asymmetric, indefinite) is used or
+  rejected with a reason naming the covariance; nothing raises, nothing published is NaN;
+- markers: probable pairs in the band of their plausible time, alpha scaled by probability;
+- the reporting rule: contacts always; other uncertain pairs iff probability >=
+  probability_threshold (a run-time change applies), as NO_CONTACT rows after the contacts
+  ordered by plausible time; exact rows carry 1.0 / 0.0 / time_to_collision.
+"""
+from __future__ import annotations
+
+from fractions import Fraction
+
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from circle_collision_ros.core.scene import Scene
+from circle_collision_ros.core.uncertainty import uncertain_pairs
+from circle_collision_ros.pipeline.predictor import CollisionPredictor, PredictorConfig
+from circle_collision_ros.pipeline.state_batch import StateBatch
+
+BASE = 1_700_000_000 * 1_000_000_000
+
+
+def _batch(n: int, seed: int, sigma: float, stamp_ns: int = BASE, every: int = 1, spread: float = 8.0):
+    rng = np.random.default_rng(seed)
+    p = np.zeros((n, 3))
+    v = np.zeros((n, 3))
+    a = np.zeros((n, 3))
+    p[:, :2] = rng.uniform(-spread, spread, (n, 2))
+    v[:, :2] = rng.uniform(-2, 2, (n, 2))
+    a[:, :2] = rng.uniform(-0.3, 0.3, (n, 2))
+    cov = np.zeros((n, 36))
+    block = np.diag([sigma ** 2] * 3 + [(sigma / 3) ** 2] * 3)
+    block[0, 3] = block[3, 0] = 0.5 * sigma * sigma / 3  # position-velocity correlation
+    cov[::every] = block.ravel()
+    return StateBatch(ids=[f"b{k:02d}" for k in range(n)], frames=["map"] * n,
+                      stamp_ns=np.full(n, stamp_ns, dtype=np.int64), radius=rng.uniform(0.3, 0.8, n),
+                      position=p, velocity=v, acceleration=a, remove=np.zeros(n, dtype=bool),
+                      covariance=cov, covariance_size=np.full(n, 36, dtype=np.int64))
+
+
+def _predict(batch: StateBatch, **config):
+    predictor = CollisionPredictor(PredictorConfig(stale_timeout=3600.0, **config))
+    predictor.receive_batch(batch, BASE)
+    return predictor, predictor.predict()
+
+
+def _without_covariance(batch: StateBatch) -> StateBatch:
+    return StateBatch(**{**batch.__dict__, "covariance": None, "covariance_size": None})
+
+
+def test_exact_path_untouched_and_zero_covariance_is_exact() -> None:
+    batch = _batch(20, seed=1, sigma=0.3, every=2)
+    _, with_cov = _predict(batch)
+    _, without = _predict(_without_covariance(batch))
+    for field in ("id_a", "id_b", "ttc", "contact_ns", "overlapping", "point", "normal", "closing_speed"):
+        assert np.array_equal(getattr(with_cov.contacts, field), getattr(without.contacts, field)), field
+    assert len(with_cov.uncertainty) > 0
+    zero = StateBatch(**{**batch.__dict__, "covariance": np.zeros_like(batch.covariance)})
+    _, zeroed = _predict(zero)
+    assert len(zeroed.uncertainty) == 0
+    assert zeroed.to_cdr() == without.to_cdr()
+    columns = without.columns
+    assert len(columns) > 0
+    assert (columns.probability == 1.0).all() and (columns.probability_bound == 0.0).all()
+    assert np.array_equal(columns.plausible_ttc, columns.ttc)
+
+
+def _exact_propagated_covariance(C: np.ndarray, dt_ns: int) -> np.ndarray:
+    """M C M^T in exact rationals (dt = dt_ns * 1e-9 as the scene's float), rounded once."""
+    D = C.shape[0] // 2
+    dt = Fraction(float(np.float64(dt_ns) * 1e-9))
+    M = [[Fraction(int(i == j)) + (dt if j == i + D else 0) for j in range(2 * D)] for i in range(2 * D)]
+    c = [[Fraction(float(x)) for x in row] for row in C]
+    mc = [[sum(M[i][k] * c[k][j] for k in range(2 * D)) for j in range(2 * D)] for i in range(2 * D)]
+    return np.array([[float(sum(mc[i][k] * M[j][k] for k in range(2 * D))) for j in range(2 * D)]
+                     for i in range(2 * D)])
+
+
+def test_states_and_covariances_are_propagated_to_the_reference_time() -> None:
+    scene = Scene(5.0, 2)
+    C = np.diag([0.09, 0.04, 0.01, 0.0225])
+    C[0, 2] = C[2, 0] = 0.012
+    old, new = BASE, BASE + 370_000_000
+    scene.merge(["a"], [old], [[0.0, 0.0]], [[1.0, 0.1]], [[0.2, 0.0]], [0.5], [False], 0, C[None])
+    scene.merge(["b"], [new], [[3.5, 1.6]], [[-0.5, 0.0]], [[0.0, 0.0]], [0.5], [False], 0, C[None] * 0.5)
+    u = scene.uncertain_pairs(0.01)
+    assert u.id_a.tolist() == ["a"] and u.id_b.tolist() == ["b"]
+    dt = np.float64(new - old) * 1e-9
+    pa = np.array([[0.0, 0.0]]) + dt * (np.array([[1.0, 0.1]]) + 0.5 * dt * np.array([[0.2, 0.0]]))
+    va = np.array([[1.0, 0.1]]) + dt * np.array([[0.2, 0.0]])
+    moved = _exact_propagated_covariance(C, new - old)
+    scene_moved = scene._C[scene._slot["a"]]  # stored at the body's own stamp ...
+    assert np.array_equal(scene_moved, C)
+    want = uncertain_pairs(pa, va, [[0.2, 0.0]], [0.5], moved[None], [[3.5, 1.6]], [[-0.5, 0.0]], [[0.0, 0.0]],
+                           [0.5], (C * 0.5)[None], 5.0, 0.01)
+    # ... and moved to R: the block formula equals M C M^T up to the rounding of its few operations
+    assert u.probability[0] == pytest.approx(want.collision_probability[0], abs=1e-12)
+    assert u.plausible_ttc[0] == pytest.approx(want.plausible_time[0], abs=1e-9)
+    assert 0.0 < u.probability[0] < 1.0
+
+
+def test_inflated_broad_phase_keeps_every_probable_pair() -> None:
+    batch = _batch(14, seed=5, sigma=0.35, spread=20.0)
+    predictor, prediction = _predict(batch)
+    listed = set(zip(prediction.uncertainty.id_a.tolist(), prediction.uncertainty.id_b.tolist()))
+    n = len(batch)
+    I, J = np.triu_indices(n, 1)
+    C = batch.covariance.reshape(-1, 6, 6)[:, [0, 1, 3, 4]][:, :, [0, 1, 3, 4]]
+    brute = uncertain_pairs(batch.position[I, :2], batch.velocity[I, :2], batch.acceleration[I, :2],
+                            batch.radius[I], C[I], batch.position[J, :2], batch.velocity[J, :2],
+                            batch.acceleration[J, :2], batch.radius[J], C[J], 5.0, 0.01)
+    probable = {(batch.ids[i], batch.ids[j]) for i, j, p in zip(I, J, brute.collision_probability) if p > 1e-9}
+    assert probable, "the scene must have probable pairs for this test to mean anything"
+    assert probable <= listed
+    assert len(listed) < len(I)  # and the broad phase did cull
+
+
+def test_reporting_rule_and_threshold() -> None:
+    batch = _batch(16, seed=9, sigma=0.4, spread=7.0)
+    predictor, prediction = _predict(batch, probability_threshold=0.01)
+    columns = prediction.columns
+    contact = columns.status != 0
+    n_contacts = len(prediction.contacts)
+    assert contact[:n_contacts].all() and not contact[n_contacts:].any()
+    extra = slice(n_contacts, None)
+    assert (columns.probability[extra] >= 0.01).all() and np.isinf(columns.ttc[extra]).all()
+    assert np.all(np.diff(columns.plausible_ttc[extra]) >= 0)
+    u = prediction.uncertainty
+    contact_pairs = set(zip(prediction.contacts.id_a.tolist(), prediction.contacts.id_b.tolist()))
+    want = {pair for pair, p in zip(zip(u.id_a.tolist(), u.id_b.tolist()), u.probability.tolist())
+            if p >= 0.01 and pair not in contact_pairs}
+    assert set(zip(columns.id_a[n_contacts:], columns.id_b[n_contacts:])) == want
+    assert want, "some pair must be reported by probability alone"
+    predictor.reconfigure(probability_threshold=1.0)
+    strict = predictor.predict().columns
+    assert len(strict) == n_contacts  # only mean contacts remain (no miss reaches probability 1)
+
+
+_entry = st.one_of(st.floats(allow_nan=True, allow_infinity=True), st.sampled_from([0.0, 1e-300, 1e30, -1e-12]),
+                   st.floats(-1.0, 1.0))
+
+
+@settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(st.lists(st.one_of(st.lists(_entry, min_size=36, max_size=36), st.lists(_entry, max_size=35),
+                          st.builds(lambda s: (np.diag([s] * 6)).ravel().tolist(), st.floats(0.0, 4.0))),
+                min_size=3, max_size=3), st.sampled_from([2, 3]))
+def test_any_covariance_content_is_used_or_rejected_with_a_reason(covariances, dimensions) -> None:
+    """Random covariance contents through validation, the scene and the encoder: nothing raises,
+    each refused state has a reason naming the covariance, nothing published is NaN."""
+    batch = _batch(3, seed=2, sigma=0.0, spread=1.5)
+    sizes = np.array([len(c) for c in covariances], dtype=np.int64)
+    cov = np.zeros((3, 36))
+    for k, c in enumerate(covariances):
+        if len(c) == 36:
+            cov[k] = c
+    batch = StateBatch(**{**batch.__dict__, "covariance": cov, "covariance_size": sizes})
+    predictor = CollisionPredictor(PredictorConfig(stale_timeout=3600.0, dimensions=dimensions))
+    report = predictor.receive_batch(batch, BASE)
+    for rejection in report.rejected:
+        assert "covariance" in rejection.reason
+    prediction = predictor.predict()
+    c = prediction.columns
+    for name in ("ttc", "closing_speed", "probability", "probability_bound", "plausible_ttc"):
+        assert not np.isnan(getattr(c, name)).any(), name
+    assert ((c.probability >= 0.0) & (c.probability <= 1.0)).all()
+    prediction.to_cdr()
+
+
+def test_raw_bytes_beyond_the_bound_are_decoded_then_rejected_or_refused() -> None:
+    """rclpy cannot send more than 36 values, but raw bytes can claim any count: a count whose
+    values are present is decoded and the state rejected with its reason; a count the buffer
+    cannot hold is a CdrError (nothing allocated for it)."""
+    from circle_collision_msgs.msg import CircleState, CircleStateArray
+    from circle_collision_ros.pipeline.cdr_codec import CdrError, decode_states
+    from circle_collision_ros.pipeline.state_validation import check_batch
+    from tests.reliability.wire import Body, encode_array, encode_state
+
+    good = Body("g", stamp_ns=BASE, covariance=tuple(np.eye(6).ravel() * 0.01))
+    long = Body("x", stamp_ns=BASE, covariance=(0.01,) * 40)
+    for big_endian in (False, True):
+        batch = decode_states(encode_array([good, long, Body("h", stamp_ns=BASE)], BASE, big_endian=big_endian),
+                              CircleStateArray)
+        assert batch.covariance_size.tolist() == [36, 40, 0]
+        check = check_batch(batch, frame_id="map", now_ns=None, dimensions=2)
+        assert check.good.tolist() == [True, False, True] and check.uncertain.tolist() == [True, False, False]
+        assert check.rejections[0].reason == "covariance has 40 values (expected 0 or 36: 6x6 row-major)"
+    data = bytearray(encode_state(Body("x", stamp_ns=BASE)))
+    data[-4:] = (2**32 - 1).to_bytes(4, "little")  # the covariance count
+    with pytest.raises(CdrError):
+        decode_states(bytes(data), CircleState)
+
+
+def test_markers_show_probability_as_opacity() -> None:
+    """Bodies of a probable pair (mean paths miss) take the band of the plausible time with
+    alpha scaled by the probability; exact contacts look as before (full band alpha)."""
+    from rclpy.serialization import deserialize_message
+    from visualization_msgs.msg import MarkerArray
+
+    from circle_collision_ros.node.markers import MarkerBuilder, Urgency
+
+    n = 4
+    cov = np.zeros((n, 36))
+    cov[2] = cov[3] = np.diag([0.09] * 3 + [0.0] * 3).ravel()
+    batch = StateBatch(ids=["a", "b", "c", "d"], frames=["map"] * n, stamp_ns=np.full(n, BASE, dtype=np.int64),
+                       radius=np.full(n, 0.5), position=np.array([[0, 0, 0], [3, 0, 0], [0, 20, 0], [2, 21.1, 0.0]]),
+                       velocity=np.array([[1.0, 0, 0], [0, 0, 0], [1.0, 0, 0], [0, 0, 0]]),
+                       acceleration=np.zeros((n, 3)), remove=np.zeros(n, dtype=bool), covariance=cov,
+                       covariance_size=np.full(n, 36, dtype=np.int64))
+    _, prediction = _predict(batch)
+    rows = {(r.id_a, r.id_b): r for r in prediction.rows()}
+    assert rows[("a", "b")].collision_probability == 1.0 and rows[("c", "d")].status == 0
+    p = rows[("c", "d")].collision_probability
+    assert 0.0 < p < 1.0
+    markers = deserialize_message(MarkerBuilder(2).build(prediction), MarkerArray).markers
+    bodies = {m.id: m.color for m in markers if m.ns == "bodies"}
+    colours = list(bodies.values())  # ids follow the id order a, b, c, d
+    assert colours[0].a == pytest.approx(Urgency.WARNING[3]) and colours[1].a == pytest.approx(Urgency.WARNING[3])
+    band = Urgency.colours(np.array([rows[("c", "d")].plausible_time_to_collision]))[0]
+    for c in colours[2:]:
+        assert (c.r, c.g, c.b) == pytest.approx(tuple(band[:3]))
+        assert c.a == pytest.approx(band[3] * Urgency.opacity(np.array([p]))[0], rel=1e-6)
+        assert c.a < band[3]
