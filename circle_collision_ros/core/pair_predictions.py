@@ -16,6 +16,7 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+from numba import njit
 
 from circle_collision_ros.core import broad_phase as _bp
 from circle_collision_ros.core.contact import contact_details
@@ -72,13 +73,59 @@ def validate_bodies(positions, velocities, accelerations, radii):
     if v.shape != p.shape or a.shape != p.shape or r.shape != p.shape[:1]:
         raise ValueError(f"shape mismatch: positions {p.shape}, velocities {v.shape}, "
                          f"accelerations {a.shape}, radii {r.shape}")
-    ok = (np.isfinite(p).all(axis=1) & np.isfinite(v).all(axis=1)
-          & np.isfinite(a).all(axis=1) & np.isfinite(r) & (r >= 0.0))
-    if not ok.all():
-        bad = np.flatnonzero(~ok)
+    p, v, a, r = (np.ascontiguousarray(x) for x in (p, v, a, r))
+    if _n_bad_rows(p, v, a, r):
+        bad = np.flatnonzero(_bad_rows(p, v, a, r))
         shown = ", ".join(str(int(b)) for b in bad[:20]) + (" ..." if bad.size > 20 else "")
         raise ValueError(f"non-finite state or negative radius in {bad.size} row(s): {shown}")
     return p, v, a, r
+
+
+@njit(cache=True, nogil=True)
+def _bad_rows(p, v, a, r):
+    """Rows with a non-finite number or a negative radius (one pass, no temporaries)."""
+    n, D = p.shape
+    bad = np.empty(n, dtype=np.bool_)
+    for i in range(n):
+        s = r[i]
+        for k in range(D):
+            s += p[i, k] + v[i, k] + a[i, k]
+        # s - s is NaN iff some term is inf or NaN (inf - inf = NaN)
+        bad[i] = not (s - s == 0.0 and r[i] >= 0.0)
+    return bad
+
+
+@njit(cache=True, nogil=True)
+def _n_bad_rows(p, v, a, r):
+    return np.count_nonzero(_bad_rows(p, v, a, r))
+
+
+@njit(cache=True, nogil=True)
+def _pair_rows(p, v, a, r, I, J):
+    """(p[I], v[I], a[I], r[I], p[J], v[J], a[J], r[J]) in one pass over the pairs."""
+    m = I.shape[0]
+    D = p.shape[1]
+    pa = np.empty((m, D))
+    va = np.empty((m, D))
+    aa = np.empty((m, D))
+    pb = np.empty((m, D))
+    vb = np.empty((m, D))
+    ab = np.empty((m, D))
+    ra = np.empty(m)
+    rb = np.empty(m)
+    for q in range(m):
+        i = I[q]
+        j = J[q]
+        ra[q] = r[i]
+        rb[q] = r[j]
+        for k in range(D):
+            pa[q, k] = p[i, k]
+            va[q, k] = v[i, k]
+            aa[q, k] = a[i, k]
+            pb[q, k] = p[j, k]
+            vb[q, k] = v[j, k]
+            ab[q, k] = a[j, k]
+    return pa, va, aa, ra, pb, vb, ab, rb
 
 
 def _check_horizon(horizon) -> float:
@@ -148,13 +195,13 @@ def predict_all_pairs(positions, velocities, accelerations, radii, horizon: floa
     lo, hi = _bp.swept_bounds(p, v, a, r, 0.0, h)
     I, J, n_box = _bp.candidate_pairs(lo, hi, p=p, v=v, a=a, r=r, tref=np.zeros(n),
                                       t_start=0.0, t_end=h, method=method)
-    ttc = narrow_on_pairs(p[I], v[I], a[I], r[I], p[J], v[J], a[J], r[J], h)
+    ttc = narrow_on_pairs(*_pair_rows(p, v, a, r, I, J), h)
     hit = ttc <= h
     I, J, ttc = I[hit], J[hit], ttc[hit]
-    order = np.argsort(I * np.int64(n) + J, kind="stable")  # (i, j) order, then
-    order = order[np.argsort(ttc[order], kind="stable")]   # stable by ttc (faster than lexsort)
+    order = np.argsort(I * np.int64(n) + J)  # (i, j) order (keys unique: any sort), then
+    order = order[np.argsort(ttc[order], kind="stable")]  # stable by ttc (faster than lexsort)
     I, J, ttc = I[order], J[order], ttc[order]
-    point, normal, cs = details_on_pairs(p[I], v[I], a[I], r[I], p[J], v[J], a[J], r[J], ttc)
+    point, normal, cs = details_on_pairs(*_pair_rows(p, v, a, r, I, J), ttc)
     res = PairPredictions(I, J, ttc, point, normal, cs)
     if return_stats:
         return res, {"n_box": int(n_box), "n_candidates": int(hit.shape[0])}
