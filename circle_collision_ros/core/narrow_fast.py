@@ -64,11 +64,13 @@ from numba.core.compiler_lock import global_compiler_lock
 from numba.extending import overload, register_jitable
 
 from circle_collision_ros.core.narrow_dd import _exponent, _pow2
+from circle_collision_ros.core.narrow_straight import _straight_rel
 from circle_collision_ros.core.narrow_eval import (
     _EPS,
     _F_ERR,
     _INF,
     _NAN,
+    UNDECIDED,
     _c_bound,
     _c_err,
     _dot,
@@ -87,7 +89,6 @@ from circle_collision_ros.core.narrow_eval import (
     _valid,
 )
 
-UNDECIDED = -1.0  # never a result of the robust solver (>= 0, inf or NaN)
 
 # Newton steps on c and float64 model steps for the entry root (written out
 # in _fast_rel; tests/core/test_narrow_fast.py checks the counts).  Measured on the benchmark mix (2-D, H = 10 s): 3 / 4 / 5 / 7
@@ -450,3 +451,61 @@ def fast_rows(pa, va, aa, ra, pb, vb, ab, rb, Hs, hofs, out, i0, m, Z):
         h = Hs[np.uint64(hofs + jj)]
         h = h if _valid(chk, ra[i], rb[i], h) else _NAN
         out[i] = _fast_rel(Ph, Pl, Vh, Vl, Ah, Al, Rh, Rl, h)
+
+
+def _raw_straight(aa, ab, i, Z):
+    """Row i (flat (n, D) views, D = len(Z)) has a_a == a_b exactly, so its
+    relative acceleration (and the scaled one) is exactly 0."""
+
+
+@overload(_raw_straight, inline="always")
+def _ov_raw_straight(aa, ab, i, Z):
+    if Z.count == 2:
+        def impl2(aa, ab, i, Z):
+            x = np.uint64(2) * i
+            return (aa[x] == ab[x]) & (aa[x + np.uint64(1)] == ab[x + np.uint64(1)])
+        return impl2
+
+    def impl3(aa, ab, i, Z):
+        x = np.uint64(3) * i
+        return ((aa[x] == ab[x]) & (aa[x + np.uint64(1)] == ab[x + np.uint64(1)])
+                & (aa[x + np.uint64(2)] == ab[x + np.uint64(2)]))
+    return impl3
+
+
+@njit(cache=True, error_model="numpy")
+def count_straight(aa, ab, i0, m, Z):
+    """How many of rows i0 <= i < i0 + m have da == 0 exactly (a_a == a_b)."""
+    aa = aa.reshape(-1)
+    ab = ab.reshape(-1)
+    c = 0
+    for jj in range(m):
+        c += _raw_straight(aa, ab, np.uint64(i0 + jj), Z)
+    return c
+
+
+# The straight loop: the rows with da == 0 through narrow_straight's
+# branch-free closed form, vectorised like fast_rows.  It writes only those
+# rows; with `keep` the others keep what fast_rows wrote, else they get
+# UNDECIDED.  A straight row that fast_rows already decided (its box cull or
+# the overlap test, certified) keeps that answer if the closed form leaves it
+# undecided.
+@njit(cache=True, error_model="numpy", pipeline_class=_Interleaved2)
+def straight_rows(pa, va, aa, ra, pb, vb, ab, rb, Hs, hofs, out, i0, m, Z, keep):
+    """out[i] = straight-path result (or UNDECIDED) of the rows with da == 0
+    among i0 <= i < i0 + m (layout as ``fast_rows``)."""
+    pa = pa.reshape(-1)
+    va = va.reshape(-1)
+    aa = aa.reshape(-1)
+    pb = pb.reshape(-1)
+    vb = vb.reshape(-1)
+    ab = ab.reshape(-1)
+    for jj in range(m):
+        i = np.uint64(i0 + jj)
+        chk, Ph, Pl, Vh, Vl, Ah, Al, Rh, Rl = _load(pa, va, aa, ra, pb, vb, ab, rb, i, Z)
+        h = Hs[np.uint64(hofs + jj)]
+        h = h if _valid(chk, ra[i], rb[i], h) else _NAN
+        res = _straight_rel(Ph, Pl, Vh, Vl, Ah, Al, Rh, Rl, h)
+        st = _raw_straight(aa, ab, i, Z)
+        old = out[i] if keep else UNDECIDED
+        out[i] = res if (st & ((res != UNDECIDED) | (not keep))) else old

@@ -58,10 +58,11 @@ import numpy as np
 from numba import njit, objmode, prange, types
 from numba.extending import overload
 
-from circle_collision_ros.core.narrow_eval import _INF, _NAN, _rel2, _rel3, _valid
+from circle_collision_ros.core.narrow_eval import _INF, _NAN, UNDECIDED, _rel2, _rel3, _valid
 from circle_collision_ros.core.narrow_exact import exact_first_contact
-from circle_collision_ros.core.narrow_fast import UNDECIDED, _fast_rel, fast_rows
+from circle_collision_ros.core.narrow_fast import _fast_rel, count_straight, fast_rows, straight_rows
 from circle_collision_ros.core.narrow_robust import _robust_pair2, _robust_pair3
+from circle_collision_ros.core.narrow_straight import _straight_rel
 
 __all__ = ["time_to_collision", "_ttc_scalar", "_ttc_kernel", "_ttc_kernel_h"]
 
@@ -156,10 +157,16 @@ def _block(pa, va, aa, ra, pb, vb, ab, rb, H, out, i0, i1, hb, Z):
     zeros, so each dimension compiles its own chain); hb: scratch of
     >= i1 - i0 floats.  Returns how many rows the robust solver, too, left
     UNDECIDED (``_resolve`` decides them exactly)."""
+    m = i1 - i0
+    n_st = count_straight(aa, ab, i0, m, Z)
+    Hs, hofs = _h_rows(H, hb, i0, m)
+    fast = n_st < m and _any_finite(H, i0, i1)
+    if fast:
+        fast_rows(pa, va, aa, ra, pb, vb, ab, rb, Hs, hofs, out, i0, m, Z)
+    if n_st > 0:
+        straight_rows(pa, va, aa, ra, pb, vb, ab, rb, Hs, hofs, out, i0, m, Z, fast)
     n_und = 0
-    if _any_finite(H, i0, i1):
-        Hs, hofs = _h_rows(H, hb, i0, i1 - i0)
-        fast_rows(pa, va, aa, ra, pb, vb, ab, rb, Hs, hofs, out, i0, i1 - i0, Z)
+    if fast or n_st > 0:
         for i in range(i0, i1):
             if out[i] == UNDECIDED:
                 out[i] = _robust_row(pa, va, aa, ra, pb, vb, ab, rb, _h_at(H, i), i, Z)
@@ -285,13 +292,17 @@ def _ttc_scalar(pax, pay, paz, vax, vay, vaz, aax, aay, aaz, r_a,
     bitwise the same result as ``time_to_collision``; pass 0.0 for z in
     2-D).  NaN for invalid input."""
     t = UNDECIDED
-    if horizon < _INF:
+    straight = (aax == abx) & (aay == aby) & (aaz == abz)
+    if straight or horizon < _INF:
         chk = (pax + pay + paz + vax + vay + vaz + aax + aay + aaz + r_a
                + pbx + pby + pbz + vbx + vby + vbz + abx + aby + abz + r_b)
         h = horizon if _valid(chk, r_a, r_b, horizon) else _NAN
         Ph, Pl, Vh, Vl, Ah, Al, Rh, Rl = _rel3(pax, pay, paz, vax, vay, vaz, aax, aay, aaz, r_a,
                                                pbx, pby, pbz, vbx, vby, vbz, abx, aby, abz, r_b)
-        t = _fast_rel(Ph, Pl, Vh, Vl, Ah, Al, Rh, Rl, h)
+        if straight:
+            t = _straight_rel(Ph, Pl, Vh, Vl, Ah, Al, Rh, Rl, h)
+        else:
+            t = _fast_rel(Ph, Pl, Vh, Vl, Ah, Al, Rh, Rl, h)
     if t == UNDECIDED:
         t = _robust_pair3(pax, pay, paz, vax, vay, vaz, aax, aay, aaz, r_a,
                           pbx, pby, pbz, vbx, vby, vbz, abx, aby, abz, r_b, horizon)
@@ -306,12 +317,16 @@ def _ttc_scalar(pax, pay, paz, vax, vay, vaz, aax, aay, aaz, r_a,
 def _ttc_scalar2(pax, pay, vax, vay, aax, aay, r_a, pbx, pby, vbx, vby, abx, aby, r_b, horizon):
     """Planar twin of ``_ttc_scalar`` (bitwise the same result with z = 0)."""
     t = UNDECIDED
-    if horizon < _INF:
+    straight = (aax == abx) & (aay == aby)
+    if straight or horizon < _INF:
         chk = (pax + pay + vax + vay + aax + aay + r_a + pbx + pby + vbx + vby + abx + aby + r_b)
         h = horizon if _valid(chk, r_a, r_b, horizon) else _NAN
         Ph, Pl, Vh, Vl, Ah, Al, Rh, Rl = _rel2(pax, pay, vax, vay, aax, aay, r_a,
                                                pbx, pby, vbx, vby, abx, aby, r_b)
-        t = _fast_rel(Ph, Pl, Vh, Vl, Ah, Al, Rh, Rl, h)
+        if straight:
+            t = _straight_rel(Ph, Pl, Vh, Vl, Ah, Al, Rh, Rl, h)
+        else:
+            t = _fast_rel(Ph, Pl, Vh, Vl, Ah, Al, Rh, Rl, h)
     if t == UNDECIDED:
         t = _robust_pair2(pax, pay, vax, vay, aax, aay, r_a, pbx, pby, vbx, vby, abx, aby, r_b, horizon)
     if t == UNDECIDED:
