@@ -409,44 +409,53 @@ def _rows_ok(p_a, v_a, a_a, r_a, p_b, v_b, a_b, r_b) -> bool:
             and a_b.flags.c_contiguous and r_b.flags.c_contiguous)
 
 
-_SCALARS = frozenset((float, int, np.float64))
-_SEQS = frozenset((list, tuple, np.ndarray))
+_NOT_ONE_PAIR = -2.0  # _pair_of_arrays*: the arrays are not one pair of length D
 
 
-def _one_pair(p_a, v_a, a_a, r_a, p_b, v_b, a_b, r_b, horizon):
-    """The answer for one pair given as 1-D vectors of length 2 or 3, or None
-    when the arguments are not of that form (the general path then decides
-    or raises its message)."""
-    D = len(p_a) if type(p_a) in _SEQS else 0
-    if D != 2 and D != 3:
-        return None
-    for x in (p_a, v_a, a_a, p_b, v_b, a_b):
-        if type(x) not in _SEQS or len(x) != D or (type(x) is _ND and (x.ndim != 1 or x.dtype != _F8)):
-            return None
-    if type(p_a) is _ND:  # Python floats unpack and type-check faster than numpy scalars
-        p_a, v_a, a_a, p_b, v_b, a_b = (x.tolist() if type(x) is _ND else x
-                                        for x in (p_a, v_a, a_a, p_b, v_b, a_b))
-    fn = _scalar_entry(D)
-    try:
-        return fn(*p_a, *v_a, *a_a, r_a, *p_b, *v_b, *a_b, r_b, horizon)
-    except TypeError:  # e.g. elements that are not numbers: the general path reports it
-        return None
+@njit(cache=True, error_model="numpy")
+def _pair_of_arrays2(p_a, v_a, a_a, r_a, p_b, v_b, a_b, r_b, horizon):
+    """``_ttc_scalar2`` on 1-D arrays of length 2 (else _NOT_ONE_PAIR)."""
+    if not (p_a.shape[0] == v_a.shape[0] == a_a.shape[0] == p_b.shape[0] == v_b.shape[0]
+            == a_b.shape[0] == 2):
+        return _NOT_ONE_PAIR
+    return _ttc_scalar2(p_a[0], p_a[1], v_a[0], v_a[1], a_a[0], a_a[1], r_a,
+                        p_b[0], p_b[1], v_b[0], v_b[1], a_b[0], a_b[1], r_b, horizon)
 
 
-def _scalar_entry(D):
-    """``_ttc_scalar2`` / ``_ttc_scalar`` with its all-float64 signature only:
-    compiled (or loaded from the cache) on first use, then no further
-    specialisation -- ints and numpy floats are cast to float64, as the
-    general path's np.asarray(..., float64) does."""
-    fn = _ttc_scalar2 if D == 2 else _ttc_scalar
-    if D not in _SCALAR_READY:
+@njit(cache=True, error_model="numpy")
+def _pair_of_arrays3(p_a, v_a, a_a, r_a, p_b, v_b, a_b, r_b, horizon):
+    """``_ttc_scalar`` on 1-D arrays of length 3 (else _NOT_ONE_PAIR)."""
+    if not (p_a.shape[0] == v_a.shape[0] == a_a.shape[0] == p_b.shape[0] == v_b.shape[0]
+            == a_b.shape[0] == 3):
+        return _NOT_ONE_PAIR
+    return _ttc_scalar(p_a[0], p_a[1], p_a[2], v_a[0], v_a[1], v_a[2], a_a[0], a_a[1], a_a[2], r_a,
+                       p_b[0], p_b[1], p_b[2], v_b[0], v_b[1], v_b[2], a_b[0], a_b[1], a_b[2], r_b,
+                       horizon)
+
+
+def _entry(kind, D):
+    """The one-pair entry point for ("floats" | "arrays", D) with its
+    all-float64 signature(s) only: compiled (or loaded from the cache) on
+    first use, then no further specialisation -- ints and numpy floats are
+    cast to float64, as the general path's np.asarray(..., float64) does;
+    arrays of other types are rejected (TypeError)."""
+    if D not in (2, 3):
+        raise KeyError(D)
+    if kind == "floats":
+        fn = _ttc_scalar2 if D == 2 else _ttc_scalar
         fn.compile((types.float64,) * (15 if D == 2 else 21))
-        fn.disable_compile()
-        _SCALAR_READY.add(D)
+    else:
+        fn = _pair_of_arrays2 if D == 2 else _pair_of_arrays3
+        f8 = types.float64
+        for vec in (f8[::1], f8[:]):  # contiguous first: the exact match of a plain 1-D array
+            fn.compile((vec, vec, vec, f8, vec, vec, vec, f8, f8))
+    fn.disable_compile()
+    (_FLOAT_ENTRIES if kind == "floats" else _ARRAY_ENTRIES)[D] = fn
     return fn
 
 
-_SCALAR_READY: set = set()
+_FLOAT_ENTRIES: dict = {}
+_ARRAY_ENTRIES: dict = {}
 
 
 def time_to_collision(p_a, v_a, a_a, r_a, p_b, v_b, a_b, r_b, horizon=math.inf) -> np.ndarray:
@@ -491,13 +500,32 @@ def time_to_collision(p_a, v_a, a_a, r_a, p_b, v_b, a_b, r_b, horizon=math.inf) 
         If the vector shapes disagree in D, D is not 2 or 3, or the shapes
         do not broadcast.
     """
-    # One pair as 1-D sequences (lists, tuples, 1-D arrays) and scalars: the
-    # one-row scalar entry points (the same kernel code, bitwise the batch
-    # answer) without the array conversions of the general path.
-    if type(r_a) in _SCALARS and type(r_b) in _SCALARS and type(horizon) in _SCALARS:
-        t = _one_pair(p_a, v_a, a_a, r_a, p_b, v_b, a_b, r_b, horizon)
-        if t is not None:
-            return np.array(t)
+    # One pair as 1-D vectors (all lists, all tuples or 1-D float64 arrays) and
+    # numbers: the one-row scalar entry points (the same kernel code, bitwise
+    # the batch answer) without the array conversions of the general path.
+    # Per call: a few type and length checks here, one dispatcher call (numba
+    # checks the argument types: anything else raises TypeError and takes
+    # the general path, which decides or raises its message).
+    tp = type(p_a)
+    if tp is list or tp is tuple:
+        D = len(p_a)
+        if ((D == 2 or D == 3) and type(v_a) is tp and type(a_a) is tp and type(p_b) is tp
+                and type(v_b) is tp and type(a_b) is tp and len(v_a) == D and len(a_a) == D
+                and len(p_b) == D and len(v_b) == D and len(a_b) == D):
+            try:
+                return np.array((_FLOAT_ENTRIES.get(D) or _entry("floats", D))(
+                    *p_a, *v_a, *a_a, r_a, *p_b, *v_b, *a_b, r_b, horizon))
+            except TypeError:
+                pass
+    elif tp is _ND and p_a.ndim == 1 and (p_a.shape[0] == 2 or p_a.shape[0] == 3):
+        D = p_a.shape[0]
+        try:
+            t = (_ARRAY_ENTRIES.get(D) or _entry("arrays", D))(
+                p_a, v_a, a_a, r_a, p_b, v_b, a_b, r_b, horizon)
+            if t != _NOT_ONE_PAIR:
+                return np.array(t)
+        except TypeError:
+            pass
     # Fast path (Scene / node hot path): inputs already in kernel layout and
     # a scalar horizon -- no conversions, no temporaries besides the output.
     th = type(horizon)
