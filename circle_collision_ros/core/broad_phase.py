@@ -36,7 +36,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit
+from numba import njit, prange
 from numba.extending import register_jitable
 
 from circle_collision_ros.core.kinematics import arc_position, arc_velocity
@@ -136,14 +136,16 @@ def _swept_bounds_kernel(p, v, a, r, t0, t1):
 # ---------------------------------------------------------------------------
 
 @njit(cache=True, error_model="numpy", inline="always")
-def _rel_keep(p, v, a, r, tref, i, j, t_start, t_end):
+def _rel_keep(p, v, a, r, tref, i, j, t_start, t_end, D):
     """True unless the pair provably cannot touch in [max(t_start, tref_i, tref_j), t_end].
 
-    Selects instead of branches (the outcome of each branch is data-dependent
-    and mispredicted about every other pair); the values are those of the
-    branching form bit for bit: a body at dt = 0 keeps its state, a vertex
-    time -dv/da that is not inside (0, W) (da = 0: inf or NaN) is replaced by
-    0, where the arc is at dp, already one end of its range."""
+    D = p.shape[1] passed as a constant 2 or 3 (see ``_rel_mask``), so the
+    loop over axes unrolls.  Selects instead of branches where the outcome is
+    data-dependent (mispredicted about every other pair); the values are
+    those of the branching form bit for bit: a vertex time -dv/da that is not
+    inside (0, W) (da = 0: inf or NaN) is replaced by 0, where the arc is at
+    dp, already one end of its range.  (Whether a body is propagated, dt != 0,
+    is the same for most pairs of a call: a branch.)"""
     tp = _fmax(t_start, _fmax(tref[i], tref[j]))
     W = _fmax(t_end - tp, 0.0)
     dti = tp - tref[i]
@@ -152,15 +154,19 @@ def _rel_keep(p, v, a, r, tref, i, j, t_start, t_end):
     dist2 = 0.0
     scale = R
     coord = 0.0
-    for k in range(p.shape[1]):
+    for k in range(D):
         pi = p[i, k]
         vi = v[i, k]
         ai = a[i, k]
         pj = p[j, k]
         vj = v[j, k]
         aj = a[j, k]
-        pi, vi = (pi, vi) if dti == 0.0 else (arc_position(pi, vi, ai, dti), arc_velocity(vi, ai, dti))
-        pj, vj = (pj, vj) if dtj == 0.0 else (arc_position(pj, vj, aj, dtj), arc_velocity(vj, aj, dtj))
+        if dti != 0.0:
+            pi = arc_position(p[i, k], vi, ai, dti)
+            vi = arc_velocity(vi, ai, dti)
+        if dtj != 0.0:
+            pj = arc_position(p[j, k], vj, aj, dtj)
+            vj = arc_velocity(vj, aj, dtj)
         dp = pj - pi
         dv = vj - vi
         da = aj - ai
@@ -234,7 +240,7 @@ def _consider(I, J, k, n_box, i, j, lo, hi, p, v, a, r, tref, t_start, t_end, us
         return I, J, k, n_box
     a_ = min(i, j)
     b_ = max(i, j)
-    if use_rel and not _rel_keep(p, v, a, r, tref, a_, b_, t_start, t_end):
+    if use_rel and not _rel_keep(p, v, a, r, tref, a_, b_, t_start, t_end, p.shape[1]):
         return I, J, k, n_box + 1
     I, J, k = _push(I, J, k, a_, b_)
     return I, J, k, n_box + 1
@@ -311,13 +317,13 @@ def _strip_entries(order, first, last):
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
-def _sweep_strips(lo, hi, ax, first, start, body, p, v, a, r, tref, t_start, t_end, use_rel):
-    """Pairs of all strips: (I, J, n_box), I < J, strip by strip in sweep order.
+def _sweep_strips(lo, hi, ax, first, start, body):
+    """Entry pairs (S, T) of all strips whose bounds overlap, body[S] < body[T].
 
-    Two passes over contiguous per-entry copies (the inner loops then read
-    memory sequentially, not by body index): the bound-overlap test without
+    The inner loop reads contiguous per-entry copies of the bounds (memory in
+    sweep order, not bodies scattered over the scene) and tests without
     branches (a data-dependent branch there mispredicts about every other
-    pair), then the relative test on the overlapping pairs only."""
+    pair)."""
     D = lo.shape[1]
     m = body.shape[0]
     lx = np.empty(m)
@@ -333,8 +339,7 @@ def _sweep_strips(lo, hi, ax, first, start, body, p, v, a, r, tref, t_start, t_e
         for k in range(D):
             elo[e, k] = lo[i, k]
             ehi[e, k] = hi[i, k]
-    # pass 1: entry pairs (S, T) whose bounds overlap, reported in the strip
-    # of the larger first strip only
+    # a pair is reported in the strip of the larger first strip only
     cap = max(16, 4 * m)
     S = np.empty(cap, dtype=np.int64)
     T = np.empty(cap, dtype=np.int64)
@@ -356,36 +361,65 @@ def _sweep_strips(lo, hi, ax, first, start, body, p, v, a, r, tref, t_start, t_e
                 S[n_box] = s
                 T[n_box] = t
                 n_box += ok
-    # pass 2: the relative test on entry-ordered copies of the states
-    I = np.empty(n_box, dtype=np.int64)
-    J = np.empty(n_box, dtype=np.int64)
-    n_out = 0
-    if use_rel:
-        ep = np.empty((m, D))
-        ev = np.empty((m, D))
-        ea = np.empty((m, D))
-        er = np.empty(m)
-        et = np.empty(m)
-        for e in range(m):
-            i = body[e]
-            er[e] = r[i]
-            et[e] = tref[i]
-            for k in range(D):
-                ep[e, k] = p[i, k]
-                ev[e, k] = v[i, k]
-                ea[e, k] = a[i, k]
+    # body a of the relative test is the lower index (as relative_filter)
     for q in range(n_box):
-        s = S[q]
-        t = T[q]
-        # body a of the relative test is the lower index (as relative_filter)
-        if body[s] > body[t]:
-            s, t = t, s
-        if use_rel and not _rel_keep(ep, ev, ea, er, et, s, t, t_start, t_end):
-            continue
-        I[n_out] = body[s]
-        J[n_out] = body[t]
-        n_out += 1
-    return I[:n_out], J[:n_out], n_box
+        if body[S[q]] > body[T[q]]:
+            S[q], T[q] = T[q], S[q]
+    return S[:n_box], T[:n_box]
+
+
+@njit(cache=True, nogil=True)
+def _entry_states(body, p, v, a, r, tref):
+    """The states of the strip entries as contiguous rows (the relative test
+    then reads neighbouring memory, not bodies scattered over the scene)."""
+    m = body.shape[0]
+    D = p.shape[1]
+    ep = np.empty((m, D))
+    ev = np.empty((m, D))
+    ea = np.empty((m, D))
+    er = np.empty(m)
+    et = np.empty(m)
+    for e in range(m):
+        i = body[e]
+        er[e] = r[i]
+        et[e] = tref[i]
+        for k in range(D):
+            ep[e, k] = p[i, k]
+            ev[e, k] = v[i, k]
+            ea[e, k] = a[i, k]
+    return ep, ev, ea, er, et
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def _rel_mask(p, v, a, r, tref, I, J, t_start, t_end):
+    """``_rel_keep`` of pairs (I[q], J[q])."""
+    out = np.empty(I.shape[0], dtype=np.bool_)
+    if p.shape[1] == 2:
+        for q in range(I.shape[0]):
+            out[q] = _rel_keep(p, v, a, r, tref, I[q], J[q], t_start, t_end, 2)
+    else:
+        for q in range(I.shape[0]):
+            out[q] = _rel_keep(p, v, a, r, tref, I[q], J[q], t_start, t_end, 3)
+    return out
+
+
+@njit(cache=True, error_model="numpy", parallel=True)
+def _rel_mask_par(p, v, a, r, tref, I, J, t_start, t_end):
+    """``_rel_mask`` over numba's threads (each pair independent: the same mask)."""
+    out = np.empty(I.shape[0], dtype=np.bool_)
+    if p.shape[1] == 2:
+        for q in prange(I.shape[0]):
+            out[q] = _rel_keep(p, v, a, r, tref, I[q], J[q], t_start, t_end, 2)
+    else:
+        for q in prange(I.shape[0]):
+            out[q] = _rel_keep(p, v, a, r, tref, I[q], J[q], t_start, t_end, 3)
+    return out
+
+
+#: Bound-overlapping pairs from which the relative test runs on numba's
+#: threads (~40 ns per pair serial; below this a parallel launch costs more
+#: than it saves on a busy 2-core machine).
+PARALLEL_MIN_PAIRS = 16384
 
 
 @njit(cache=True, nogil=True)
@@ -415,12 +449,29 @@ def _sweep_axes(lo, hi):
 
 
 @njit(cache=True, nogil=True)
-def _sweep_pairs(lo, hi, ax, ay, order, p, v, a, r, tref, t_start, t_end, use_rel):
+def _sweep_pairs(lo, hi, ax, ay, order):
     """Sort-and-sweep in strips: sweep along axis ax (order: the bodies by
-    lower bound on ax), strips across axis ay."""
+    lower bound on ax), strips across axis ay.  Returns (S, T, body): entry
+    pairs whose bounds overlap and each entry's body."""
     first, last = _strips(lo, hi, ay)
     start, body = _strip_entries(order, first, last)
-    return _sweep_strips(lo, hi, ax, first, start, body, p, v, a, r, tref, t_start, t_end, use_rel)
+    S, T = _sweep_strips(lo, hi, ax, first, start, body)
+    return S, T, body
+
+
+def _sweep(lo, hi, p, v, a, r, tref, t_start, t_end, use_rel):
+    """The sweep generator: (I, J, n_box) as ``candidate_pairs``."""
+    ax, ay = _sweep_axes(lo, hi)
+    order = np.argsort(lo[:, ax])  # numpy's sort: ~3x faster than numba's
+    S, T, body = _sweep_pairs(lo, hi, ax, ay, order)
+    n_box = S.shape[0]
+    if use_rel and n_box:
+        states = _entry_states(body, p, v, a, r, tref)
+        mask = _rel_mask_par if n_box >= PARALLEL_MIN_PAIRS else _rel_mask
+        keep = mask(*states, S, T, t_start, t_end)
+        S = S[keep]
+        T = T[keep]
+    return body[S], body[T], n_box
 
 
 @njit(cache=True, error_model="numpy")
@@ -563,22 +614,12 @@ def candidate_pairs(lo: np.ndarray, hi: np.ndarray, *, p=None, v=None, a=None, r
         e = np.empty(0, dtype=np.int64)
         return e, e.copy(), 0
     if method == "sweep":
-        ax, ay = _sweep_axes(lo, hi)
-        order = np.argsort(lo[:, ax])  # numpy's sort: ~3x faster than numba's
-        return _sweep_pairs(lo, hi, ax, ay, order, p, v, a, r, tref, float(t_start), float(t_end), use_rel)
+        return _sweep(lo, hi, p, v, a, r, tref, float(t_start), float(t_end), use_rel)
     if method == "grid":
         cell, origin = choose_cell_size(lo, hi)
         return _grid_kernel(lo, hi, cell, origin, p, v, a, r, tref, float(t_start), float(t_end),
                             use_rel, _MAX_CELLS_PER_BODY)
     raise ValueError(f"unknown broad-phase method {method!r}")
-
-
-@njit(cache=True, error_model="numpy")
-def _relative_filter_kernel(p, v, a, r, tref, I, J, t_start, t_end):
-    out = np.empty(I.shape[0], dtype=np.bool_)
-    for k in range(I.shape[0]):
-        out[k] = _rel_keep(p, v, a, r, tref, I[k], J[k], t_start, t_end)
-    return out
 
 
 def relative_filter(p, v, a, r, tref, I, J, t_start: float, t_end: float) -> np.ndarray:
@@ -587,7 +628,7 @@ def relative_filter(p, v, a, r, tref, I, J, t_start: float, t_end: float) -> np.
     The same test (and margin) as the one fused into :func:`candidate_pairs`;
     ``I[k]`` plays body a (the narrow phase's ``p_a``).
     """
-    return _relative_filter_kernel(
+    return _rel_mask(
         np.ascontiguousarray(p, dtype=np.float64), np.ascontiguousarray(v, dtype=np.float64),
         np.ascontiguousarray(a, dtype=np.float64), np.ascontiguousarray(r, dtype=np.float64),
         np.ascontiguousarray(tref, dtype=np.float64), np.ascontiguousarray(I, dtype=np.int64),
