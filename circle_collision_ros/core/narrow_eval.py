@@ -214,18 +214,21 @@ def _c(P, V, A, t):
     return _dot(_g(P, V, A, t), _gd(V, A, t))
 
 
-@njit(cache=True, error_model="numpy", inline="always")
-def _q(P, V, A, t):
-    """c'(t) = |g'|^2 + g . da."""
-    gd = _gd(V, A, t)
-    return _dot(gd, gd) + _dot(_g(P, V, A, t), A)
-
-
 @register_jitable(error_model="numpy")
 def _scale(nP, nV, nA, t):
     """S(t) = |dp| + |t| (|dv| + |t| |da| / 2): the scale of the terms of g(t)."""
     at = abs(t)
     return nP + at * (nV + 0.5 * at * nA)
+
+
+@register_jitable(error_model="numpy")
+def _f0_err(P2, R2):
+    """Error bound of the float64 f(0) = |dp|^2 - R^2 from the high parts
+    (P2 = dp.dp, R2 = Rh^2): < 8 eps (P2 + R2) (rounding of the squares and
+    sums, the dropped low parts <= u).  Beyond it every solver decides on the
+    float sign (overlap -> 0.0, or f(0) > 0); within it the robust solver
+    takes the double-double value, the branch-free paths leave the row."""
+    return 8.0 * _EPS * (P2 + R2)
 
 
 @register_jitable(error_model="numpy")

@@ -1,7 +1,7 @@
 """Certified branch-free fast path of the narrow phase (SIMD-vectorised).
 
-For most pairs of a scene (finite horizon ``H``, relative acceleration
-``|da| > 0``) the first-contact time follows from a *fixed* sequence of
+For most accelerating pairs of a scene (finite horizon ``H``, relative
+acceleration ``|da| > 0``) the first-contact time follows from a *fixed* sequence of
 float64 steps.  ``_fast_rel`` runs that sequence with selects instead of
 branches, so the batch kernels' loop over rows compiles to SIMD code (LLVM
 vectorises it: 4 or 8 rows per instruction), and it certifies each answer:
@@ -51,6 +51,13 @@ LLVM vectorise it took, each measured on the benchmark mix:
 
 2-D: ~25 ns/row in the loop, ~28 ns/row for a whole serial batch kernel,
 against ~130 ns/row for the robust solver alone.
+
+Rows with da == 0 exactly (constant relative velocity) get their own loop,
+``straight_rows``, over ``narrow_straight``'s branch-free closed form (the
+sequence above needs |da| > 0): the same loads and compiler options, any
+horizon.  On bench_core.py's mix with da = 0 it is ~0.5x the cost per row of
+the accelerating mix in the same run (was ~1.3-1.7x through the robust
+solver).
 """
 from __future__ import annotations
 
@@ -74,6 +81,7 @@ from circle_collision_ros.core.narrow_eval import (
     _c_bound,
     _c_err,
     _dot,
+    _f0_err,
     _f_dd_inline,
     _g,
     _gd,
@@ -205,11 +213,10 @@ def _fast_rel(Ph, Pl, Vh, Vl, Ah, Al, Rh, Rl, H):
     nV = math.sqrt(_dot(Vh, Vh))
     nA = math.sqrt(A2)
 
-    # ---- 0. t = 0.  Error of the float f0 < 8 eps (P2 + R2) (high parts,
-    # dropped low parts <= u, rounding): the robust solver's own threshold,
-    # beyond which it decides on the float sign exactly like this.
+    # ---- 0. t = 0: the float sign of f0 beyond its error bound (_f0_err),
+    # the robust solver's own threshold, beyond which it decides exactly so.
     f0 = P2 - R2
-    e0 = 8.0 * _EPS * (P2 + R2)
+    e0 = _f0_err(P2, R2)
     overlap = f0 < -e0
     ok = (f0 > e0) & (A2 > 0.0) & (H < _INF)
 

@@ -18,8 +18,11 @@ This module holds the public entry points and the batch plumbing; the
 solvers are:
 
 * ``narrow_fast``: a certified branch-free version of the method, one SIMD
-  loop over the rows of a batch with a finite horizon (decides ~99 % of a
-  typical batch, leaves the rest UNDECIDED);
+  loop over the accelerating rows (da != 0) of a batch with a finite horizon
+  (decides ~99 % of a typical batch, leaves the rest UNDECIDED), and one over
+  the constant-velocity rows (da == 0, any horizon) running
+  ``narrow_straight``'s certified closed form (the robust solver and the
+  scalar entry points call the same function for such rows);
 * ``narrow_robust``: the robust solver, one row at a time, every decision
   certified against rigorous rounding bounds (rows it cannot certify stay
   UNDECIDED -- well under 0.1 % of the benchmark mixes, see
@@ -72,13 +75,16 @@ __all__ = ["time_to_collision", "_ttc_scalar", "_ttc_kernel", "_ttc_kernel_h"]
 # out (n,).  One per dimension (a planar-only process never compiles or
 # loads the 3-D chain), serial or multi-threaded.
 #
-# Rows go in blocks of <= _BLOCK: the fast path (narrow_fast) runs over the
-# block as one vectorised loop, then the rows it left UNDECIDED go to the
-# robust solver; the kernels return how many rows that leaves UNDECIDED, and
-# _run decides those exactly (narrow_exact, plain Python).  A row's result depends only on the row, never on the
-# batch or kernel it comes in.  Each call of the fast loop costs ~0.5 us of
-# set-up (run-time alias and overflow checks, vector prologue), so blocks of
-# 1024 rows (~2 ns/row less than 256 on the benchmark mix).
+# Rows go in blocks of <= _BLOCK: the fast paths (narrow_fast) run over the
+# block as vectorised loops -- fast_rows for accelerating rows (finite
+# horizon), straight_rows for rows with da == 0 (each loop only where the
+# block has such rows; a cheap vectorised count decides) -- then the rows
+# they left UNDECIDED go to the robust solver; the kernels return how many
+# rows that leaves UNDECIDED, and _run decides those exactly (narrow_exact,
+# plain Python).  A row's result depends only on the row, never on the batch
+# or kernel it comes in.  Each call of a fast loop costs ~0.5 us of set-up
+# (run-time alias and overflow checks, vector prologue), so blocks of 1024
+# rows (~2 ns/row less than 256 on the benchmark mix).
 # --------------------------------------------------------------------------
 _BLOCK = 1024
 
@@ -281,7 +287,8 @@ def _resolve(n_und, pa, va, aa, ra, pb, vb, ab, rb, H, out):
 
 # The scalar entry points run a batch row's steps on one row without the
 # batch loop (no scratch arrays, no vector-loop set-up, ~0.5 us): the fast
-# path's _fast_rel (finite horizon), the robust solver for what it leaves
+# path's _fast_rel (finite horizon) or, for da == 0, _straight_rel (any
+# horizon), the robust solver for what it leaves
 # undecided, the exact decision for the rest.  The arithmetic per row is the
 # same IEEE operations as in the (vectorised) loop, so the result is bitwise
 # the batch answer (tests/core/test_narrow_fast.py checks it).

@@ -74,6 +74,7 @@ from circle_collision_ros.core.narrow_eval import (
     _cross2,
     _dot,
     _entry_step,
+    _f0_err,
     _f_dd,
     _g,
     _gd,
@@ -450,7 +451,7 @@ def _ttc_rel(Ph, Pl, Vh, Vl, Ah, Al, Rh, Rl, H):
     # path, which applies the order-of-contact rule.
     P2 = _dot(Ph, Ph)
     f0 = P2 - Rh * Rh
-    if abs(f0) <= 8.0 * _EPS * (P2 + Rh * Rh):
+    if abs(f0) <= _f0_err(P2, Rh * Rh):
         f0h, f0l = dd_sqr(Rh, Rl)
         f0h, f0l = -f0h, -f0l
         for k in range(len(Ph)):

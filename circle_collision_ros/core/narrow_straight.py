@@ -29,6 +29,7 @@ from circle_collision_ros.core.narrow_eval import (
     _INF,
     UNDECIDED,
     _dot,
+    _f0_err,
     _f_dd_inline,
     _max,
     _reach_miss,
@@ -171,14 +172,14 @@ def _straight(Ph, Pl, Vh, Vl, Ah, Al, Rh, Rl, f0, H):
 @njit(cache=True, error_model="numpy", inline="always")
 def _straight_rel(Ph, Pl, Vh, Vl, Ah, Al, Rh, Rl, H):
     """``_straight`` on the exact relative state of a row with da == 0,
-    including t = 0: f(0) beyond its float error bound 8 eps (|dp|^2 + R^2)
-    (the robust solver's threshold, see ``narrow_robust._ttc_rel``) decides
+    including t = 0: f(0) beyond its float error bound (``_f0_err``, the
+    robust solver's threshold, see ``narrow_robust._ttc_rel``) decides
     overlap -> 0.0 or the rest; closer to 0, and for H NaN (a row with
     invalid input), UNDECIDED."""
     P2 = _dot(Ph, Ph)
     R2 = Rh * Rh
     f0 = P2 - R2
-    e0 = 8.0 * _EPS * (P2 + R2)
+    e0 = _f0_err(P2, R2)
     res = _straight(Ph, Pl, Vh, Vl, Ah, Al, Rh, Rl, f0, H)
     res = res if f0 > e0 else UNDECIDED
     res = 0.0 if f0 < -e0 else res

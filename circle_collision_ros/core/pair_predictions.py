@@ -8,7 +8,7 @@ pair, but runs it only on the pairs the broad phase
 narrow phase's own outputs, never recomputed here, so they are bitwise equal.
 
 Cost is O(N log N + candidate pairs) time and memory; no N x N array is built
-and the narrow phase runs in fixed-size chunks.
+and contact details are computed in fixed-size chunks.
 """
 from __future__ import annotations
 
@@ -24,8 +24,9 @@ from circle_collision_ros.core.narrow_phase import time_to_collision
 
 __all__ = ["PairPredictions", "predict_all_pairs"]
 
-#: Pairs per call of the narrow phase and of contact_details: bounds the numpy
-#: temporaries of contact_details (about a dozen (rows, D) arrays per call).
+#: Pairs per call of contact_details: bounds its numpy temporaries (about a
+#: dozen (rows, D) arrays per call).  The narrow phase needs no chunks: its
+#: kernels work in blocks and allocate nothing per row.
 _CHUNK = 1 << 15
 
 
@@ -136,18 +137,12 @@ def _check_horizon(horizon) -> float:
 
 
 def narrow_on_pairs(pa, va, aa, ra, pb, vb, ab, rb, horizon: float) -> np.ndarray:
-    """``time_to_collision`` on row-aligned pair arrays, in memory-bounded chunks."""
-    n = ra.shape[0]
-    out = np.empty(n)
-    for s in range(0, n, _CHUNK):
-        e = min(n, s + _CHUNK)
-        out[s:e] = time_to_collision(pa[s:e], va[s:e], aa[s:e], ra[s:e],
-                                     pb[s:e], vb[s:e], ab[s:e], rb[s:e], horizon)
-    return out
+    """``time_to_collision`` on row-aligned pair arrays (n, D) / (n,)."""
+    return time_to_collision(pa, va, aa, ra, pb, vb, ab, rb, float(horizon))
 
 
 def details_on_pairs(pa, va, aa, ra, pb, vb, ab, rb, t):
-    """``contact_details`` on row-aligned pair arrays (chunked like the narrow phase)."""
+    """``contact_details`` on row-aligned pair arrays, in chunks of ``_CHUNK`` rows."""
     n, D = pa.shape
     point = np.empty((n, D))
     normal = np.empty((n, D))
