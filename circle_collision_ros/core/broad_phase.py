@@ -369,25 +369,22 @@ def _sweep_strips(lo, hi, ax, first, start, body):
 
 
 @njit(cache=True, nogil=True)
-def _entry_states(body, p, v, a, r, tref):
-    """The states of the strip entries as contiguous rows (the relative test
-    then reads neighbouring memory, not bodies scattered over the scene)."""
-    m = body.shape[0]
+def gather_states(idx, p, v, a, r):
+    """(p[idx], v[idx], a[idx], r[idx]) in one pass (contiguous rows)."""
+    m = idx.shape[0]
     D = p.shape[1]
-    ep = np.empty((m, D))
-    ev = np.empty((m, D))
-    ea = np.empty((m, D))
-    er = np.empty(m)
-    et = np.empty(m)
-    for e in range(m):
-        i = body[e]
-        er[e] = r[i]
-        et[e] = tref[i]
-        for k in range(D):
-            ep[e, k] = p[i, k]
-            ev[e, k] = v[i, k]
-            ea[e, k] = a[i, k]
-    return ep, ev, ea, er, et
+    q = np.empty((m, D))
+    w = np.empty((m, D))
+    e = np.empty((m, D))
+    s = np.empty(m)
+    for k in range(m):
+        i = idx[k]
+        s[k] = r[i]
+        for d in range(D):
+            q[k, d] = p[i, d]
+            w[k, d] = v[i, d]
+            e[k, d] = a[i, d]
+    return q, w, e, s
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
@@ -466,7 +463,9 @@ def _sweep(lo, hi, p, v, a, r, tref, t_start, t_end, use_rel):
     S, T, body = _sweep_pairs(lo, hi, ax, ay, order)
     n_box = S.shape[0]
     if use_rel and n_box:
-        states = _entry_states(body, p, v, a, r, tref)
+        # the entries' states as contiguous rows: the relative test then reads
+        # neighbouring memory, not bodies scattered over the scene
+        states = gather_states(body, p, v, a, r) + (tref[body],)
         mask = _rel_mask_par if n_box >= PARALLEL_MIN_PAIRS else _rel_mask
         keep = mask(*states, S, T, t_start, t_end)
         S = S[keep]

@@ -430,6 +430,22 @@ def _ov_load(pa, va, aa, ra, pb, vb, ab, rb, i, Z):
     return impl3
 
 
+@njit(cache=True, error_model="numpy", inline="always")
+def _flat(pa, va, aa, pb, vb, ab):
+    """Flat 1-D views of the (n, D) vector inputs (see below)."""
+    return pa.reshape(-1), va.reshape(-1), aa.reshape(-1), pb.reshape(-1), vb.reshape(-1), ab.reshape(-1)
+
+
+@njit(cache=True, error_model="numpy", inline="always")
+def _row(pa, va, aa, ra, pb, vb, ab, rb, Hs, hofs, jj, i, Z):
+    """(h, exact relative state) of row i = i0 + jj: h its horizon, NaN for a
+    row with invalid input (the fast paths then leave it undecided)."""
+    chk, Ph, Pl, Vh, Vl, Ah, Al, Rh, Rl = _load(pa, va, aa, ra, pb, vb, ab, rb, i, Z)
+    h = Hs[np.uint64(hofs + jj)]
+    h = h if _valid(chk, ra[i], rb[i], h) else _NAN
+    return h, Ph, Pl, Vh, Vl, Ah, Al, Rh, Rl
+
+
 # The loop reads the (n, D) input arrays through flat 1-D views with a
 # constant stride D and indexes with uint64: with 2-D indexing LLVM versions
 # the loop on "row stride == 1" (false for (n, 2) rows) and always ran the
@@ -445,18 +461,10 @@ def fast_rows(pa, va, aa, ra, pb, vb, ab, rb, Hs, hofs, out, i0, m, Z):
     C-contiguous float64; row i's horizon is Hs[hofs + i - i0].  Rows with
     invalid input come out UNDECIDED.
     """
-    pa = pa.reshape(-1)
-    va = va.reshape(-1)
-    aa = aa.reshape(-1)
-    pb = pb.reshape(-1)
-    vb = vb.reshape(-1)
-    ab = ab.reshape(-1)
+    pa, va, aa, pb, vb, ab = _flat(pa, va, aa, pb, vb, ab)
     for jj in range(m):
         i = np.uint64(i0 + jj)
-        chk, Ph, Pl, Vh, Vl, Ah, Al, Rh, Rl = _load(pa, va, aa, ra, pb, vb, ab, rb, i, Z)
-        # an invalid row gets H = NaN: the fast path leaves it undecided
-        h = Hs[np.uint64(hofs + jj)]
-        h = h if _valid(chk, ra[i], rb[i], h) else _NAN
+        h, Ph, Pl, Vh, Vl, Ah, Al, Rh, Rl = _row(pa, va, aa, ra, pb, vb, ab, rb, Hs, hofs, jj, i, Z)
         out[i] = _fast_rel(Ph, Pl, Vh, Vl, Ah, Al, Rh, Rl, h)
 
 
@@ -501,17 +509,10 @@ def count_straight(aa, ab, i0, m, Z):
 def straight_rows(pa, va, aa, ra, pb, vb, ab, rb, Hs, hofs, out, i0, m, Z, keep):
     """out[i] = straight-path result (or UNDECIDED) of the rows with da == 0
     among i0 <= i < i0 + m (layout as ``fast_rows``)."""
-    pa = pa.reshape(-1)
-    va = va.reshape(-1)
-    aa = aa.reshape(-1)
-    pb = pb.reshape(-1)
-    vb = vb.reshape(-1)
-    ab = ab.reshape(-1)
+    pa, va, aa, pb, vb, ab = _flat(pa, va, aa, pb, vb, ab)
     for jj in range(m):
         i = np.uint64(i0 + jj)
-        chk, Ph, Pl, Vh, Vl, Ah, Al, Rh, Rl = _load(pa, va, aa, ra, pb, vb, ab, rb, i, Z)
-        h = Hs[np.uint64(hofs + jj)]
-        h = h if _valid(chk, ra[i], rb[i], h) else _NAN
+        h, Ph, Pl, Vh, Vl, Ah, Al, Rh, Rl = _row(pa, va, aa, ra, pb, vb, ab, rb, Hs, hofs, jj, i, Z)
         res = _straight_rel(Ph, Pl, Vh, Vl, Ah, Al, Rh, Rl, h)
         st = _raw_straight(aa, ab, i, Z)
         old = out[i] if keep else UNDECIDED

@@ -101,32 +101,9 @@ def _n_bad_rows(p, v, a, r):
     return np.count_nonzero(_bad_rows(p, v, a, r))
 
 
-@njit(cache=True, nogil=True)
 def _pair_rows(p, v, a, r, I, J):
-    """(p[I], v[I], a[I], r[I], p[J], v[J], a[J], r[J]) in one pass over the pairs."""
-    m = I.shape[0]
-    D = p.shape[1]
-    pa = np.empty((m, D))
-    va = np.empty((m, D))
-    aa = np.empty((m, D))
-    pb = np.empty((m, D))
-    vb = np.empty((m, D))
-    ab = np.empty((m, D))
-    ra = np.empty(m)
-    rb = np.empty(m)
-    for q in range(m):
-        i = I[q]
-        j = J[q]
-        ra[q] = r[i]
-        rb[q] = r[j]
-        for k in range(D):
-            pa[q, k] = p[i, k]
-            va[q, k] = v[i, k]
-            aa[q, k] = a[i, k]
-            pb[q, k] = p[j, k]
-            vb[q, k] = v[j, k]
-            ab[q, k] = a[j, k]
-    return pa, va, aa, ra, pb, vb, ab, rb
+    """(p[I], v[I], a[I], r[I], p[J], v[J], a[J], r[J]): the rows of the pairs."""
+    return _bp.gather_states(I, p, v, a, r) + _bp.gather_states(J, p, v, a, r)
 
 
 def _check_horizon(horizon) -> float:
