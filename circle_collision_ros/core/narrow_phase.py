@@ -416,6 +416,7 @@ def _rows_ok(p_a, v_a, a_a, r_a, p_b, v_b, a_b, r_b) -> bool:
             and a_b.flags.c_contiguous and r_b.flags.c_contiguous)
 
 
+_SCALARS = frozenset((float, int, np.float64))
 _NOT_ONE_PAIR = -2.0  # _pair_of_arrays*: the arrays are not one pair of length D
 
 
@@ -514,7 +515,9 @@ def time_to_collision(p_a, v_a, a_a, r_a, p_b, v_b, a_b, r_b, horizon=math.inf) 
     # checks the argument types: anything else raises TypeError and takes
     # the general path, which decides or raises its message).
     tp = type(p_a)
-    if tp is list or tp is tuple:
+    if not (type(r_a) in _SCALARS and type(r_b) in _SCALARS and type(horizon) in _SCALARS):
+        pass  # (a dispatcher's TypeError costs ~100 us: not for a common mismatch)
+    elif tp is list or tp is tuple:
         D = len(p_a)
         if ((D == 2 or D == 3) and type(v_a) is tp and type(a_a) is tp and type(p_b) is tp
                 and type(v_b) is tp and type(a_b) is tp and len(v_a) == D and len(a_a) == D
@@ -524,7 +527,7 @@ def time_to_collision(p_a, v_a, a_a, r_a, p_b, v_b, a_b, r_b, horizon=math.inf) 
                     *p_a, *v_a, *a_a, r_a, *p_b, *v_b, *a_b, r_b, horizon))
             except TypeError:
                 pass
-    elif tp is _ND and p_a.ndim == 1 and (p_a.shape[0] == 2 or p_a.shape[0] == 3):
+    elif tp is _ND and p_a.ndim == 1 and p_a.dtype is _F8 and (p_a.shape[0] == 2 or p_a.shape[0] == 3):
         D = p_a.shape[0]
         try:
             t = (_ARRAY_ENTRIES.get(D) or _entry("arrays", D))(
