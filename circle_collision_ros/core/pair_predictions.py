@@ -88,11 +88,13 @@ def _bad_rows(p, v, a, r):
     n, D = p.shape
     bad = np.empty(n, dtype=np.bool_)
     for i in range(n):
-        s = r[i]
+        # x - x is 0 for a finite x, NaN for inf and NaN (each value on its
+        # own: a sum of finite values may overflow)
+        ok = r[i] - r[i] == 0.0 and r[i] >= 0.0
         for k in range(D):
-            s += p[i, k] + v[i, k] + a[i, k]
-        # s - s is NaN iff some term is inf or NaN (inf - inf = NaN)
-        bad[i] = not (s - s == 0.0 and r[i] >= 0.0)
+            ok = ok and (p[i, k] - p[i, k] == 0.0 and v[i, k] - v[i, k] == 0.0
+                         and a[i, k] - a[i, k] == 0.0)
+        bad[i] = not ok
     return bad
 
 
