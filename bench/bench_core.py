@@ -9,12 +9,14 @@ Usage::
 Pairs: half aimed to collide within ~10 s, half random; 2-D; horizon 10 s.
 Prints ns/pair for ours (``time_to_collision``: threaded from
 ``PARALLEL_MIN_ROWS`` pairs; the serial kernel on all pairs and separately on
-the aimed and the random half), batched ``numpy.linalg.eigvals`` on 4x4
+the aimed and the random half, and on the same mix with da = 0, the
+constant-velocity closed form), batched ``numpy.linalg.eigvals`` on 4x4
 companions, and a Python loop over ``numpy.roots`` (timed on every k-th
 pair, 4000 by default), each the best of several runs (ours: 2 x 25, before
 and after the others; eigvals 5; the loop 3), their ratios to ours threaded and serial, the cost of small batches (one body
 vs 10 neighbours: row arrays = fast path, and broadcast scalar radii =
-general path), and numba's cold-compile vs cached start.
+general path), one pair per call (with a trivial jitted call as the
+same-run baseline) and numba's cold-compile vs cached start.
 """
 from __future__ import annotations
 
@@ -41,6 +43,11 @@ from tests.core.test_narrow_phase_accuracy import mixed_pairs  # noqa: E402
 def make_pairs(n: int, seed: int = 1):
     """The benchmark's 2-D mix: half aimed, half random (tests/core share the generator)."""
     return mixed_pairs(n, 2, seed)
+
+
+@numba.njit(cache=True)
+def _trivial_jit(x):
+    return x
 
 
 def best_of(fn, repeat: int) -> float:
@@ -108,12 +115,18 @@ def main() -> None:
     rand = tuple(np.ascontiguousarray(x[h:]) for x in P)
     t_aimed = best_of(lambda: _ttc_kernel_h(*aimed, H, buf[:h]), repeat)
     t_rand = best_of(lambda: _ttc_kernel_h(*rand, H, buf[:n - h]), repeat)
+    # constant relative velocity (da = 0, the closed-form path): the same
+    # generator with every row's relative acceleration zeroed, serial kernel
+    S = mixed_pairs(n, 2, 1, straight_fraction=1.0)
+    _ttc_kernel_h(*(x[:10] for x in S), H, buf[:10])
+    t_straight = best_of(lambda: _ttc_kernel_h(*S, H, buf), repeat_ours)
     t_eig = best_of(lambda: ttc_companion_eigvals(*P, horizon=H), repeat)
     # every k-th pair: the subsample holds aimed and random pairs alike
     sub = tuple(np.ascontiguousarray(x[::n // nroots][:nroots]) for x in P)
     t_roots = best_of(lambda: ttc_numpy_roots_loop(*sub, horizon=H), 1 if args.quick else 3)
     t_ours = min(t_ours, best_of(lambda: time_to_collision(*P, horizon=H), repeat_ours))
     t_ours1 = min(t_ours1, best_of(lambda: _ttc_kernel_h(*P, H, buf), repeat_ours))
+    t_straight = min(t_straight, best_of(lambda: _ttc_kernel_h(*S, H, buf), repeat_ours))
 
     ours = time_to_collision(*P, horizon=H)
     eig = ttc_companion_eigvals(*P, horizon=H)
@@ -146,9 +159,26 @@ def main() -> None:
     one_list = tuple(x.tolist() if np.ndim(x) else float(x) for x in one)
     one_tuple = tuple(tuple(x) if isinstance(x, list) else x for x in one_list)
 
-    t_one = {"1-D arrays": per_call(one, runs=5), "lists": per_call(one_list, runs=5),
-             "tuples": per_call(one_tuple, runs=5), "(1, D) arrays": per_call(tuple(x[:1] for x in P), runs=5),
-             "1-D arrays, general path": per_call(one, np.array(H), runs=5)}
+    # Interleaved rounds (every case once per round, best round each) with a
+    # same-run baseline: the cheapest call of a jitted function.  On a shared
+    # machine the load changes within seconds; interleaving exposes every
+    # case to the same load, so the ratios to the baseline hold.
+    cases = {"1-D arrays": lambda: time_to_collision(*one, horizon=H),
+             "lists": lambda: time_to_collision(*one_list, horizon=H),
+             "tuples": lambda: time_to_collision(*one_tuple, horizon=H),
+             "(1, D) arrays": lambda: time_to_collision(*(x[:1] for x in P), horizon=H),
+             "1-D arrays, general path": lambda: time_to_collision(*one, horizon=np.array(H)),
+             "trivial jitted call": lambda: _trivial_jit(1.0)}
+    t_one = {k: math.inf for k in cases}
+    for fn in cases.values():
+        fn()
+    for _ in range(7):
+        for k, fn in cases.items():
+            t0 = time.perf_counter()
+            for _ in range(reps):
+                fn()
+            t_one[k] = min(t_one[k], (time.perf_counter() - t0) / reps)
+    t_trivial = t_one.pop("trivial jitted call")
 
     ns = lambda t, m: 1e9 * t / m  # noqa: E731
     rows = [
@@ -156,6 +186,7 @@ def main() -> None:
         ("ours (numba, serial kernel)", ns(t_ours1, n)),
         ("  serial, aimed half only", ns(t_aimed, h)),
         ("  serial, random half only", ns(t_rand, n - h)),
+        ("  serial, da = 0 (same mix, straight)", ns(t_straight, n)),
         ("companion eigvals (batched)", ns(t_eig, n)),
         (f"numpy.roots loop ({nroots} pairs)", ns(t_roots, nroots)),
     ]
@@ -166,7 +197,10 @@ def main() -> None:
         print(f"{name:36s} {v:12.1f} {v / rows[0][1]:15.1f} {v / rows[1][1]:17.1f}")
     print(f"small batch (10 pairs) per call: {t_small * 1e6:.1f} us (row arrays, fast path), "
           f"{t_small_b * 1e6:.1f} us (scalar radii, general path)")
-    print("one pair per call: " + ", ".join(f"{k} {v * 1e6:.2f} us" for k, v in t_one.items()))
+    print(f"constant velocity (da = 0) / accelerating rows, serial kernel: {t_straight / t_ours1:.2f}")
+    print("one pair per call: " + ", ".join(f"{k} {v * 1e6:.2f} us ({v / t_trivial:.1f}x)"
+                                            for k, v in t_one.items())
+          + f"; (Nx): N times the same-run baseline, a trivial jitted call, {t_trivial * 1e6:.2f} us")
     print(f"numba start (import + first call): cold compile {cold:.2f} s, cached {cached:.3f} s")
 
 

@@ -15,7 +15,11 @@
   /proc/self/clear_refs; covers numba's own allocations) and tracemalloc's
   peak (Python/numpy heap only);
 * incremental ``Scene``: one body re-reported (upsert) + ``predictions()``,
-  median and p90 over many updates.
+  median and p90 over many updates;
+* the stages of ``predict_all_pairs`` (broad phase, narrow phase, the rest)
+  and the broad phase's share, printed per N.
+
+``--n 5000 20000`` runs only those body counts and writes nothing.
 """
 from __future__ import annotations
 
@@ -83,6 +87,31 @@ def peak_memory(fn) -> tuple[float, float]:
     return max(rise, 0.0), traced / 2**20
 
 
+def stage_split(p, v, a, r, h, repeat: int) -> dict:
+    """Best-of-``repeat`` ms of predict_all_pairs' stages, run as it runs them:
+    broad phase (swept bounds + candidate pairs), narrow phase (pair rows +
+    time_to_collision), the rest (hit filter, sort, contact details)."""
+    from circle_collision_ros.core import broad_phase as bp
+    from circle_collision_ros.core import pair_predictions as pp
+    n = r.shape[0]
+    tref = np.zeros(n)
+
+    def broad():
+        lo, hi = bp.swept_bounds(p, v, a, r, 0.0, h)
+        return bp.candidate_pairs(lo, hi, p=p, v=v, a=a, r=r, tref=tref, t_start=0.0, t_end=h)
+    I, J, _ = broad()
+
+    def narrow():
+        return pp.narrow_on_pairs(*pp._pair_rows(p, v, a, r, I, J), h)
+    ttc = narrow()
+    tb = best_of(broad, repeat)[0]
+    tn = best_of(narrow, repeat)[0]
+    tt = best_of(lambda: predict_all_pairs(p, v, a, r, h), repeat)[0]
+    return dict(stage_broad_ms=tb * 1e3, stage_narrow_ms=tn * 1e3,
+                stage_rest_ms=max(tt - tb - tn, 0.0) * 1e3, stage_total_ms=tt * 1e3,
+                narrow_rows=int(ttc.shape[0]))
+
+
 def scene_update(p, v, a, r, h, rng, updates: int) -> dict:
     n, dim = p.shape
     sc = Scene(h, dim)
@@ -104,8 +133,8 @@ def scene_update(p, v, a, r, h, rng, updates: int) -> dict:
                 update_p90_ms=float(np.percentile(ts, 90)) * 1e3)
 
 
-def run(quick: bool = False, log=print) -> dict:
-    ns = NS_QUICK if quick else NS_FULL
+def run(quick: bool = False, log=print, ns=None) -> dict:
+    ns = ns or (NS_QUICK if quick else NS_FULL)
     ap_max = ALL_PAIRS_MAX_QUICK if quick else ALL_PAIRS_MAX
     repeat = 2 if quick else 3
     updates = 20 if quick else 100
@@ -139,10 +168,15 @@ def run(quick: bool = False, log=print) -> dict:
                 else:
                     row.update(all_pairs_ms=None, identical=None)
                 row.update(scene_update(p, v, a, r, h, rng, updates))
+                row.update(stage_split(p, v, a, r, h, repeat))
                 rows.append(row)
-                log(f"  {dname:8s} h={h:g} N={n:6d}: broad {tb * 1e3:8.2f} ms"
+                st = row
+                log(f"  {dname:8s} h={h:g} N={n:6d}: predict_all_pairs {tb * 1e3:8.2f} ms"
                     + (f", all pairs {row['all_pairs_ms']:9.1f} ms" if row["all_pairs_ms"] else "")
-                    + f", cull {row['cull_rate']:.2e}, rss +{rss:.1f} MiB, update {row['update_median_ms']:.3f} ms")
+                    + f", cull {row['cull_rate']:.2e}, rss +{rss:.1f} MiB, update {row['update_median_ms']:.3f} ms"
+                    + f" | stages: broad {st['stage_broad_ms']:.2f} ms, narrow {st['stage_narrow_ms']:.2f} ms"
+                    + f", rest {st['stage_rest_ms']:.2f} ms (broad share "
+                    + f"{st['stage_broad_ms'] / max(st['stage_total_ms'], 1e-9):.0%})")
     return dict(rows=rows, all_pairs_max=ap_max, densities=DENSITIES, horizons=list(HORIZONS), ns=list(ns),
                 repeat=repeat, updates=updates)
 
@@ -216,7 +250,11 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true")
     ap.add_argument("--out", default=str(_common.HERE / "results"))
+    ap.add_argument("--n", type=int, nargs="*", help="only these body counts (printed, nothing written)")
     a = ap.parse_args(argv)
+    if a.n:
+        run(a.quick, ns=tuple(a.n))
+        return 0
     out = Path(a.out)
     out.mkdir(parents=True, exist_ok=True)
     res = run(a.quick)

@@ -83,6 +83,44 @@ else:
         return sig, codegen
 
 
+if config.DISABLE_JIT:  # pure-Python debugging mode
+
+    def _next_down(x):
+        """The float64 below a finite x > 0 (bit pattern - 1; 0 for the
+        smallest subnormal): ``nextafter(x, 0)`` without a libm call."""
+        return struct.unpack("<d", struct.pack("<q", struct.unpack("<q", struct.pack("<d", x))[0] - 1))[0]
+
+    def _next_up(x):
+        """The float64 above a finite x >= 0 (bit pattern + 1): ``nextafter(x, inf)``."""
+        return struct.unpack("<d", struct.pack("<q", struct.unpack("<q", struct.pack("<d", x))[0] + 1))[0]
+
+else:
+
+    @intrinsic
+    def _next_down(typingctx, x):  # pragma: no cover - compiled
+        """The float64 below a finite x > 0 (bit pattern - 1; 0 for the
+        smallest subnormal): ``nextafter(x, 0)`` without a libm call, so a
+        loop using it still vectorises.  Meaningless for other x."""
+        sig = types.float64(types.float64)
+
+        def codegen(context, builder, signature, args):
+            bits = builder.bitcast(args[0], _I64)
+            return builder.bitcast(builder.sub(bits, ir.Constant(_I64, 1)), ir.DoubleType())
+
+        return sig, codegen
+
+    @intrinsic
+    def _next_up(typingctx, x):  # pragma: no cover - compiled
+        """The float64 above a finite x >= 0 (bit pattern + 1): ``nextafter(x, inf)``."""
+        sig = types.float64(types.float64)
+
+        def codegen(context, builder, signature, args):
+            bits = builder.bitcast(args[0], _I64)
+            return builder.bitcast(builder.add(bits, ir.Constant(_I64, 1)), ir.DoubleType())
+
+        return sig, codegen
+
+
 @njit(cache=True, error_model="numpy", inline="always")
 def pow2_scales(m: float):
     """Powers of two (s1, s2) with ``m * s1 * s2`` in [2, 4) for a finite

@@ -39,6 +39,7 @@ _F_ERR = 16.0 * _EPS
 _DD_ERR = 16.0 * _EPS * _EPS
 _INF = math.inf
 _NAN = math.nan
+UNDECIDED = -1.0  # a row no certified path decided (never a result: those are >= 0, inf or NaN)
 
 # --------------------------------------------------------------------------
 # exact relative state (the only place absolute coordinates meet)
@@ -213,18 +214,33 @@ def _c(P, V, A, t):
     return _dot(_g(P, V, A, t), _gd(V, A, t))
 
 
-@njit(cache=True, error_model="numpy", inline="always")
-def _q(P, V, A, t):
-    """c'(t) = |g'|^2 + g . da."""
-    gd = _gd(V, A, t)
-    return _dot(gd, gd) + _dot(_g(P, V, A, t), A)
-
-
 @register_jitable(error_model="numpy")
 def _scale(nP, nV, nA, t):
     """S(t) = |dp| + |t| (|dv| + |t| |da| / 2): the scale of the terms of g(t)."""
     at = abs(t)
     return nP + at * (nV + 0.5 * at * nA)
+
+
+@register_jitable(error_model="numpy")
+def _f0_err(P2, R2):
+    """Error bound of the float64 f(0) = |dp|^2 - R^2 from the high parts
+    (P2 = dp.dp, R2 = Rh^2): < 8 eps (P2 + R2) (rounding of the squares and
+    sums, the dropped low parts <= u).  Beyond it every solver decides on the
+    float sign (overlap -> 0.0, or f(0) > 0); within it the robust solver
+    takes the double-double value, the branch-free paths leave the row."""
+    return 8.0 * _EPS * (P2 + R2)
+
+
+@register_jitable(error_model="numpy")
+def _reach_miss(nP, nV, nA, Rh, Rl, H):
+    """True if no contact in [0, H] by the triangle inequality (finite H):
+    |g(t)| >= |dp| - t |dv| - t^2 |da| / 2 >= nP - reach.  The norms of the
+    high parts differ from the exact ones by <= ~3u relative (rounding and
+    the dropped low parts), reach and the difference add ~3u; the margin
+    8 eps (nP + reach) (>= 16u of every term) and R (1 + 4 eps) (R = r_a + r_b
+    rounded) keep it from ever rejecting a real contact."""
+    reach = H * (nV + 0.5 * H * nA)
+    return (H < _INF) & (nP - reach > (Rh + Rl) * (1.0 + 4.0 * _EPS) + 8.0 * _EPS * (nP + reach))
 
 
 @register_jitable(error_model="numpy")

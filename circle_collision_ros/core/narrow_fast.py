@@ -1,7 +1,7 @@
 """Certified branch-free fast path of the narrow phase (SIMD-vectorised).
 
-For most pairs of a scene (finite horizon ``H``, relative acceleration
-``|da| > 0``) the first-contact time follows from a *fixed* sequence of
+For most accelerating pairs of a scene (finite horizon ``H``, relative
+acceleration ``|da| > 0``) the first-contact time follows from a *fixed* sequence of
 float64 steps.  ``_fast_rel`` runs that sequence with selects instead of
 branches, so the batch kernels' loop over rows compiles to SIMD code (LLVM
 vectorises it: 4 or 8 rows per instruction), and it certifies each answer:
@@ -51,6 +51,13 @@ LLVM vectorise it took, each measured on the benchmark mix:
 
 2-D: ~25 ns/row in the loop, ~28 ns/row for a whole serial batch kernel,
 against ~130 ns/row for the robust solver alone.
+
+Rows with da == 0 exactly (constant relative velocity) get their own loop,
+``straight_rows``, over ``narrow_straight``'s branch-free closed form (the
+sequence above needs |da| > 0): the same loads and compiler options, any
+horizon.  On bench_core.py's mix with da = 0 it is ~0.5x the cost per row of
+the accelerating mix in the same run (was ~1.3-1.7x through the robust
+solver).
 """
 from __future__ import annotations
 
@@ -64,14 +71,17 @@ from numba.core.compiler_lock import global_compiler_lock
 from numba.extending import overload, register_jitable
 
 from circle_collision_ros.core.narrow_dd import _exponent, _pow2
+from circle_collision_ros.core.narrow_straight import _straight_rel
 from circle_collision_ros.core.narrow_eval import (
     _EPS,
     _F_ERR,
     _INF,
     _NAN,
+    UNDECIDED,
     _c_bound,
     _c_err,
     _dot,
+    _f0_err,
     _f_dd_inline,
     _g,
     _gd,
@@ -87,7 +97,6 @@ from circle_collision_ros.core.narrow_eval import (
     _valid,
 )
 
-UNDECIDED = -1.0  # never a result of the robust solver (>= 0, inf or NaN)
 
 # Newton steps on c and float64 model steps for the entry root (written out
 # in _fast_rel; tests/core/test_narrow_fast.py checks the counts).  Measured on the benchmark mix (2-D, H = 10 s): 3 / 4 / 5 / 7
@@ -204,11 +213,10 @@ def _fast_rel(Ph, Pl, Vh, Vl, Ah, Al, Rh, Rl, H):
     nV = math.sqrt(_dot(Vh, Vh))
     nA = math.sqrt(A2)
 
-    # ---- 0. t = 0.  Error of the float f0 < 8 eps (P2 + R2) (high parts,
-    # dropped low parts <= u, rounding): the robust solver's own threshold,
-    # beyond which it decides on the float sign exactly like this.
+    # ---- 0. t = 0: the float sign of f0 beyond its error bound (_f0_err),
+    # the robust solver's own threshold, beyond which it decides exactly so.
     f0 = P2 - R2
-    e0 = 8.0 * _EPS * (P2 + R2)
+    e0 = _f0_err(P2, R2)
     overlap = f0 < -e0
     ok = (f0 > e0) & (A2 > 0.0) & (H < _INF)
 
@@ -422,6 +430,22 @@ def _ov_load(pa, va, aa, ra, pb, vb, ab, rb, i, Z):
     return impl3
 
 
+@njit(cache=True, error_model="numpy", inline="always")
+def _flat(pa, va, aa, pb, vb, ab):
+    """Flat 1-D views of the (n, D) vector inputs (see below)."""
+    return pa.reshape(-1), va.reshape(-1), aa.reshape(-1), pb.reshape(-1), vb.reshape(-1), ab.reshape(-1)
+
+
+@njit(cache=True, error_model="numpy", inline="always")
+def _row(pa, va, aa, ra, pb, vb, ab, rb, Hs, hofs, jj, i, Z):
+    """(h, exact relative state) of row i = i0 + jj: h its horizon, NaN for a
+    row with invalid input (the fast paths then leave it undecided)."""
+    chk, Ph, Pl, Vh, Vl, Ah, Al, Rh, Rl = _load(pa, va, aa, ra, pb, vb, ab, rb, i, Z)
+    h = Hs[np.uint64(hofs + jj)]
+    h = h if _valid(chk, ra[i], rb[i], h) else _NAN
+    return h, Ph, Pl, Vh, Vl, Ah, Al, Rh, Rl
+
+
 # The loop reads the (n, D) input arrays through flat 1-D views with a
 # constant stride D and indexes with uint64: with 2-D indexing LLVM versions
 # the loop on "row stride == 1" (false for (n, 2) rows) and always ran the
@@ -437,16 +461,59 @@ def fast_rows(pa, va, aa, ra, pb, vb, ab, rb, Hs, hofs, out, i0, m, Z):
     C-contiguous float64; row i's horizon is Hs[hofs + i - i0].  Rows with
     invalid input come out UNDECIDED.
     """
-    pa = pa.reshape(-1)
-    va = va.reshape(-1)
-    aa = aa.reshape(-1)
-    pb = pb.reshape(-1)
-    vb = vb.reshape(-1)
-    ab = ab.reshape(-1)
+    pa, va, aa, pb, vb, ab = _flat(pa, va, aa, pb, vb, ab)
     for jj in range(m):
         i = np.uint64(i0 + jj)
-        chk, Ph, Pl, Vh, Vl, Ah, Al, Rh, Rl = _load(pa, va, aa, ra, pb, vb, ab, rb, i, Z)
-        # an invalid row gets H = NaN: the fast path leaves it undecided
-        h = Hs[np.uint64(hofs + jj)]
-        h = h if _valid(chk, ra[i], rb[i], h) else _NAN
+        h, Ph, Pl, Vh, Vl, Ah, Al, Rh, Rl = _row(pa, va, aa, ra, pb, vb, ab, rb, Hs, hofs, jj, i, Z)
         out[i] = _fast_rel(Ph, Pl, Vh, Vl, Ah, Al, Rh, Rl, h)
+
+
+def _raw_straight(aa, ab, i, Z):
+    """Row i (flat (n, D) views, D = len(Z)) has a_a == a_b exactly, so its
+    relative acceleration (and the scaled one) is exactly 0."""
+
+
+@overload(_raw_straight, inline="always")
+def _ov_raw_straight(aa, ab, i, Z):
+    if Z.count == 2:
+        def impl2(aa, ab, i, Z):
+            x = np.uint64(2) * i
+            return (aa[x] == ab[x]) & (aa[x + np.uint64(1)] == ab[x + np.uint64(1)])
+        return impl2
+
+    def impl3(aa, ab, i, Z):
+        x = np.uint64(3) * i
+        return ((aa[x] == ab[x]) & (aa[x + np.uint64(1)] == ab[x + np.uint64(1)])
+                & (aa[x + np.uint64(2)] == ab[x + np.uint64(2)]))
+    return impl3
+
+
+@njit(cache=True, error_model="numpy")
+def count_straight(aa, ab, i0, m, Z):
+    """How many of rows i0 <= i < i0 + m have da == 0 exactly (a_a == a_b)."""
+    aa = aa.reshape(-1)
+    ab = ab.reshape(-1)
+    c = 0
+    for jj in range(m):
+        c += _raw_straight(aa, ab, np.uint64(i0 + jj), Z)
+    return c
+
+
+# The straight loop: the rows with da == 0 through narrow_straight's
+# branch-free closed form, vectorised like fast_rows.  It writes only those
+# rows; with `keep` the others keep what fast_rows wrote, else they get
+# UNDECIDED.  A straight row that fast_rows already decided (its box cull or
+# the overlap test, certified) keeps that answer if the closed form leaves it
+# undecided.
+@njit(cache=True, error_model="numpy", pipeline_class=_Interleaved2)
+def straight_rows(pa, va, aa, ra, pb, vb, ab, rb, Hs, hofs, out, i0, m, Z, keep):
+    """out[i] = straight-path result (or UNDECIDED) of the rows with da == 0
+    among i0 <= i < i0 + m (layout as ``fast_rows``)."""
+    pa, va, aa, pb, vb, ab = _flat(pa, va, aa, pb, vb, ab)
+    for jj in range(m):
+        i = np.uint64(i0 + jj)
+        h, Ph, Pl, Vh, Vl, Ah, Al, Rh, Rl = _row(pa, va, aa, ra, pb, vb, ab, rb, Hs, hofs, jj, i, Z)
+        res = _straight_rel(Ph, Pl, Vh, Vl, Ah, Al, Rh, Rl, h)
+        st = _raw_straight(aa, ab, i, Z)
+        old = out[i] if keep else UNDECIDED
+        out[i] = res if (st & ((res != UNDECIDED) | (not keep))) else old

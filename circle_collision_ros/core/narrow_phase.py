@@ -18,8 +18,11 @@ This module holds the public entry points and the batch plumbing; the
 solvers are:
 
 * ``narrow_fast``: a certified branch-free version of the method, one SIMD
-  loop over the rows of a batch with a finite horizon (decides ~99 % of a
-  typical batch, leaves the rest UNDECIDED);
+  loop over the accelerating rows (da != 0) of a batch with a finite horizon
+  (decides ~99 % of a typical batch, leaves the rest UNDECIDED), and one over
+  the constant-velocity rows (da == 0, any horizon) running
+  ``narrow_straight``'s certified closed form (the robust solver and the
+  scalar entry points call the same function for such rows);
 * ``narrow_robust``: the robust solver, one row at a time, every decision
   certified against rigorous rounding bounds (rows it cannot certify stay
   UNDECIDED -- well under 0.1 % of the benchmark mixes, see
@@ -58,10 +61,11 @@ import numpy as np
 from numba import njit, objmode, prange, types
 from numba.extending import overload
 
-from circle_collision_ros.core.narrow_eval import _INF, _NAN, _rel2, _rel3, _valid
+from circle_collision_ros.core.narrow_eval import _INF, _NAN, UNDECIDED, _rel2, _rel3, _valid
 from circle_collision_ros.core.narrow_exact import exact_first_contact
-from circle_collision_ros.core.narrow_fast import UNDECIDED, _fast_rel, fast_rows
+from circle_collision_ros.core.narrow_fast import _fast_rel, count_straight, fast_rows, straight_rows
 from circle_collision_ros.core.narrow_robust import _robust_pair2, _robust_pair3
+from circle_collision_ros.core.narrow_straight import _straight_rel
 
 __all__ = ["time_to_collision", "_ttc_scalar", "_ttc_kernel", "_ttc_kernel_h"]
 
@@ -71,13 +75,16 @@ __all__ = ["time_to_collision", "_ttc_scalar", "_ttc_kernel", "_ttc_kernel_h"]
 # out (n,).  One per dimension (a planar-only process never compiles or
 # loads the 3-D chain), serial or multi-threaded.
 #
-# Rows go in blocks of <= _BLOCK: the fast path (narrow_fast) runs over the
-# block as one vectorised loop, then the rows it left UNDECIDED go to the
-# robust solver; the kernels return how many rows that leaves UNDECIDED, and
-# _run decides those exactly (narrow_exact, plain Python).  A row's result depends only on the row, never on the
-# batch or kernel it comes in.  Each call of the fast loop costs ~0.5 us of
-# set-up (run-time alias and overflow checks, vector prologue), so blocks of
-# 1024 rows (~2 ns/row less than 256 on the benchmark mix).
+# Rows go in blocks of <= _BLOCK: the fast paths (narrow_fast) run over the
+# block as vectorised loops -- fast_rows for accelerating rows (finite
+# horizon), straight_rows for rows with da == 0 (each loop only where the
+# block has such rows; a cheap vectorised count decides) -- then the rows
+# they left UNDECIDED go to the robust solver; the kernels return how many
+# rows that leaves UNDECIDED, and _run decides those exactly (narrow_exact,
+# plain Python).  A row's result depends only on the row, never on the batch
+# or kernel it comes in.  Each call of a fast loop costs ~0.5 us of set-up
+# (run-time alias and overflow checks, vector prologue), so blocks of 1024
+# rows (~2 ns/row less than 256 on the benchmark mix).
 # --------------------------------------------------------------------------
 _BLOCK = 1024
 
@@ -156,10 +163,16 @@ def _block(pa, va, aa, ra, pb, vb, ab, rb, H, out, i0, i1, hb, Z):
     zeros, so each dimension compiles its own chain); hb: scratch of
     >= i1 - i0 floats.  Returns how many rows the robust solver, too, left
     UNDECIDED (``_resolve`` decides them exactly)."""
+    m = i1 - i0
+    n_st = count_straight(aa, ab, i0, m, Z)
+    Hs, hofs = _h_rows(H, hb, i0, m)
+    fast = n_st < m and _any_finite(H, i0, i1)
+    if fast:
+        fast_rows(pa, va, aa, ra, pb, vb, ab, rb, Hs, hofs, out, i0, m, Z)
+    if n_st > 0:
+        straight_rows(pa, va, aa, ra, pb, vb, ab, rb, Hs, hofs, out, i0, m, Z, fast)
     n_und = 0
-    if _any_finite(H, i0, i1):
-        Hs, hofs = _h_rows(H, hb, i0, i1 - i0)
-        fast_rows(pa, va, aa, ra, pb, vb, ab, rb, Hs, hofs, out, i0, i1 - i0, Z)
+    if fast or n_st > 0:
         for i in range(i0, i1):
             if out[i] == UNDECIDED:
                 out[i] = _robust_row(pa, va, aa, ra, pb, vb, ab, rb, _h_at(H, i), i, Z)
@@ -274,7 +287,8 @@ def _resolve(n_und, pa, va, aa, ra, pb, vb, ab, rb, H, out):
 
 # The scalar entry points run a batch row's steps on one row without the
 # batch loop (no scratch arrays, no vector-loop set-up, ~0.5 us): the fast
-# path's _fast_rel (finite horizon), the robust solver for what it leaves
+# path's _fast_rel (finite horizon) or, for da == 0, _straight_rel (any
+# horizon), the robust solver for what it leaves
 # undecided, the exact decision for the rest.  The arithmetic per row is the
 # same IEEE operations as in the (vectorised) loop, so the result is bitwise
 # the batch answer (tests/core/test_narrow_fast.py checks it).
@@ -285,13 +299,17 @@ def _ttc_scalar(pax, pay, paz, vax, vay, vaz, aax, aay, aaz, r_a,
     bitwise the same result as ``time_to_collision``; pass 0.0 for z in
     2-D).  NaN for invalid input."""
     t = UNDECIDED
-    if horizon < _INF:
+    straight = (aax == abx) & (aay == aby) & (aaz == abz)
+    if straight or horizon < _INF:
         chk = (pax + pay + paz + vax + vay + vaz + aax + aay + aaz + r_a
                + pbx + pby + pbz + vbx + vby + vbz + abx + aby + abz + r_b)
         h = horizon if _valid(chk, r_a, r_b, horizon) else _NAN
         Ph, Pl, Vh, Vl, Ah, Al, Rh, Rl = _rel3(pax, pay, paz, vax, vay, vaz, aax, aay, aaz, r_a,
                                                pbx, pby, pbz, vbx, vby, vbz, abx, aby, abz, r_b)
-        t = _fast_rel(Ph, Pl, Vh, Vl, Ah, Al, Rh, Rl, h)
+        if straight:
+            t = _straight_rel(Ph, Pl, Vh, Vl, Ah, Al, Rh, Rl, h)
+        else:
+            t = _fast_rel(Ph, Pl, Vh, Vl, Ah, Al, Rh, Rl, h)
     if t == UNDECIDED:
         t = _robust_pair3(pax, pay, paz, vax, vay, vaz, aax, aay, aaz, r_a,
                           pbx, pby, pbz, vbx, vby, vbz, abx, aby, abz, r_b, horizon)
@@ -306,12 +324,16 @@ def _ttc_scalar(pax, pay, paz, vax, vay, vaz, aax, aay, aaz, r_a,
 def _ttc_scalar2(pax, pay, vax, vay, aax, aay, r_a, pbx, pby, vbx, vby, abx, aby, r_b, horizon):
     """Planar twin of ``_ttc_scalar`` (bitwise the same result with z = 0)."""
     t = UNDECIDED
-    if horizon < _INF:
+    straight = (aax == abx) & (aay == aby)
+    if straight or horizon < _INF:
         chk = (pax + pay + vax + vay + aax + aay + r_a + pbx + pby + vbx + vby + abx + aby + r_b)
         h = horizon if _valid(chk, r_a, r_b, horizon) else _NAN
         Ph, Pl, Vh, Vl, Ah, Al, Rh, Rl = _rel2(pax, pay, vax, vay, aax, aay, r_a,
                                                pbx, pby, vbx, vby, abx, aby, r_b)
-        t = _fast_rel(Ph, Pl, Vh, Vl, Ah, Al, Rh, Rl, h)
+        if straight:
+            t = _straight_rel(Ph, Pl, Vh, Vl, Ah, Al, Rh, Rl, h)
+        else:
+            t = _fast_rel(Ph, Pl, Vh, Vl, Ah, Al, Rh, Rl, h)
     if t == UNDECIDED:
         t = _robust_pair2(pax, pay, vax, vay, aax, aay, r_a, pbx, pby, vbx, vby, abx, aby, r_b, horizon)
     if t == UNDECIDED:
@@ -395,43 +417,53 @@ def _rows_ok(p_a, v_a, a_a, r_a, p_b, v_b, a_b, r_b) -> bool:
 
 
 _SCALARS = frozenset((float, int, np.float64))
-_SEQS = frozenset((list, tuple, np.ndarray))
+_NOT_ONE_PAIR = -2.0  # _pair_of_arrays*: the arrays are not one pair of length D
 
 
-def _one_pair(p_a, v_a, a_a, r_a, p_b, v_b, a_b, r_b, horizon):
-    """The answer for one pair given as 1-D vectors of length 2 or 3, or None
-    when the arguments are not of that form (the general path then decides
-    or raises its message)."""
-    D = len(p_a) if type(p_a) in _SEQS else 0
-    if D != 2 and D != 3:
-        return None
-    for x in (p_a, v_a, a_a, p_b, v_b, a_b):
-        if type(x) not in _SEQS or len(x) != D or (type(x) is _ND and (x.ndim != 1 or x.dtype != _F8)):
-            return None
-    if type(p_a) is _ND:  # Python floats unpack and type-check faster than numpy scalars
-        p_a, v_a, a_a, p_b, v_b, a_b = (x.tolist() if type(x) is _ND else x
-                                        for x in (p_a, v_a, a_a, p_b, v_b, a_b))
-    fn = _scalar_entry(D)
-    try:
-        return fn(*p_a, *v_a, *a_a, r_a, *p_b, *v_b, *a_b, r_b, horizon)
-    except TypeError:  # e.g. elements that are not numbers: the general path reports it
-        return None
+@njit(cache=True, error_model="numpy")
+def _pair_of_arrays2(p_a, v_a, a_a, r_a, p_b, v_b, a_b, r_b, horizon):
+    """``_ttc_scalar2`` on 1-D arrays of length 2 (else _NOT_ONE_PAIR)."""
+    if not (p_a.shape[0] == v_a.shape[0] == a_a.shape[0] == p_b.shape[0] == v_b.shape[0]
+            == a_b.shape[0] == 2):
+        return _NOT_ONE_PAIR
+    return _ttc_scalar2(p_a[0], p_a[1], v_a[0], v_a[1], a_a[0], a_a[1], r_a,
+                        p_b[0], p_b[1], v_b[0], v_b[1], a_b[0], a_b[1], r_b, horizon)
 
 
-def _scalar_entry(D):
-    """``_ttc_scalar2`` / ``_ttc_scalar`` with its all-float64 signature only:
-    compiled (or loaded from the cache) on first use, then no further
-    specialisation -- ints and numpy floats are cast to float64, as the
-    general path's np.asarray(..., float64) does."""
-    fn = _ttc_scalar2 if D == 2 else _ttc_scalar
-    if D not in _SCALAR_READY:
+@njit(cache=True, error_model="numpy")
+def _pair_of_arrays3(p_a, v_a, a_a, r_a, p_b, v_b, a_b, r_b, horizon):
+    """``_ttc_scalar`` on 1-D arrays of length 3 (else _NOT_ONE_PAIR)."""
+    if not (p_a.shape[0] == v_a.shape[0] == a_a.shape[0] == p_b.shape[0] == v_b.shape[0]
+            == a_b.shape[0] == 3):
+        return _NOT_ONE_PAIR
+    return _ttc_scalar(p_a[0], p_a[1], p_a[2], v_a[0], v_a[1], v_a[2], a_a[0], a_a[1], a_a[2], r_a,
+                       p_b[0], p_b[1], p_b[2], v_b[0], v_b[1], v_b[2], a_b[0], a_b[1], a_b[2], r_b,
+                       horizon)
+
+
+def _entry(kind, D):
+    """The one-pair entry point for ("floats" | "arrays", D) with its
+    all-float64 signature(s) only: compiled (or loaded from the cache) on
+    first use, then no further specialisation -- ints and numpy floats are
+    cast to float64, as the general path's np.asarray(..., float64) does;
+    arrays of other types are rejected (TypeError)."""
+    if D not in (2, 3):
+        raise KeyError(D)
+    if kind == "floats":
+        fn = _ttc_scalar2 if D == 2 else _ttc_scalar
         fn.compile((types.float64,) * (15 if D == 2 else 21))
-        fn.disable_compile()
-        _SCALAR_READY.add(D)
+    else:
+        fn = _pair_of_arrays2 if D == 2 else _pair_of_arrays3
+        f8 = types.float64
+        for vec in (f8[::1], f8[:]):  # contiguous first: the exact match of a plain 1-D array
+            fn.compile((vec, vec, vec, f8, vec, vec, vec, f8, f8))
+    fn.disable_compile()
+    (_FLOAT_ENTRIES if kind == "floats" else _ARRAY_ENTRIES)[D] = fn
     return fn
 
 
-_SCALAR_READY: set = set()
+_FLOAT_ENTRIES: dict = {}
+_ARRAY_ENTRIES: dict = {}
 
 
 def time_to_collision(p_a, v_a, a_a, r_a, p_b, v_b, a_b, r_b, horizon=math.inf) -> np.ndarray:
@@ -476,13 +508,34 @@ def time_to_collision(p_a, v_a, a_a, r_a, p_b, v_b, a_b, r_b, horizon=math.inf) 
         If the vector shapes disagree in D, D is not 2 or 3, or the shapes
         do not broadcast.
     """
-    # One pair as 1-D sequences (lists, tuples, 1-D arrays) and scalars: the
-    # one-row scalar entry points (the same kernel code, bitwise the batch
-    # answer) without the array conversions of the general path.
-    if type(r_a) in _SCALARS and type(r_b) in _SCALARS and type(horizon) in _SCALARS:
-        t = _one_pair(p_a, v_a, a_a, r_a, p_b, v_b, a_b, r_b, horizon)
-        if t is not None:
-            return np.array(t)
+    # One pair as 1-D vectors (all lists, all tuples or 1-D float64 arrays) and
+    # numbers: the one-row scalar entry points (the same kernel code, bitwise
+    # the batch answer) without the array conversions of the general path.
+    # Per call: a few type and length checks here, one dispatcher call (numba
+    # checks the argument types: anything else raises TypeError and takes
+    # the general path, which decides or raises its message).
+    tp = type(p_a)
+    if not (type(r_a) in _SCALARS and type(r_b) in _SCALARS and type(horizon) in _SCALARS):
+        pass  # (a dispatcher's TypeError costs ~100 us: not for a common mismatch)
+    elif tp is list or tp is tuple:
+        D = len(p_a)
+        if ((D == 2 or D == 3) and type(v_a) is tp and type(a_a) is tp and type(p_b) is tp
+                and type(v_b) is tp and type(a_b) is tp and len(v_a) == D and len(a_a) == D
+                and len(p_b) == D and len(v_b) == D and len(a_b) == D):
+            try:
+                return np.array((_FLOAT_ENTRIES.get(D) or _entry("floats", D))(
+                    *p_a, *v_a, *a_a, r_a, *p_b, *v_b, *a_b, r_b, horizon))
+            except TypeError:
+                pass
+    elif tp is _ND and p_a.ndim == 1 and p_a.dtype is _F8 and (p_a.shape[0] == 2 or p_a.shape[0] == 3):
+        D = p_a.shape[0]
+        try:
+            t = (_ARRAY_ENTRIES.get(D) or _entry("arrays", D))(
+                p_a, v_a, a_a, r_a, p_b, v_b, a_b, r_b, horizon)
+            if t != _NOT_ONE_PAIR:
+                return np.array(t)
+        except TypeError:
+            pass
     # Fast path (Scene / node hot path): inputs already in kernel layout and
     # a scalar horizon -- no conversions, no temporaries besides the output.
     th = type(horizon)

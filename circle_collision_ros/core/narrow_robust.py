@@ -60,12 +60,9 @@ import math
 
 import numpy as np
 from numba import njit
+from numba.extending import register_jitable
 
-from circle_collision_ros.core.narrow_dd import (
-    dd_add,
-    dd_mul,
-    dd_sqr,
-)
+from circle_collision_ros.core.narrow_dd import dd_add, dd_sqr
 from circle_collision_ros.core.narrow_eval import (
     _DD_ERR,
     _EPS,
@@ -77,18 +74,21 @@ from circle_collision_ros.core.narrow_eval import (
     _cross2,
     _dot,
     _entry_step,
+    _f0_err,
     _f_dd,
     _g,
     _gd,
     _model_err,
     _polish_done,
+    _reach_miss,
     _rel2,
     _rel3,
     _scale,
     _turning_points,
     _valid,
 )
-from circle_collision_ros.core.narrow_fast import UNDECIDED
+from circle_collision_ros.core.narrow_eval import UNDECIDED
+from circle_collision_ros.core.narrow_straight import _straight
 
 
 @njit(cache=True, error_model="numpy")
@@ -390,73 +390,6 @@ def _at_minimum(Ph, Pl, Vh, Vl, Ah, Al, Rh, Rl, lo, s, nP, nV, nA):
     return t
 
 
-@njit(cache=True, error_model="numpy")
-def _straight(Ph, Pl, Vh, Vl, Ah, Al, Rh, Rl, f0, H):
-    """da == 0 exactly: f is a quadratic, closed form + one dd polish."""
-    V2 = _dot(Vh, Vh)
-    if V2 == 0.0:
-        return _INF  # static pair, f0 > 0 (overlap handled by caller)
-    # c0 = dp.dv in double-double: its sign decides approach vs separation
-    ch, cl = 0.0, 0.0
-    for k in range(len(Ph)):
-        a, b = dd_mul(Ph[k], Pl[k], Vh[k], Vl[k])
-        ch, cl = dd_add(ch, cl, a, b)
-    c0 = ch + cl
-    # dd_mul / dd_add: error <= ~8u^2 |dp||dv|; closer to 0 the exact path decides
-    if abs(c0) <= _DD_ERR * math.sqrt(_dot(Ph, Ph) * V2):
-        return UNDECIDED
-    if c0 > 0.0:
-        return _INF  # separating: |g| never decreases
-    # squared miss distance d^2 = |dp x dv|^2 / |dv|^2, cross product in dd
-    # (no cancellation for near-collinear head-on pairs either)
-    cr2 = 0.0
-    for k in range(3 if len(Ph) == 3 else 1):
-        i = (k + 1) % 3 if len(Ph) == 3 else 0  # 2-D: only the z component
-        j = (k + 2) % 3 if len(Ph) == 3 else 1
-        a, b = dd_mul(Ph[i], Pl[i], Vh[j], Vl[j])
-        e, f = dd_mul(Ph[j], Pl[j], -Vh[i], -Vl[i])
-        xh, xl = dd_add(a, b, e, f)
-        x = xh + xl
-        cr2 += x * x
-    d = math.sqrt(cr2 / V2)
-    R = Rh + Rl
-    # d carries <= ~4u relative error (rounded dd cross product, division,
-    # sqrt), R = r_a + r_b rounded u: a miss is proved beyond R (1 + 8 eps).
-    # Closer, the closed form is only a start: the caller certifies the time.
-    if d > R * (1.0 + 8.0 * _EPS):
-        return _INF
-    s = math.sqrt(V2 * max(R - d, 0.0) * (R + d))
-    # f0 / (-c0 + s): both denominator terms are >= 0, no cancellation
-    t = f0 / (s - c0)
-    tm = -c0 / V2  # closest approach; the entry root lies in [0, tm]
-    hi = tm
-    if not (t <= H):
-        # The closed form is not yet polished and may sit a few ulp above
-        # the root (more at grazing incidence), so t > H does not prove the
-        # root is beyond H.  If H >= tm the root (<= tm) is within the
-        # horizon; else f decreases on [0, H] and the dd sign of f(H) decides.
-        if H < tm:
-            fH, _g_unused = _f_dd(Ph, Pl, Vh, Vl, Ah, Al, Rh, Rl, H)
-            SH = math.sqrt(_dot(Ph, Ph)) + H * math.sqrt(V2)
-            eH = _DD_ERR * (SH * SH + R * R)
-            if fH > eH:
-                return _INF
-            if not (fH < -eH):
-                return UNDECIDED
-            hi = H
-        t = min(t, hi)
-    fx, g = _f_dd(Ph, Pl, Vh, Vl, Ah, Al, Rh, Rl, t)  # da == 0 (hi and lo)
-    cc = _dot(g, Vh)
-    den = s - cc
-    if den > 0.0:
-        tn = t + fx / den
-        if tn >= 0.0 and tn <= hi:
-            t = tn
-    if not (t <= H):
-        return _INF
-    return t
-
-
 @njit(cache=True, error_model="numpy", inline="always")
 def _axis_reject(Ph, Vh, Ah, Rp, H):
     """True if some coordinate of g stays beyond +-Rp on all of [0, H].
@@ -518,7 +451,7 @@ def _ttc_rel(Ph, Pl, Vh, Vl, Ah, Al, Rh, Rl, H):
     # path, which applies the order-of-contact rule.
     P2 = _dot(Ph, Ph)
     f0 = P2 - Rh * Rh
-    if abs(f0) <= 8.0 * _EPS * (P2 + Rh * Rh):
+    if abs(f0) <= _f0_err(P2, Rh * Rh):
         f0h, f0l = dd_sqr(Rh, Rl)
         f0h, f0l = -f0h, -f0l
         for k in range(len(Ph)):
@@ -529,6 +462,9 @@ def _ttc_rel(Ph, Pl, Vh, Vl, Ah, Al, Rh, Rl, H):
             return UNDECIDED
     if f0 < 0.0:
         return 0.0
+    if _is_zero(Ah):
+        # da == 0 exactly: the closed form, certified itself (narrow_straight)
+        return _straight(Ph, Pl, Vh, Vl, Ah, Al, Rh, Rl, f0, H)
     t = _ttc_walk(Ph, Pl, Vh, Vl, Ah, Al, Rh, Rl, H, f0, P2)
     if t == _INF or t == UNDECIDED:
         return t
@@ -573,32 +509,30 @@ def _certified(Ph, Pl, Vh, Vl, Ah, Al, Rh, Rl, H, t):
     return fn < -_DD_ERR * (S * S + R2)
 
 
+@register_jitable(error_model="numpy")
+def _is_zero(A):
+    """All components exactly 0."""
+    z = True
+    for k in range(len(A)):
+        z &= A[k] == 0.0
+    return z
+
+
 @njit(cache=True, error_model="numpy")
 def _ttc_walk(Ph, Pl, Vh, Vl, Ah, Al, Rh, Rl, H, f0, P2):
-    """Given f(0) = f0 > 0 certainly: the first contact time (to be
-    certified by the caller), inf (proved) or UNDECIDED."""
+    """Given f(0) = f0 > 0 certainly and da != 0: the first contact time (to
+    be certified by the caller), inf (proved) or UNDECIDED."""
     A2 = _dot(Ah, Ah)
     nP = math.sqrt(P2)
     nV = math.sqrt(_dot(Vh, Vh))
     nA = math.sqrt(A2)
-    if H < _INF:
-        # Cheap exact-safe rejection: for t in [0, H] the triangle inequality
-        # gives |g(t)| >= |dp| - t|dv| - t^2|da|/2 >= nP - reach.  The norms
-        # of the high parts differ from the exact ones by <= ~3u relative
-        # (rounding + dropped low parts), reach and the difference add ~3u;
-        # the 8 eps (nP + reach) margin (>= 16u of every term) and R(1+4eps)
-        # (R = r_a + r_b rounded) keep it from ever rejecting a real contact.
-        reach = H * (nV + 0.5 * H * nA)
-        if nP - reach > (Rh + Rl) * (1.0 + 4.0 * _EPS) + 8.0 * _EPS * (nP + reach):
-            return _INF
+    if _reach_miss(nP, nV, nA, Rh, Rl, H):
+        return _INF
     if A2 == 0.0:
-        # |da|^2 may underflow although da != 0 (components below ~1e-154 of
-        # the scale): then the straight-line answers (inf for a separating
-        # pair, in particular) would ignore a real acceleration: exact path.
-        for k in range(len(Ah)):
-            if Ah[k] != 0.0:
-                return UNDECIDED
-        return _straight(Ph, Pl, Vh, Vl, Ah, Al, Rh, Rl, f0, H)
+        # da != 0 (the caller took da == 0) but |da|^2 underflows (components
+        # below ~1e-154 of the scale): the straight-line answers (inf for a
+        # separating pair, in particular) would ignore a real acceleration.
+        return UNDECIDED
     # Turning points of c (roots of the quadratic q = c', closed form about
     # its vertex t0, _turning_points): they split [0, inf) into pieces on
     # which c is monotone.  Where q(t0) is within its error bound of 0 the

@@ -8,7 +8,7 @@ pair, but runs it only on the pairs the broad phase
 narrow phase's own outputs, never recomputed here, so they are bitwise equal.
 
 Cost is O(N log N + candidate pairs) time and memory; no N x N array is built
-and the narrow phase runs in fixed-size chunks.
+and contact details are computed in fixed-size chunks.
 """
 from __future__ import annotations
 
@@ -16,6 +16,7 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+from numba import njit
 
 from circle_collision_ros.core import broad_phase as _bp
 from circle_collision_ros.core.contact import contact_details
@@ -23,8 +24,9 @@ from circle_collision_ros.core.narrow_phase import time_to_collision
 
 __all__ = ["PairPredictions", "predict_all_pairs"]
 
-#: Pairs per call of the narrow phase and of contact_details: bounds the numpy
-#: temporaries of contact_details (about a dozen (rows, D) arrays per call).
+#: Pairs per call of contact_details: bounds its numpy temporaries (about a
+#: dozen (rows, D) arrays per call).  The narrow phase needs no chunks: its
+#: kernels work in blocks and allocate nothing per row.
 _CHUNK = 1 << 15
 
 
@@ -72,13 +74,38 @@ def validate_bodies(positions, velocities, accelerations, radii):
     if v.shape != p.shape or a.shape != p.shape or r.shape != p.shape[:1]:
         raise ValueError(f"shape mismatch: positions {p.shape}, velocities {v.shape}, "
                          f"accelerations {a.shape}, radii {r.shape}")
-    ok = (np.isfinite(p).all(axis=1) & np.isfinite(v).all(axis=1)
-          & np.isfinite(a).all(axis=1) & np.isfinite(r) & (r >= 0.0))
-    if not ok.all():
-        bad = np.flatnonzero(~ok)
+    p, v, a, r = (np.ascontiguousarray(x) for x in (p, v, a, r))
+    if _n_bad_rows(p, v, a, r):
+        bad = np.flatnonzero(_bad_rows(p, v, a, r))
         shown = ", ".join(str(int(b)) for b in bad[:20]) + (" ..." if bad.size > 20 else "")
         raise ValueError(f"non-finite state or negative radius in {bad.size} row(s): {shown}")
     return p, v, a, r
+
+
+@njit(cache=True, nogil=True)
+def _bad_rows(p, v, a, r):
+    """Rows with a non-finite number or a negative radius (one pass, no temporaries)."""
+    n, D = p.shape
+    bad = np.empty(n, dtype=np.bool_)
+    for i in range(n):
+        # x - x is 0 for a finite x, NaN for inf and NaN (each value on its
+        # own: a sum of finite values may overflow)
+        ok = r[i] - r[i] == 0.0 and r[i] >= 0.0
+        for k in range(D):
+            ok = ok and (p[i, k] - p[i, k] == 0.0 and v[i, k] - v[i, k] == 0.0
+                         and a[i, k] - a[i, k] == 0.0)
+        bad[i] = not ok
+    return bad
+
+
+@njit(cache=True, nogil=True)
+def _n_bad_rows(p, v, a, r):
+    return np.count_nonzero(_bad_rows(p, v, a, r))
+
+
+def _pair_rows(p, v, a, r, I, J):
+    """(p[I], v[I], a[I], r[I], p[J], v[J], a[J], r[J]): the rows of the pairs."""
+    return _bp.gather_states(I, p, v, a, r) + _bp.gather_states(J, p, v, a, r)
 
 
 def _check_horizon(horizon) -> float:
@@ -89,18 +116,12 @@ def _check_horizon(horizon) -> float:
 
 
 def narrow_on_pairs(pa, va, aa, ra, pb, vb, ab, rb, horizon: float) -> np.ndarray:
-    """``time_to_collision`` on row-aligned pair arrays, in memory-bounded chunks."""
-    n = ra.shape[0]
-    out = np.empty(n)
-    for s in range(0, n, _CHUNK):
-        e = min(n, s + _CHUNK)
-        out[s:e] = time_to_collision(pa[s:e], va[s:e], aa[s:e], ra[s:e],
-                                     pb[s:e], vb[s:e], ab[s:e], rb[s:e], horizon)
-    return out
+    """``time_to_collision`` on row-aligned pair arrays (n, D) / (n,)."""
+    return time_to_collision(pa, va, aa, ra, pb, vb, ab, rb, float(horizon))
 
 
 def details_on_pairs(pa, va, aa, ra, pb, vb, ab, rb, t):
-    """``contact_details`` on row-aligned pair arrays (chunked like the narrow phase)."""
+    """``contact_details`` on row-aligned pair arrays, in chunks of ``_CHUNK`` rows."""
     n, D = pa.shape
     point = np.empty((n, D))
     normal = np.empty((n, D))
@@ -148,13 +169,13 @@ def predict_all_pairs(positions, velocities, accelerations, radii, horizon: floa
     lo, hi = _bp.swept_bounds(p, v, a, r, 0.0, h)
     I, J, n_box = _bp.candidate_pairs(lo, hi, p=p, v=v, a=a, r=r, tref=np.zeros(n),
                                       t_start=0.0, t_end=h, method=method)
-    ttc = narrow_on_pairs(p[I], v[I], a[I], r[I], p[J], v[J], a[J], r[J], h)
+    ttc = narrow_on_pairs(*_pair_rows(p, v, a, r, I, J), h)
     hit = ttc <= h
     I, J, ttc = I[hit], J[hit], ttc[hit]
-    order = np.argsort(I * np.int64(n) + J, kind="stable")  # (i, j) order, then
-    order = order[np.argsort(ttc[order], kind="stable")]   # stable by ttc (faster than lexsort)
+    order = np.argsort(I * np.int64(n) + J)  # (i, j) order (keys unique: any sort), then
+    order = order[np.argsort(ttc[order], kind="stable")]  # stable by ttc (faster than lexsort)
     I, J, ttc = I[order], J[order], ttc[order]
-    point, normal, cs = details_on_pairs(p[I], v[I], a[I], r[I], p[J], v[J], a[J], r[J], ttc)
+    point, normal, cs = details_on_pairs(*_pair_rows(p, v, a, r, I, J), ttc)
     res = PairPredictions(I, J, ttc, point, normal, cs)
     if return_stats:
         return res, {"n_box": int(n_box), "n_candidates": int(hit.shape[0])}

@@ -135,3 +135,70 @@ def test_propagate_identity_at_zero():
     q, w = bp.propagate(p, v, a, 2.0)
     assert np.array_equal(q, p + v * 2.0 + 0.5 * a * 2.0 * 2.0)
     assert np.array_equal(w, v + a * 2.0)
+
+
+def _scene_bounds(rng, n, dim, layout):
+    c = rng.uniform(0, 200, (n, dim))
+    ext = rng.lognormal(0, 0.7, (n, dim))
+    if layout == "line":  # every centre on one line across the strips
+        c[:, 1:] = 50.0
+    elif layout == "column":  # every centre on one line along the sweep axis
+        c[:, 0] = 50.0
+    elif layout == "points":  # zero-extent bounds, many coincident
+        c = np.round(c / 20.0) * 20.0
+        ext[:] = 0.0
+    elif layout == "tall":  # some bounds span every strip
+        ext[:7, 1] = 500.0
+    elif layout == "far":  # one body far away: the strip height must not collapse
+        c[0] = 1e9
+    return c - ext, c + ext
+
+
+@pytest.mark.parametrize("dim", [2, 3])
+@pytest.mark.parametrize("layout", ["uniform", "line", "column", "points", "tall", "far"])
+def test_sweep_strips_exact(dim, layout):
+    """The sweep in strips returns exactly the bound-overlapping pairs (brute
+    force), each once, however the centres are laid out across the strips;
+    with states given, exactly those that also pass relative_filter."""
+    rng = np.random.default_rng(len(layout) + dim)
+    n = 300
+    lo, hi = _scene_bounds(rng, n, dim, layout)
+    ref = _brute_overlap(lo, hi)
+    I, J, n_box = bp.candidate_pairs(lo, hi, method="sweep")
+    got = list(zip(I.tolist(), J.tolist()))
+    assert len(got) == len(set(got)) == n_box == len(ref)
+    assert set(got) == ref and np.all(I < J)
+    # relative test: random states whose swept bounds are lo/hi's boxes
+    p = 0.5 * (lo + hi)
+    v = rng.normal(0, 2, (n, dim))
+    a = rng.normal(0, 1, (n, dim))
+    r = rng.uniform(0, 1, n)
+    tref = rng.uniform(-0.5, 0.0, n)
+    I, J, n_box = bp.candidate_pairs(lo, hi, p=p, v=v, a=a, r=r, tref=tref, t_start=0.0, t_end=2.0)
+    RI, RJ = (np.array(x, dtype=np.int64) for x in zip(*sorted(ref)))
+    keep = bp.relative_filter(p, v, a, r, tref, RI, RJ, 0.0, 2.0)
+    assert n_box == len(ref)
+    assert set(zip(I.tolist(), J.tolist())) == set(zip(RI[keep].tolist(), RJ[keep].tolist()))
+
+
+def test_relative_test_threaded_is_serial():
+    """The relative test on numba's threads (from PARALLEL_MIN_PAIRS pairs)
+    keeps exactly the pairs the serial one keeps."""
+    rng = np.random.default_rng(3)
+    n = 4000
+    p = rng.uniform(0, 60, (n, 2))
+    v = rng.normal(0, 3, (n, 2))
+    a = rng.normal(0, 1, (n, 2))
+    r = rng.uniform(0.2, 1.5, n)
+    tref = np.zeros(n)
+    I = rng.integers(0, n, 3 * bp.PARALLEL_MIN_PAIRS)
+    J = rng.integers(0, n, I.size)
+    args = (p, v, a, r, tref, I, J, 0.0, 3.0)
+    assert np.array_equal(bp._rel_mask_par(*args), bp._rel_mask(*args))
+    lo, hi = bp.swept_bounds(p, v, a, r, 0.0, 3.0)
+    I, J, n_box = bp.candidate_pairs(lo, hi, p=p, v=v, a=a, r=r, tref=tref, t_start=0.0, t_end=3.0)
+    assert n_box >= bp.PARALLEL_MIN_PAIRS  # the threaded branch ran
+    ref = _brute_overlap(lo, hi)
+    RI, RJ = (np.array(x, dtype=np.int64) for x in zip(*sorted(ref)))
+    keep = bp.relative_filter(p, v, a, r, tref, RI, RJ, 0.0, 3.0)
+    assert set(zip(I.tolist(), J.tolist())) == set(zip(RI[keep].tolist(), RJ[keep].tolist()))

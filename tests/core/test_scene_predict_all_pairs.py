@@ -188,3 +188,17 @@ def test_collinear_turnaround():
     a = np.array([[0.0, 0.0], -v[1]])  # relative velocity reaches exactly 0 at t = 1 s
     r = np.array([0.36999600089515494, 0.35217189715440045])
     assert len(assert_exact(p, v, a, r, 2.5)) == 0
+
+
+def test_validation_names_only_bad_rows_across_the_float_range():
+    """Rows of huge finite values (whose sums overflow) are valid; rows with
+    inf, NaN or a negative radius are named."""
+    from circle_collision_ros.core.pair_predictions import validate_bodies
+    big = np.finfo(float).max
+    p = np.array([[big, big], [0.0, 0.0], [0.0, np.inf], [1.0, 1.0], [0.0, np.nan]])
+    v = np.array([[big, -big], [0.0, 0.0], [0.0, 0.0], [0.0, 0.0], [0.0, 0.0]])
+    a = np.array([[big, big], [0.0, 0.0], [0.0, 0.0], [0.0, 0.0], [0.0, 0.0]])
+    r = np.array([big, 1.0, 1.0, -1.0, 1.0])
+    with pytest.raises(ValueError, match=r"in 3 row\(s\): 2, 3, 4$"):
+        validate_bodies(p, v, a, r)
+    validate_bodies(p[:2], v[:2], a[:2], r[:2])  # huge but finite: accepted
