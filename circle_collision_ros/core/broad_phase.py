@@ -98,36 +98,42 @@ def swept_bounds(p: np.ndarray, v: np.ndarray, a: np.ndarray, r: np.ndarray,
     return _swept_bounds_kernel(p, v, a, r, t0, t1)
 
 
+@njit(cache=True, nogil=True, error_model="numpy", inline="always")
+def swept_bound_row(p, v, a, r, i, ta, tb, lo, hi, out):
+    """Swept bounds of body ``i`` over the window [ta, tb] into lo/hi[out]: the one
+    per-row rule behind `swept_bounds` and the scene's few-body updates."""
+    D = p.shape[1]
+    tm = max(abs(ta), abs(tb))
+    motion = 0.0
+    coord = 0.0
+    for k in range(D):
+        pk = p[i, k]
+        vk = v[i, k]
+        ak = a[i, k]
+        x0 = arc_position(pk, vk, ak, ta)
+        x1 = arc_position(pk, vk, ak, tb)
+        # the arc's turning point -v/a where inside the window (a = 0:
+        # inf or NaN, never inside)
+        ts = -vk / ak
+        xs = arc_position(pk, vk, ak, ts if (ts > ta) & (ts < tb) else ta)
+        lo[out, k] = _fmin(_fmin(x0, x1), xs)
+        hi[out, k] = _fmax(_fmax(x0, x1), xs)
+        motion += abs(vk) * tm + 0.5 * abs(ak) * tm * tm
+        coord = _fmax(coord, abs(pk))
+    coord += motion
+    pad = r[i] + _REL_MARGIN * (r[i] + motion) + _COORD_MARGIN * coord + _ABS_MARGIN
+    for k in range(D):
+        lo[out, k] -= pad
+        hi[out, k] += pad
+
+
 @njit(cache=True, nogil=True, error_model="numpy")
 def _swept_bounds_kernel(p, v, a, r, t0, t1):
     n, D = p.shape
     lo = np.empty((n, D))
     hi = np.empty((n, D))
     for i in range(n):
-        ta = t0[i]
-        tb = t1[i]
-        tm = max(abs(ta), abs(tb))
-        motion = 0.0
-        coord = 0.0
-        for k in range(D):
-            pk = p[i, k]
-            vk = v[i, k]
-            ak = a[i, k]
-            x0 = arc_position(pk, vk, ak, ta)
-            x1 = arc_position(pk, vk, ak, tb)
-            # the arc's turning point -v/a where inside the window (a = 0:
-            # inf or NaN, never inside)
-            ts = -vk / ak
-            xs = arc_position(pk, vk, ak, ts if (ts > ta) & (ts < tb) else ta)
-            lo[i, k] = _fmin(_fmin(x0, x1), xs)
-            hi[i, k] = _fmax(_fmax(x0, x1), xs)
-            motion += abs(vk) * tm + 0.5 * abs(ak) * tm * tm
-            coord = _fmax(coord, abs(pk))
-        coord += motion
-        pad = r[i] + _REL_MARGIN * (r[i] + motion) + _COORD_MARGIN * coord + _ABS_MARGIN
-        for k in range(D):
-            lo[i, k] -= pad
-            hi[i, k] += pad
+        swept_bound_row(p, v, a, r, i, t0[i], t1[i], lo, hi, i)
     return lo, hi
 
 

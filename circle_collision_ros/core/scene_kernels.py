@@ -21,8 +21,7 @@ import math
 import numpy as np
 from numba import njit
 
-from circle_collision_ros.core.broad_phase import _ABS_MARGIN, _COORD_MARGIN, _REL_MARGIN
-from circle_collision_ros.core.kinematics import arc_position
+from circle_collision_ros.core.broad_phase import swept_bound_row
 from circle_collision_ros.core.narrow_phase import _ttc_scalar
 
 __all__ = ["evaluate_rows", "order_rows", "split_past", "pair_keys", "assemble", "swept_bound_rows"]
@@ -277,36 +276,7 @@ def assemble(F, ttc_f, ra, rb, rtp, rtau, rov, rpt, rnm, rcs,
 
 @njit(cache=True, error_model="numpy")
 def swept_bound_rows(P, V, A, Rad, slots, t0, t1, lo, hi):
-    """broad_phase.swept_bounds of the rows `slots` (windows t0[k], t1[k]) into lo/hi[slots]:
-    the same operations per row, for a few bodies at a time (no numpy set-up)."""
-    D = P.shape[1]
+    """broad_phase.swept_bounds of the rows `slots` (windows t0[k], t1[k]) into lo/hi[slots],
+    for a few bodies at a time (no numpy set-up): the same per-row function."""
     for k in range(slots.shape[0]):
-        s = slots[k]
-        a0 = t0[k]
-        a1 = t1[k]
-        tm = max(abs(a0), abs(a1))
-        motion = 0.0
-        coord = 0.0
-        for d in range(D):
-            p, v, a = P[s, d], V[s, d], A[s, d]
-            x0 = arc_position(p, v, a, a0)
-            x1 = arc_position(p, v, a, a1)
-            l = min(x0, x1)
-            h = max(x0, x1)
-            if a != 0.0:
-                ts = -v / a
-                if ts > a0 and ts < a1:
-                    xs = arc_position(p, v, a, ts)
-                    l = min(l, xs)
-                    h = max(h, xs)
-            lo[s, d] = l
-            hi[s, d] = h
-            m = abs(v) * tm + 0.5 * abs(a) * tm * tm
-            motion = m if d == 0 else motion + m
-            coord = abs(p) if d == 0 else max(coord, abs(p))
-        coord = coord + motion
-        r = Rad[s]
-        pad = r + _REL_MARGIN * (r + motion) + _COORD_MARGIN * coord + _ABS_MARGIN
-        for d in range(D):
-            lo[s, d] = lo[s, d] - pad
-            hi[s, d] = hi[s, d] + pad
+        swept_bound_row(P, V, A, Rad, slots[k], t0[k], t1[k], lo, hi, slots[k])
