@@ -1,12 +1,16 @@
-"""Exact-rational decision of the first-contact time (the narrow phase's fallback).
+"""Exact decision of the first-contact time (the narrow phase's fallback).
 
-Float64 inputs are dyadic rationals, so the relative state
-``dp, dv, da, R`` and the power-basis coefficients of
+Float64 inputs are dyadic rationals m * 2^e, so scaling every input by one
+power of two 2^-E (E the smallest exponent among them) makes the relative state
+``dp, dv, da, R`` integers, and
 
-    f(t) = |dp + t dv + t^2 da / 2|^2 - R^2 = c4 t^4 + c3 t^3 + c2 t^2 + c1 t + c0
+    4 * 2^(-2E) * f(t),   f(t) = |dp + t dv + t^2 da / 2|^2 - R^2 = c4 t^4 + ... + c0,
 
-are exact rationals (``fractions.Fraction``).  Everything below is decided
-exactly on them, with no rounding anywhere before the final one:
+a polynomial with integer coefficients and the same sign as f everywhere.  All
+arithmetic below is on Python integers (exact, no rounding before the final
+one); only signs of polynomials are ever needed, so every polynomial may be
+scaled by any positive factor (each is kept primitive: coefficients divided by
+their positive gcd).
 
 * Order of contact at t = 0 (``f(0) = 0``, touching): the first nonzero
   coefficient of ``c1, c2, c3, c4`` is the sign of f just after 0.  Negative:
@@ -16,25 +20,31 @@ exactly on them, with no rounding anywhere before the final one:
 * Roots in (0, H]: a Sturm sequence of the square-free part of ``f / t^k``
   (k = the order of the root at 0) counts the distinct real roots in any
   interval exactly; double roots (tangent grazes, point bodies whose paths
-  cross) count like any other root.
+  cross) count like any other root.  The sequence is built with pseudo-
+  remainders whose multipliers are made positive, so each member is a positive
+  multiple of the classical (rational) Sturm polynomial: same signs.
+* The sign of a polynomial p of degree d at a float x = n / 2^s (s >= 0) is
+  the sign of the integer sum_i c_i n^i 2^(s (d - i)) = 2^(s d) p(x).
 * The returned time is the first root rounded to the nearest float64 (ties to
   even), found by bisection over float64 bit patterns in (0, H]: the root
   count on (0, x] is monotone in x.  A positive root is never rounded to 0.
 
-Cost: ~1-5 ms per row in plain Python; the batch kernels call it only for
+Cost: tens to hundreds of microseconds per row in plain Python (integer
+arithmetic; bench/fallback.py prints it); the batch kernels call it only for
 rows their certified float64/double-double paths leave undecided.
 """
 from __future__ import annotations
 
 import math
 import struct
-from fractions import Fraction
 from typing import Sequence
 
 __all__ = ["exact_first_contact"]
 
 _MAX_BITS = 0x7FEFFFFFFFFFFFFF  # bit pattern of the largest finite float64
 _MAX_INPUT = 1e150  # the narrow phase's documented input range
+
+Poly = list  # integer coefficients, ascending powers, highest one nonzero
 
 
 def _bits(x: float) -> int:
@@ -45,67 +55,85 @@ def _float(b: int) -> float:
     return struct.unpack("<d", struct.pack("<q", b))[0]
 
 
-def _trim(p: list) -> list:
-    """Drop zero leading (highest-degree) coefficients; coefficients ascending."""
+def _sign(x: int) -> int:
+    return (x > 0) - (x < 0)
+
+
+def _trim(p: Poly) -> Poly:
+    """Drop zero leading (highest-degree) coefficients."""
     while p and p[-1] == 0:
         p = p[:-1]
     return p
 
 
-def _rem(a: list, b: list) -> list:
-    """Remainder of a / b (ascending coefficients, exact)."""
-    a = list(a)
+def _primitive(p: Poly) -> Poly:
+    """p divided by the positive gcd of its coefficients (same signs everywhere)."""
+    g = math.gcd(*p)
+    return [c // g for c in p] if g > 1 else p
+
+
+def _pdiv(a: Poly, b: Poly) -> tuple[Poly, Poly]:
+    """Pseudo-division with a positive multiplier: (q, r) with m a = q b + r,
+    m = |lc(b)|^(deg a - deg b + 1) > 0 and deg r < deg b."""
     db = len(b) - 1
     lead = b[-1]
-    while len(a) - 1 >= db and a:
-        k = Fraction(a[-1]) / lead
-        shift = len(a) - 1 - db
+    steps = len(a) - db
+    if steps <= 0:
+        return [], a
+    q = [0] * steps
+    r = list(a)
+    for k in range(steps - 1, -1, -1):
+        # r := lead * r - r_top x^k b (exact; drops the top coefficient)
+        top = r[k + db]
+        q = [lead * c for c in q]
+        q[k] += top
+        r = [lead * c for c in r]
         for i, c in enumerate(b):
-            a[shift + i] -= k * c
-        a = _trim(a[:-1])
-    return a
+            r[k + i] -= top * c
+        r.pop()
+    if lead < 0 and steps % 2:  # multiplier lead^steps < 0: flip to |lead|^steps
+        q = [-c for c in q]
+        r = [-c for c in r]
+    return q, _trim(r)
 
 
-def _quo(a: list, b: list) -> list:
-    """Exact quotient of a / b when b divides a (ascending coefficients)."""
-    a = list(a)
-    db = len(b) - 1
-    out = [Fraction(0)] * (len(a) - db)
-    while len(a) - 1 >= db and a:
-        k = Fraction(a[-1]) / b[-1]
-        shift = len(a) - 1 - db
-        out[shift] = k
-        for i, c in enumerate(b):
-            a[shift + i] -= k * c
-        a = _trim(a[:-1])
-    return out
-
-
-def _deriv(p: list) -> list:
+def _deriv(p: Poly) -> Poly:
     return [i * c for i, c in enumerate(p)][1:]
 
 
-def _gcd(a: list, b: list) -> list:
+def _gcd(a: Poly, b: Poly) -> Poly:
+    """A polynomial gcd of a and b (primitive remainder sequence)."""
     while b:
-        a, b = b, _rem(a, b)
+        a, b = b, _pdiv(a, b)[1]
+        if b:
+            b = _primitive(b)
     return a
 
 
-def _eval(p: list, x: Fraction) -> Fraction:
-    r = Fraction(0)
-    for c in reversed(p):
-        r = r * x + c
-    return r
+def _eval_sign(p: Poly, n: int, s: int) -> int:
+    """Sign of p(n / 2^s) for s >= 0 (Horner on 2^(s deg p) p(n / 2^s))."""
+    r = p[-1]
+    shift = 0
+    for c in reversed(p[:-1]):
+        shift += s
+        r = r * n + (c << shift)
+    return _sign(r)
 
 
-def _sturm(p: list) -> list:
-    seq = [p, _deriv(p)]
-    while seq[-1]:
-        r = _rem(seq[-2], seq[-1])
+def _dyadic(x: float) -> tuple[int, int]:
+    """(n, s) with x = n / 2^s, s >= 0."""
+    n, d = x.as_integer_ratio()  # d is a power of two
+    return n, d.bit_length() - 1
+
+
+def _sturm(p: Poly) -> list:
+    seq = [p, _primitive(_deriv(p))]
+    while True:
+        r = _pdiv(seq[-2], seq[-1])[1]
         if not r:
             break
-        seq.append([-c for c in r])
-    return [s for s in seq if s]
+        seq.append(_primitive([-c for c in r]))
+    return seq
 
 
 def _variations(signs) -> int:
@@ -119,59 +147,68 @@ def _variations(signs) -> int:
     return v
 
 
-def _sign(x) -> int:
-    return (x > 0) - (x < 0)
-
-
 class _Roots:
-    """Root counting on (0, x] for a polynomial with p(0) != 0 (exact)."""
+    """Root counting on (0, x] for an integer polynomial with p(0) != 0 (exact)."""
 
-    def __init__(self, p: list):
+    def __init__(self, p: Poly):
         g = _gcd(p, _deriv(p))
-        self.p = _quo(p, g) if len(g) > 1 else p  # square-free part
+        self.p = _primitive(_pdiv(p, g)[0]) if len(g) > 1 else p  # square-free part
         self.seq = _sturm(self.p)
         self.v0 = _variations(_sign(s[0]) for s in self.seq)
 
-    def v(self, x: Fraction) -> int:
-        return _variations(_sign(_eval(s, x)) for s in self.seq)
+    def sign(self, x: float | tuple[int, int]) -> int:
+        """Sign of the square-free part at x (a float, or (n, s) for n / 2^s)."""
+        n, s = _dyadic(x) if isinstance(x, float) else x
+        return _eval_sign(self.p, n, s)
+
+    def v(self, x: float | tuple[int, int]) -> int:
+        n, s = _dyadic(x) if isinstance(x, float) else x
+        return _variations(_eval_sign(q, n, s) for q in self.seq)
 
     def v_inf(self) -> int:
         return _variations(_sign(s[-1]) for s in self.seq)
 
-    def any_upto(self, x: Fraction) -> bool:
+    def any_upto(self, x: float | tuple[int, int]) -> bool:
         """Some root in (0, x] (x > 0)."""
-        if _eval(self.p, x) == 0:
-            return True
-        return self.v0 - self.v(x) > 0
+        return self.sign(x) == 0 or self.v0 - self.v(x) > 0
 
 
-def _rel(x: Sequence[float], y: Sequence[float]) -> list:
-    return [Fraction(float(a)) - Fraction(float(b)) for a, b in zip(x, y)]
+def _scaled_ints(vals: list) -> list:
+    """The floats in `vals` times one common power of two, as exact integers."""
+    ratios = [x.as_integer_ratio() for x in vals]
+    s = max(d.bit_length() - 1 for _, d in ratios)  # 2^s clears every denominator
+    return [n << (s - (d.bit_length() - 1)) for n, d in ratios]
 
 
 def exact_first_contact(p_a: Sequence[float], v_a: Sequence[float], a_a: Sequence[float], r_a: float,
                         p_b: Sequence[float], v_b: Sequence[float], a_b: Sequence[float], r_b: float,
                         horizon: float = math.inf) -> float:
-    """First-contact time of one pair decided in exact rational arithmetic.
+    """First-contact time of one pair decided in exact integer arithmetic.
 
     Same contract as ``time_to_collision`` for valid input (finite values,
     radii >= 0, horizon >= 0): 0.0 for overlap or an approaching touch at
     t = 0 (order-of-contact rule in the module docstring); else the first
     contact time in (0, horizon] rounded to nearest float64; inf if none.
     """
+    D = len(p_a)
     vals = [float(x) for x in (*p_a, *v_a, *a_a, r_a, *p_b, *v_b, *a_b, r_b)]
     if max(abs(x) for x in vals) > _MAX_INPUT:
-        # beyond the documented input range: exact rationals with ~2000-bit
-        # parts make the exact path arbitrarily slow (NaN, like an overflow)
+        # beyond the documented input range: integers of ~2000 bits and more
+        # make the exact path arbitrarily slow (NaN, like an overflow)
         return math.nan
-    dp, dv, da = _rel(p_a, p_b), _rel(v_a, v_b), _rel(a_a, a_b)
-    R = Fraction(float(r_a)) + Fraction(float(r_b))
+    w = _scaled_ints(vals)  # p_a, v_a, a_a, r_a, p_b, v_b, a_b, r_b, times 2^s
+    half = 3 * D + 1
+    dp = [w[i] - w[half + i] for i in range(D)]
+    dv = [w[D + i] - w[half + D + i] for i in range(D)]
+    da = [w[2 * D + i] - w[half + 2 * D + i] for i in range(D)]
+    R = w[3 * D] + w[half + 3 * D]
 
     def dot(x, y):
-        return sum((i * j for i, j in zip(x, y)), Fraction(0))
+        return sum(i * j for i, j in zip(x, y))
 
-    coeffs = [dot(dp, dp) - R * R, 2 * dot(dp, dv), dot(dv, dv) + dot(da, dp),
-              dot(da, dv), dot(da, da) / 4]
+    # 4 f(t) (times 2^(2s)): integer coefficients, ascending
+    coeffs = [4 * (dot(dp, dp) - R * R), 8 * dot(dp, dv), 4 * (dot(dv, dv) + dot(da, dp)),
+              4 * dot(da, dv), dot(da, da)]
     if coeffs[0] < 0:
         return 0.0
     k = 0
@@ -186,58 +223,61 @@ def exact_first_contact(p_a: Sequence[float], v_a: Sequence[float], a_a: Sequenc
     H = float(horizon)
     if len(h) == 1 or H <= 0.0:
         return math.inf
-    roots = _Roots(h)
+    roots = _Roots(_primitive(h))
     if math.isinf(H):
         if roots.v0 - roots.v_inf() == 0:
             return math.inf
         hi = _MAX_BITS
     else:
         hi = _bits(H)
-    if not roots.any_upto(Fraction(_float(hi))):
+    if not roots.any_upto(_float(hi)):
         return math.inf
     lo = 0  # invariant: no root in (0, float(lo)], a root in (0, float(hi)]
     # Sturm counts until (lo, hi] isolates the first root; from then on the
     # sign of the square-free part (every root simple, so a sign change at
     # each) decides, one polynomial evaluation per step instead of a sequence
-    s_lo = _sign(_eval(roots.p, Fraction(0)))
-    v_lo, v_hi = roots.v0, roots.v(Fraction(_float(hi)))
-    single = _eval(roots.p, Fraction(_float(hi))) != 0 and v_lo - v_hi == 1
+    s_lo = _sign(roots.p[0])
+    v_lo, v_hi = roots.v0, roots.v(_float(hi))
+    single = roots.sign(_float(hi)) != 0 and v_lo - v_hi == 1
     while hi - lo > 1:
         mid = (lo + hi) // 2
-        x = Fraction(_float(mid))
+        x = _float(mid)
         if single:
-            s_mid = _sign(_eval(roots.p, x))
-            if s_mid == s_lo:
+            if roots.sign(x) == s_lo:
                 lo = mid
             else:
                 hi = mid
             continue
         v_mid = roots.v(x)
-        if _eval(roots.p, x) == 0 or v_lo - v_mid > 0:
+        s_mid = roots.sign(x)
+        if s_mid == 0 or v_lo - v_mid > 0:
             hi = mid
-            single = _eval(roots.p, x) != 0 and v_lo - v_mid == 1
+            single = s_mid != 0 and v_lo - v_mid == 1
             v_hi = v_mid
         else:
             lo = mid
             v_lo = v_mid
-            s_lo = _sign(_eval(roots.p, x))
-            single = v_lo - v_hi == 1 and _eval(roots.p, Fraction(_float(hi))) != 0
+            s_lo = s_mid
+            single = v_lo - v_hi == 1 and roots.sign(_float(hi)) != 0
     # first root r in (x_lo, x_hi]: round to nearest (never to 0)
     x_lo, x_hi = _float(lo), _float(hi)
     if lo == 0:
         return x_hi
-    m = (Fraction(x_lo) + Fraction(x_hi)) / 2
+    # m = (x_lo + x_hi) / 2 = n / 2^s exactly
+    (n_lo, e_lo), (n_hi, e_hi) = _dyadic(x_lo), _dyadic(x_hi)
+    e = max(e_lo, e_hi)
+    m = (n_lo << (e - e_lo)) + (n_hi << (e - e_hi)), e + 1
     if not roots.any_upto(m):
         return x_hi  # r > m
-    if _eval(roots.p, m) != 0:
+    if roots.sign(m) != 0:
         return x_lo  # r < m
     # m is a root: r == m unless another root lies in (x_lo, m); deflate m
-    # (a simple root of the square-free part) and count on the rest
-    q = _quo(roots.p, [-m, Fraction(1)])
+    # (a simple root of the square-free part: 2^s x - n divides p) and count on the rest
+    q = _primitive(_pdiv(roots.p, [-m[0], 1 << m[1]])[0])
     if len(q) > 1:
         sq = _sturm(q)
-        va = _variations(_sign(_eval(s, Fraction(x_lo))) for s in sq)
-        vm = _variations(_sign(_eval(s, m)) for s in sq)
+        va = _variations(_eval_sign(s, *_dyadic(x_lo)) for s in sq)
+        vm = _variations(_eval_sign(s, *m) for s in sq)
         if va - vm > 0:
             return x_lo  # r < m
     return x_lo if lo % 2 == 0 else x_hi  # tie: even mantissa

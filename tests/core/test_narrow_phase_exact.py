@@ -289,3 +289,41 @@ def test_exact_fallback_rounds_to_nearest():
     for cls in "ABCD":
         for row in GENS[cls](rng, 15, 2):
             assert exact_first_contact(*row) == exact_reference(*row).t
+
+
+@pytest.mark.parametrize("D", [2, 3])
+def test_exact_fallback_point_crossings(D):
+    """Crossing point bodies (R = 0, f has a double root at the crossing time T):
+    narrow_exact returns T exactly, also for dyadic states far from 1 in scale.
+
+    dp = -(T dv + T^2 da / 2) is exact in binary64 (few significant bits), so
+    g(t) = (t - T)(dv + (t + T) da / 2); with dv and da not parallel the second
+    factor never vanishes, so T is the only (double) root."""
+    rng = np.random.default_rng([17, 400, D])
+    for _ in range(60):
+        scale = 2.0 ** int(rng.integers(-60, 60))
+        T = float(rng.integers(1, 64)) / 8.0
+        dv = rng.integers(-16, 17, D) / 4.0 * scale
+        da = rng.integers(-16, 17, D) / 4.0 * scale
+        if np.linalg.matrix_rank(np.stack([dv, da])) < 2:
+            continue
+        dp = -(T * dv) - 0.5 * T * T * da
+        row = (tuple(dp), tuple(dv), tuple(da), 0.0, (0.0,) * D, (0.0,) * D, (0.0,) * D, 0.0)
+        assert exact_first_contact(*row) == T, row
+        assert exact_first_contact(*row, horizon=T) == T, row
+        assert exact_first_contact(*row, horizon=np.nextafter(T, 0.0)) == math.inf, row
+
+
+def test_exact_fallback_wide_exponents():
+    """narrow_exact against the independent reference on non-dyadic rows whose
+    magnitudes span 16 decades (inputs scaled to integers by one power of two)."""
+    rng = np.random.default_rng(1616)
+    for i in range(40):
+        D = 2 + i % 2
+        sc = 10.0 ** rng.uniform(-8, 8, 4)
+        row = (tuple(rng.normal(0, sc[0], D)), tuple(rng.normal(0, sc[1], D)),
+               tuple(rng.normal(0, sc[2], D)), float(abs(rng.normal(0, sc[3]))),
+               tuple(rng.normal(0, sc[0], D)), tuple(rng.normal(0, sc[1], D)),
+               tuple(rng.normal(0, sc[2], D)), 0.0)
+        H = math.inf if i % 3 == 0 else float(10.0 ** rng.uniform(-3, 3))
+        assert exact_first_contact(*row, H) == exact_reference(*row, H).t, (row, H)
