@@ -1,7 +1,107 @@
-"""Contact geometry at a known contact time (point, normal, closing speed)."""
+"""Contact geometry at a known contact time (point, normal, closing speed).
+
+One formula, compiled once (``contact_row``), behind every caller: the public
+``contact_details`` (any broadcastable shapes), ``details_on_rows`` (pair rows,
+e.g. the scene's) and ``details_on_index_pairs`` (pairs of a body table without
+gathering their rows first).  The same row gives the same bits whichever path
+computed it.
+"""
 from __future__ import annotations
 
+import math
+
 import numpy as np
+from numba import njit
+
+__all__ = ["contact_details", "contact_row", "details_on_rows", "details_on_index_pairs"]
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def contact_row(pa, va, aa, i, ra, pb, vb, ab, j, t, point, normal, k, g, w):
+    """Contact point and normal of a pair at ``t`` into row ``k`` of
+    ``point``/``normal`` (D = their width); returns the closing speed.
+
+    Body a is row ``i`` of ``pa, va, aa`` (radius ``ra``), body b row ``j``
+    of ``pb, vb, ab`` (2-D arrays indexed in place: row views would cost more
+    than the formula).  ``g``, ``w``: scratch of length D.  Relative centre and
+    velocity are formed first (``p_b - p_a``), so large map-frame coordinates
+    do not cancel digits of the normal.  Sums over the axis run x0 + x1 (+ x2),
+    left to right.  A non-finite ``t``, point or closing speed, or a negative
+    or NaN radius, gives NaN in all outputs.
+    """
+    D = point.shape[1]
+    h = 0.5 * t
+    for d in range(D):
+        g[d] = (pb[j, d] - pa[i, d]) + t * ((vb[j, d] - va[i, d]) + h * (ab[j, d] - aa[i, d]))
+        w[d] = (va[i, d] - vb[j, d]) + t * (aa[i, d] - ab[j, d])
+    sg = g[0] * g[0]
+    sw = w[0] * w[0]
+    for d in range(1, D):
+        sg += g[d] * g[d]
+        sw += w[d] * w[d]
+    ng = math.sqrt(sg)
+    nw = math.sqrt(sw)
+    for d in range(D):
+        if ng > 0:
+            normal[k, d] = g[d] / ng
+        elif nw > 0:  # coincident centres: along the relative velocity
+            normal[k, d] = w[d] / nw
+        else:
+            normal[k, d] = 1.0 if d == 0 else 0.0
+    finite = True
+    for d in range(D):
+        point[k, d] = (pa[i, d] + t * (va[i, d] + h * aa[i, d])) + ra * normal[k, d]
+        finite = finite and math.isfinite(point[k, d])
+    closing = w[0] * normal[k, 0]
+    for d in range(1, D):
+        closing += w[d] * normal[k, d]
+    if not (math.isfinite(t) and math.isfinite(closing) and finite and ra >= 0):
+        for d in range(D):
+            point[k, d] = np.nan
+            normal[k, d] = np.nan
+        closing = np.nan
+    return closing
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def _rows_kernel(pa, va, aa, ra, pb, vb, ab, t, point, normal, closing):
+    D = point.shape[1]
+    g = np.empty(D)
+    w = np.empty(D)
+    for k in range(t.shape[0]):
+        closing[k] = contact_row(pa, va, aa, k, ra[k], pb, vb, ab, k, t[k], point, normal, k, g, w)
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def _index_kernel(p, v, a, r, I, J, t, point, normal, closing):
+    D = point.shape[1]
+    g = np.empty(D)
+    w = np.empty(D)
+    for k in range(t.shape[0]):
+        i = I[k]
+        closing[k] = contact_row(p, v, a, i, r[i], p, v, a, J[k], t[k], point, normal, k, g, w)
+
+
+def _f64(x) -> np.ndarray:
+    return np.ascontiguousarray(x, dtype=np.float64)
+
+
+def details_on_rows(pa, va, aa, ra, pb, vb, ab, t):
+    """``contact_details`` on row-aligned pair arrays: (n, D) states, (n,) ra and t."""
+    n, D = np.shape(pa)
+    point, normal, closing = np.empty((n, D)), np.empty((n, D)), np.empty(n)
+    _rows_kernel(_f64(pa), _f64(va), _f64(aa), _f64(ra), _f64(pb), _f64(vb), _f64(ab), _f64(t),
+                 point, normal, closing)
+    return point, normal, closing
+
+
+def details_on_index_pairs(p, v, a, r, I, J, t):
+    """``contact_details`` of pairs ``(I[k], J[k])`` of the bodies (p, v, a, r) at ``t[k]``."""
+    n, D = I.shape[0], np.shape(p)[1]
+    point, normal, closing = np.empty((n, D)), np.empty((n, D)), np.empty(n)
+    _index_kernel(_f64(p), _f64(v), _f64(a), _f64(r), np.ascontiguousarray(I, dtype=np.int64),
+                  np.ascontiguousarray(J, dtype=np.int64), _f64(t), point, normal, closing)
+    return point, normal, closing
 
 
 def contact_details(p_a, v_a, a_a, r_a, p_b, v_b, a_b, r_b, t):
@@ -34,29 +134,14 @@ def contact_details(p_a, v_a, a_a, r_a, p_b, v_b, a_b, r_b, t):
     relative quantities (``p_b - p_a`` first), so map-frame offsets do not
     cancel digits of the normal.
     """
-    p_a, v_a, a_a, p_b, v_b, a_b = (np.asarray(x, dtype=np.float64)
-                                    for x in (p_a, v_a, a_a, p_b, v_b, a_b))
-    r_a = np.asarray(r_a, dtype=np.float64)[..., None]
+    vecs = [np.asarray(x, dtype=np.float64) for x in (p_a, v_a, a_a, p_b, v_b, a_b)]
+    ra = np.asarray(r_a, dtype=np.float64)
     np.asarray(r_b, dtype=np.float64)
-    t = np.asarray(t, dtype=np.float64)[..., None]
-    with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
-        h = 0.5 * t
-        # relative centre b - a at t, from relative quantities (no cancellation
-        # of large absolute coordinates)
-        g = (p_b - p_a) + t * ((v_b - v_a) + h * (a_b - a_a))
-        w = (v_a - v_b) + t * (a_a - a_b)  # relative velocity of a w.r.t. b
-        ng = np.sqrt(np.sum(g * g, axis=-1, keepdims=True))
-        nw = np.sqrt(np.sum(w * w, axis=-1, keepdims=True))
-        ex = np.zeros_like(g)
-        ex[..., 0] = 1.0
-        fallback = np.where(nw > 0, w / np.where(nw > 0, nw, 1.0), ex)
-        n = np.where(ng > 0, g / np.where(ng > 0, ng, 1.0), fallback)
-        pa_t = p_a + t * (v_a + h * a_a)
-        point = pa_t + r_a * n
-        closing = np.sum(w * n, axis=-1)
-        bad = ~np.isfinite(t[..., 0]) | ~np.isfinite(closing) | ~np.all(np.isfinite(point), axis=-1)
-        bad = bad | ~(r_a[..., 0] >= 0)
-    point = np.where(bad[..., None], np.nan, point)
-    n = np.where(bad[..., None], np.nan, n)
-    closing = np.where(bad, np.nan, closing)
-    return point, n, closing
+    tt = np.asarray(t, dtype=np.float64)
+    shape = np.broadcast_shapes(*(x.shape for x in vecs), ra.shape + (1,), tt.shape + (1,))
+    lead, D = shape[:-1], shape[-1]
+    m = math.prod(lead)
+    pa, va, aa, pb, vb, ab = (np.broadcast_to(x, shape).reshape(m, D) for x in vecs)
+    point, normal, closing = details_on_rows(pa, va, aa, np.broadcast_to(ra, lead).reshape(m),
+                                             pb, vb, ab, np.broadcast_to(tt, lead).reshape(m))
+    return point.reshape(shape), normal.reshape(shape), closing.reshape(lead)

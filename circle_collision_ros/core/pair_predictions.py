@@ -19,15 +19,10 @@ import numpy as np
 from numba import njit
 
 from circle_collision_ros.core import broad_phase as _bp
-from circle_collision_ros.core.contact import contact_details
+from circle_collision_ros.core.contact import details_on_index_pairs
 from circle_collision_ros.core.narrow_phase import time_to_collision
 
 __all__ = ["PairPredictions", "predict_all_pairs"]
-
-#: Pairs per call of contact_details: bounds its numpy temporaries (about a
-#: dozen (rows, D) arrays per call).  The narrow phase needs no chunks: its
-#: kernels work in blocks and allocate nothing per row.
-_CHUNK = 1 << 15
 
 
 @dataclass(frozen=True)
@@ -120,22 +115,6 @@ def narrow_on_pairs(pa, va, aa, ra, pb, vb, ab, rb, horizon: float) -> np.ndarra
     return time_to_collision(pa, va, aa, ra, pb, vb, ab, rb, float(horizon))
 
 
-def details_on_pairs(pa, va, aa, ra, pb, vb, ab, rb, t):
-    """``contact_details`` on row-aligned pair arrays, in chunks of ``_CHUNK`` rows."""
-    n, D = pa.shape
-    point = np.empty((n, D))
-    normal = np.empty((n, D))
-    cs = np.empty(n)
-    for s in range(0, n, _CHUNK):
-        e = min(n, s + _CHUNK)
-        pt, nm, c = contact_details(pa[s:e], va[s:e], aa[s:e], ra[s:e],
-                                    pb[s:e], vb[s:e], ab[s:e], rb[s:e], t[s:e])
-        point[s:e] = pt
-        normal[s:e] = nm
-        cs[s:e] = c
-    return point, normal, cs
-
-
 def predict_all_pairs(positions, velocities, accelerations, radii, horizon: float,
                       *, method: str = "sweep", return_stats: bool = False):
     """All pairs that come into contact within ``[0, horizon]``.
@@ -175,7 +154,7 @@ def predict_all_pairs(positions, velocities, accelerations, radii, horizon: floa
     order = np.argsort(I * np.int64(n) + J)  # (i, j) order (keys unique: any sort), then
     order = order[np.argsort(ttc[order], kind="stable")]  # stable by ttc (faster than lexsort)
     I, J, ttc = I[order], J[order], ttc[order]
-    point, normal, cs = details_on_pairs(*_pair_rows(p, v, a, r, I, J), ttc)
+    point, normal, cs = details_on_index_pairs(p, v, a, r, I, J, ttc)
     res = PairPredictions(I, J, ttc, point, normal, cs)
     if return_stats:
         return res, {"n_box": int(n_box), "n_candidates": int(hit.shape[0])}

@@ -77,7 +77,8 @@ import numpy as np
 from circle_collision_ros.core import broad_phase as _bp
 from circle_collision_ros.core import scene_kernels as _sk
 from circle_collision_ros.core.pair_predictions import (
-    details_on_pairs, narrow_on_pairs, validate_bodies, _check_horizon)
+    narrow_on_pairs, validate_bodies, _check_horizon)
+from circle_collision_ros.core.contact import details_on_rows
 
 __all__ = ["Scene", "SceneContacts", "SceneSnapshot", "SceneUncertainty", "MergeResult"]
 
@@ -659,7 +660,7 @@ class Scene:
         self.evaluated_pairs += int(tau.shape[0])
         hit = tau <= horizon
         h = np.flatnonzero(hit)
-        pt, nm, cs = details_on_pairs(pa[h], va[h], aa[h], ra[h], pb[h], vb[h], ab[h], rb[h], tau[h])
+        pt, nm, cs = details_on_rows(pa[h], va[h], aa[h], ra[h], pb[h], vb[h], ab[h], tau[h])
         ov = np.zeros(h.size, dtype=bool)
         z = np.flatnonzero(tau[h] == 0.0)
         if z.size:

@@ -5,8 +5,9 @@ code it replaces, in the same order, so its results are bitwise those of:
 
 * ``evaluate_rows``: ``scene._propagate_ns`` to the evaluation time, the narrow
   phase (``narrow_phase._ttc_scalar``, bitwise ``time_to_collision``),
-  ``contact.contact_details`` at the contact time, and the overlap test of
-  ``Scene._resolve`` (``norm(p_a - p_b) - (r_a + r_b) < 0`` at that time);
+  ``contact.contact_row`` (the one contact-details formula) at the contact
+  time, and the overlap test of ``Scene._resolve`` (``norm(p_a - p_b) -
+  (r_a + r_b) < 0`` at that time);
 * ``order_rows``: the order of ``Scene._sort`` (``(ttc, rank_a, rank_b)``
   ascending) for rows that were sorted at the previous reference time.
 
@@ -22,6 +23,7 @@ import numpy as np
 from numba import njit
 
 from circle_collision_ros.core.broad_phase import swept_bound_row
+from circle_collision_ros.core.contact import contact_row
 from circle_collision_ros.core.narrow_phase import _ttc_scalar
 
 __all__ = ["evaluate_rows", "order_rows", "split_past", "pair_keys", "assemble", "swept_bound_rows"]
@@ -36,49 +38,6 @@ _OVERLAP_MARGIN = 1.0 - 2.0 ** -30
 
 
 @njit(cache=True, error_model="numpy")
-def _details(pa, va, aa, ra, pb, vb, ab, t, point, normal):
-    """contact_details of one pair at t into point/normal (length D); the closing speed.
-
-    Same operations as core/contact.py on one row (sums over the axis run
-    x0 + x1 (+ x2), as numpy reduces a short contiguous axis).
-    """
-    D = pa.shape[0]
-    h = 0.5 * t
-    g = np.empty(D)
-    w = np.empty(D)
-    for d in range(D):
-        g[d] = (pb[d] - pa[d]) + t * ((vb[d] - va[d]) + h * (ab[d] - aa[d]))
-        w[d] = (va[d] - vb[d]) + t * (aa[d] - ab[d])
-    sg = g[0] * g[0]
-    sw = w[0] * w[0]
-    for d in range(1, D):
-        sg += g[d] * g[d]
-        sw += w[d] * w[d]
-    ng = math.sqrt(sg)
-    nw = math.sqrt(sw)
-    for d in range(D):
-        if ng > 0:
-            normal[d] = g[d] / ng
-        elif nw > 0:
-            normal[d] = w[d] / nw
-        else:
-            normal[d] = 1.0 if d == 0 else 0.0
-    finite = True
-    for d in range(D):
-        point[d] = (pa[d] + t * (va[d] + h * aa[d])) + ra * normal[d]
-        finite = finite and math.isfinite(point[d])
-    closing = w[0] * normal[0]
-    for d in range(1, D):
-        closing += w[d] * normal[d]
-    if not (math.isfinite(t) and math.isfinite(closing) and finite and ra >= 0):
-        for d in range(D):
-            point[d] = np.nan
-            normal[d] = np.nan
-        closing = np.nan
-    return closing
-
-
-@njit(cache=True, error_model="numpy")
 def evaluate_rows(P, V, A, Rad, T, ia, ib, t_eval, horizon, tau, point, normal, closing, overlap):
     """Pairs (ia[k], ib[k]) propagated to t_eval[k] (ns), narrow phase with `horizon`.
 
@@ -87,12 +46,13 @@ def evaluate_rows(P, V, A, Rad, T, ia, ib, t_eval, horizon, tau, point, normal, 
     propagated gap is negative).  Returns the number of narrow-phase rows.
     """
     D = P.shape[1]
-    pa = np.zeros(3)
-    va = np.zeros(3)
-    aa = np.zeros(3)
-    pb = np.zeros(3)
-    vb = np.zeros(3)
-    ab = np.zeros(3)
+    # the pair's states at t_eval: one-row tables (contact_row's layout) and
+    # views of their rows (the narrow phase's scalars)
+    pa2, va2, aa2 = np.zeros((1, 3)), np.zeros((1, 3)), np.zeros((1, 3))
+    pb2, vb2, ab2 = np.zeros((1, 3)), np.zeros((1, 3)), np.zeros((1, 3))
+    pa, va, aa, pb, vb, ab = pa2[0], va2[0], aa2[0], pb2[0], vb2[0], ab2[0]
+    g = np.empty(D)
+    w = np.empty(D)
     for k in range(ia.shape[0]):
         a = ia[k]
         b = ib[k]
@@ -122,8 +82,7 @@ def evaluate_rows(P, V, A, Rad, T, ia, ib, t_eval, horizon, tau, point, normal, 
         tau[k] = t
         overlap[k] = False
         if t <= horizon:
-            closing[k] = _details(pa[:D], va[:D], aa[:D], Rad[a], pb[:D], vb[:D], ab[:D], t,
-                                  point[k], normal[k])
+            closing[k] = contact_row(pa2, va2, aa2, 0, Rad[a], pb2, vb2, ab2, 0, t, point, normal, k, g, w)
             if t == 0.0:  # the overlap test of Scene._resolve: norm(p_a - p_b) - (r_a + r_b) < 0
                 overlap[k] = math.sqrt(s) - rs < 0.0
     return ia.shape[0]
