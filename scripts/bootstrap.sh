@@ -172,11 +172,12 @@ if ! is_current numba "$h"; then
   find "$ROOT/circle_collision_ros" \( -name '*.nbi' -o -name '*.nbc' \) -delete
   (cd "$ROOT" && "$PY" -c '
 import numpy as np
-from circle_collision_ros.core import predict_all_pairs, time_to_collision
+from circle_collision_ros.core import contact_details, predict_all_pairs, time_to_collision
 from circle_collision_ros.core.narrow_phase import PARALLEL_MIN_ROWS
 for d in (2, 3):
     z = np.zeros((2, d))
     predict_all_pairs(np.eye(2, d), z, z, np.ones(2), 1.0)
+    contact_details(z, z, z, np.ones(2), z, z, z, np.ones(2), np.ones(2))  # the rows kernel (scene batches)
     time_to_collision(z[0], z[0], z[0], 1.0, z[1], z[1], z[1], 1.0, 1.0)
     # the threaded kernels (large batches), one float and per-row horizons
     zz = np.zeros((PARALLEL_MIN_ROWS, d))
