@@ -1070,8 +1070,9 @@ class Scene:
         I, J = key // n, key % n
         if I.size == 0:
             return SceneUncertainty(R, np.empty(0, dtype=object), np.empty(0, dtype=object), e, e, e)
+        # screen=True: pairs certified below threshold / 2 skip the full evaluation
         res = unc.uncertain_pairs(P[I], V[I], A[I], Rad[I], C[I], P[J], V[J], A[J], Rad[J], C[J],
-                                  self._h, threshold)
+                                  self._h, threshold, screen=True)
         ids = self._ids[slots]
         return SceneUncertainty(R, ids[I], ids[J], res.collision_probability,
                                 res.collision_probability_bound, res.plausible_time)

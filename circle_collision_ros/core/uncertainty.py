@@ -34,6 +34,8 @@ from circle_collision_ros.core.uncertainty_kernels import (
     TUBE_TAIL,
     max_sigma_over,
     pair_probability,
+    screen_rows,
+    screen_sigmas,
 )
 
 __all__ = ["UncertainPairs", "uncertain_pairs", "BROAD_PHASE_SIGMAS", "TUBE_TAIL",
@@ -89,7 +91,7 @@ def _rows(x, n, D, name):
 
 
 def uncertain_pairs(pa, va, aa, ra, cov_a, pb, vb, ab, rb, cov_b,
-                    horizon: float, threshold: float) -> UncertainPairs:
+                    horizon: float, threshold: float, *, screen: bool = False) -> UncertainPairs:
     """Collision probability, its bound and the earliest plausible contact of n pairs.
 
     pa, va, aa, pb, vb, ab: (n, D) float64, D in {2, 3} [m, m/s, m/s^2];
@@ -98,7 +100,15 @@ def uncertain_pairs(pa, va, aa, ra, cov_a, pb, vb, ab, rb, cov_b,
     m^2/s, m^2/s^2]; horizon H [s] (finite, >= 0); threshold in (0, 1].
     The caller validates covariances (``covariance_problem``); tiny negative
     eigenvalues from rounding are clamped here.  A row with a non-finite value
-    or a negative radius gets NaN in all three outputs."""
+    or a negative radius gets NaN in all three outputs.
+
+    screen=True: an uncertain row whose certified upper bound U on
+    P(contact within [0, H]) is below threshold / 2 (the k-sigma tube with
+    P(chi^2_2D > k^2) = U never reaches the ball) is answered (0.0, U, +inf)
+    without the full evaluation: still |reported - true| <= bound, and the
+    plausible time is certified absent (sup_t P(|X(t)| <= R) <= U < threshold).
+    Such rows are never published (probability < threshold); the scene
+    screens, callers wanting the best estimate of small probabilities do not."""
     pa = np.asarray(pa, dtype=np.float64)
     if pa.ndim != 2 or pa.shape[1] not in (2, 3):
         raise ValueError(f"pa must have shape (n, 2) or (n, 3), got {pa.shape}")
@@ -139,7 +149,18 @@ def uncertain_pairs(pa, va, aa, ra, cov_a, pb, vb, ab, rb, cov_b,
               & np.isfinite(sigma.reshape(n, -1)).all(1) & (ra >= 0) & (rb >= 0))
     bad = ~finite & ~exact
     prob[bad] = bound[bad] = tpl[bad] = np.nan
-    for i in np.flatnonzero(~exact & finite):
+    todo = np.flatnonzero(~exact & finite)
+    if screen and todo.size:
+        k, tail = screen_sigmas(thr, 2 * D)
+        if math.isfinite(k):
+            clear = np.zeros(todo.size, dtype=np.bool_)
+            # relative state as below (the tube test is exactly symmetric under X -> -X)
+            screen_rows(pa[todo] - pb[todo], va[todo] - vb[todo], aa[todo] - ab[todo],
+                        ra[todo] + rb[todo], np.ascontiguousarray(sigma[todo]), H, k, clear)
+            done = todo[clear]
+            prob[done], bound[done], tpl[done] = 0.0, tail, np.inf
+            todo = todo[~clear]
+    for i in todo:
         # relative state from relative quantities (map offsets cancel first)
         dp = pa[i] - pb[i]
         dv = va[i] - vb[i]

@@ -141,8 +141,8 @@ _TUBE_DEPTH = 8  # leaves of width >= H / 256
 
 
 @njit(cache=True, error_model="numpy")
-def tube_intervals(dp, dv, da, R, Sigma, H, out):
-    """Classify [0, H] with the k-sigma tube (k = BROAD_PHASE_SIGMAS).
+def tube_intervals(dp, dv, da, R, Sigma, H, out, k):
+    """Classify [0, H] with the k-sigma tube (pair_probability: k = BROAD_PHASE_SIGMAS).
 
     Writes the ambiguous leaf intervals [out[j, 0], out[j, 1]] (merged when
     adjacent; out has >= 2^_TUBE_DEPTH rows) and returns (count, inside):
@@ -182,6 +182,35 @@ def tube_intervals(dp, dv, da, R, Sigma, H, out):
             continue
         top = push_halves(sa, sb, sd, top, ta, m, tb, d)
     return cnt, t_inside
+
+
+@njit(cache=True, error_model="numpy")
+def screen_rows(dp, dv, da, R, Sigma, H, k, clear):
+    """clear[i] = True when the k-sigma tube of row i never reaches the ball
+    within [0, H] (no ambiguous interval, never wholly inside): then
+    P(contact within [0, H]) <= P(chi^2_{2D} > k^2) for that row (a contact
+    path has |z| > k, docs/uncertainty.md "Screening").  Rows (n, D),
+    Sigma (n, 2D, 2D) C-contiguous; each row is decided from itself alone."""
+    leaves = np.empty((1 << _TUBE_DEPTH, 2))
+    for i in range(dp.shape[0]):
+        cnt, t_inside = tube_intervals(dp[i], dv[i], da[i], R[i], Sigma[i], H, leaves, k)
+        clear[i] = cnt == 0 and not (t_inside <= H)
+
+
+def screen_sigmas(threshold: float, dof: int) -> tuple[float, float]:
+    """(k, U): the smallest k (to 1e-12) with U = P(chi^2_dof > k^2) <= threshold / 2,
+    dof even; (inf, 0.0) when no k <= 40 qualifies (a threshold below ~1e-300)."""
+    target = 0.5 * threshold
+    lo, hi = 0.0, 40.0
+    if chi2_tail_even(hi * hi, dof) > target:
+        return math.inf, 0.0
+    while hi - lo > 1e-12:
+        m = 0.5 * (lo + hi)
+        if chi2_tail_even(m * m, dof) <= target:
+            hi = m
+        else:
+            lo = m
+    return hi, chi2_tail_even(hi * hi, dof)
 
 
 @njit(cache=True, error_model="numpy")
@@ -282,8 +311,10 @@ class _Pair:
         if key in self.cache:
             return self.cache[key]
         self.acc[1] = 0.0
+        # slow_H passed explicitly: a call that omits a defaulted argument misses numba's
+        # fast dispatch and costs ~3 ms of type resolution every time
         v, e = entry_rate_integral(self.dp, self.dv, self.da, self.R, self.Sigma, a, b,
-                                   _RICE_TOL, self.acc)
+                                   _RICE_TOL, self.acc, -1.0)
         if self.acc[1] != 0.0:
             self.degenerate = True
         self.cache[key] = (v, e)
@@ -365,7 +396,7 @@ def pair_probability(dp, dv, da, R, Sigma, H, thr):
     D = dp.shape[0]
     pair = _Pair(dp, dv, da, R, Sigma)
     leaves = np.empty((1 << _TUBE_DEPTH, 2))
-    cnt, t_inside = tube_intervals(dp, dv, da, R, Sigma, H, leaves)
+    cnt, t_inside = tube_intervals(dp, dv, da, R, Sigma, H, leaves, BROAD_PHASE_SIGMAS)
     if cnt == 0 and thr > TUBE_TAIL and thr <= 1.0 - TUBE_TAIL:
         # the tube alone decides (far pairs, tiny sigma): P <= TUBE_TAIL < thr
         # wherever it is outside, >= 1 - TUBE_TAIL >= thr from t_inside on
