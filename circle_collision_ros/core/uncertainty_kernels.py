@@ -84,13 +84,16 @@ def S_at(Sigma, t):
 @njit(cache=True, error_model="numpy")
 def _lam_max(Sigma, t):
     """Largest eigenvalue of S(t) (closed form in 2-D, Jacobi in 3-D)."""
-    S = S_at(Sigma, t)
-    if S.shape[0] == 2:
-        h = 0.5 * (S[0, 0] + S[1, 1])
-        d = 0.5 * (S[0, 0] - S[1, 1])
-        o = 0.5 * (S[0, 1] + S[1, 0])
+    if Sigma.shape[0] == 4:  # scalar (no temporaries: the tube calls this per node); as S_at
+        s00 = Sigma[0, 0] + t * (Sigma[0, 2] + Sigma[2, 0]) + t * t * Sigma[2, 2]
+        s11 = Sigma[1, 1] + t * (Sigma[1, 3] + Sigma[3, 1]) + t * t * Sigma[3, 3]
+        s01 = Sigma[0, 1] + t * (Sigma[0, 3] + Sigma[2, 1]) + t * t * Sigma[2, 3]
+        s10 = Sigma[1, 0] + t * (Sigma[1, 2] + Sigma[3, 0]) + t * t * Sigma[3, 2]
+        h = 0.5 * (s00 + s11)
+        d = 0.5 * (s00 - s11)
+        o = 0.5 * (s01 + s10)
         return h + math.sqrt(d * d + o * o)
-    lam, _ = eig_sym(S)
+    lam, _ = eig_sym(S_at(Sigma, t))
     return lam[lam.shape[0] - 1]
 
 
@@ -137,6 +140,13 @@ def _mean_range(dp, dv, da, ta, tb):
     return math.sqrt(dmin), math.sqrt(dmax)
 
 
+@njit(cache=True, error_model="numpy")
+def max_sigma_rows(cov, ta, tb, out):
+    """out[i] = max_sigma_over(cov[i], ta, tb) for a C-contiguous (n, 2D, 2D) stack."""
+    for i in range(cov.shape[0]):
+        out[i] = max_sigma_over(cov[i], ta, tb)
+
+
 _TUBE_DEPTH = 8  # leaves of width >= H / 256
 
 
@@ -149,7 +159,6 @@ def tube_intervals(dp, dv, da, R, Sigma, H, out, k):
     inside is True when some interval has the whole tube inside the ball (then
     P(contact) >= 1 - TUBE_TAIL).  Outside the ambiguous intervals, no path of
     the tube touches the sphere |x| = R."""
-    k = BROAD_PHASE_SIGMAS
     sa = np.empty(_TUBE_DEPTH + 2)
     sb = np.empty(_TUBE_DEPTH + 2)
     sd = np.empty(_TUBE_DEPTH + 2, dtype=np.int64)
@@ -185,16 +194,48 @@ def tube_intervals(dp, dv, da, R, Sigma, H, out, k):
 
 
 @njit(cache=True, error_model="numpy")
-def screen_rows(dp, dv, da, R, Sigma, H, k, clear):
+def screen_rows(dp, dv, da, R, Sigma, H, k, clear, t_first):
     """clear[i] = True when the k-sigma tube of row i never reaches the ball
     within [0, H] (no ambiguous interval, never wholly inside): then
     P(contact within [0, H]) <= P(chi^2_{2D} > k^2) for that row (a contact
-    path has |z| > k, docs/uncertainty.md "Screening").  Rows (n, D),
-    Sigma (n, 2D, 2D) C-contiguous; each row is decided from itself alone."""
-    leaves = np.empty((1 << _TUBE_DEPTH, 2))
+    path has |z| > k, docs/uncertainty.md "Screening").  t_first[i] = the
+    first t where the tube may reach the ball (start of the first ambiguous
+    interval, or where it lies wholly inside; +inf if never): before it
+    P(|X(t)| <= R) <= P(chi^2_{2D} > k^2).  Rows (n, D), Sigma (n, 2D, 2D)
+    C-contiguous; each row is decided from itself alone."""
     for i in range(dp.shape[0]):
-        cnt, t_inside = tube_intervals(dp[i], dv[i], da[i], R[i], Sigma[i], H, leaves, k)
-        clear[i] = cnt == 0 and not (t_inside <= H)
+        t_first[i] = _tube_first(dp[i], dv[i], da[i], R[i], Sigma[i], H, k)
+        clear[i] = not (t_first[i] <= H)
+
+
+@njit(cache=True, error_model="numpy")
+def _tube_first(dp, dv, da, R, Sigma, H, k):
+    """min(start of the first ambiguous leaf, t_inside) of ``tube_intervals`` (+inf: the
+    tube never reaches the ball), stopping at the first such node: nodes are visited
+    left to right, so the first terminal node that is not outside has the smallest start."""
+    sa = np.empty(_TUBE_DEPTH + 2)
+    sb = np.empty(_TUBE_DEPTH + 2)
+    sd = np.empty(_TUBE_DEPTH + 2, dtype=np.int64)
+    sa[0] = 0.0
+    sb[0] = H
+    sd[0] = 0
+    top = 1
+    while top > 0:
+        top -= 1
+        ta = sa[top]
+        tb = sb[top]
+        d = sd[top]
+        rho = k * max_sigma_over(Sigma, ta, tb)
+        gmin, gmax = _mean_range(dp, dv, da, ta, tb)
+        if gmin - rho > R:
+            continue
+        if gmax + rho < R:
+            return ta
+        m = 0.5 * (ta + tb)
+        if d >= _TUBE_DEPTH or not (ta < m < tb):
+            return ta
+        top = push_halves(sa, sb, sd, top, ta, m, tb, d)
+    return math.inf
 
 
 def screen_sigmas(threshold: float, dof: int) -> tuple[float, float]:
