@@ -19,7 +19,7 @@ import pytest
 
 from circle_collision_ros.core import time_to_collision
 from circle_collision_ros.core.uncertainty import uncertain_pairs
-from circle_collision_ros.core.uncertainty_kernels import chi2_tail_even, screen_sigmas
+from circle_collision_ros.core.uncertainty_kernels import chi2_tail_even, screen_rows, screen_sigmas
 
 
 def _near_pairs(rng, n, D, miss_sigmas):
@@ -111,3 +111,41 @@ def test_screen_leaves_exact_rows_alone():
     for x, y in zip(exact, plain):
         assert x.tobytes() == y.tobytes()
     assert np.all(exact.collision_probability_bound == 0.0)
+
+
+def test_budget_defers_the_latest_pairs_honestly():
+    """max_evaluated=m: the m uncleared rows whose screening tube may reach the ball first get
+    the full answer (bit for bit); the others (1.0, 1.0, t_first) with t_first never later
+    than the full answer's plausible time; deferred_count counts them."""
+    from circle_collision_ros.core.uncertainty import deferred_count
+
+    rng = np.random.default_rng(21)
+    args = _near_pairs(rng, 30, 2, (0.0, 9.0))
+    H, thr = 3.0, 0.01
+    full = uncertain_pairs(*args, H, thr, screen=True)
+    _, U = screen_sigmas(thr, 4)
+    open_rows = np.flatnonzero(full.collision_probability_bound != U)
+    assert open_rows.size > 5
+    m = 3
+    part = uncertain_pairs(*args, H, thr, screen=True, max_evaluated=m)
+    deferred = part.collision_probability_bound == 1.0
+    assert deferred_count(part) == np.count_nonzero(deferred) == open_rows.size - m
+    assert np.all(part.collision_probability[deferred] == 1.0)
+    assert np.all(part.plausible_time[deferred] <= full.plausible_time[deferred])
+    kept = ~deferred
+    for f, g in zip(full, part):
+        assert f[kept].tobytes() == g[kept].tobytes()
+    # the evaluated rows are those whose screening tube may reach the ball first
+    pa, va, aa, ra, ca, pb, vb, ab, rb, cb = args
+    k, _ = screen_sigmas(thr, 4)
+    clear, t_first = np.zeros(30, dtype=bool), np.empty(30)
+    screen_rows(pa - pb, va - vb, aa - ab, ra + rb, np.ascontiguousarray(ca + cb), H, k, clear, t_first)
+    evaluated = kept & ~clear
+    assert np.count_nonzero(evaluated) == m
+    assert t_first[evaluated].max() <= t_first[deferred].min()
+    assert np.array_equal(part.plausible_time[deferred], t_first[deferred])
+    again = uncertain_pairs(*args, H, thr, screen=True, max_evaluated=m)
+    for f, g in zip(part, again):
+        assert f.tobytes() == g.tobytes()
+    with pytest.raises(ValueError, match="screen=True"):
+        uncertain_pairs(*args, H, thr, max_evaluated=m)
