@@ -151,14 +151,11 @@ _TUBE_DEPTH = 8  # leaves of width >= H / 256
 
 
 @njit(cache=True, error_model="numpy")
-def tube_intervals(dp, dv, da, R, Sigma, H, out, k):
-    """Classify [0, H] with the k-sigma tube (pair_probability: k = BROAD_PHASE_SIGMAS).
-
-    Writes the ambiguous leaf intervals [out[j, 0], out[j, 1]] (merged when
-    adjacent; out has >= 2^_TUBE_DEPTH rows) and returns (count, inside):
-    inside is True when some interval has the whole tube inside the ball (then
-    P(contact) >= 1 - TUBE_TAIL).  Outside the ambiguous intervals, no path of
-    the tube touches the sphere |x| = R."""
+def _tube_walk(dp, dv, da, R, Sigma, H, out, k, first_only):
+    """The k-sigma tube's interval tree over [0, H], nodes visited depth first, left
+    to right.  Returns (count of ambiguous leaves written to out, t_inside); with
+    first_only it stops at the first terminal node that is not outside and returns
+    (0, its start): by the visiting order, the smallest start of any such node."""
     sa = np.empty(_TUBE_DEPTH + 2)
     sb = np.empty(_TUBE_DEPTH + 2)
     sd = np.empty(_TUBE_DEPTH + 2, dtype=np.int64)
@@ -178,10 +175,14 @@ def tube_intervals(dp, dv, da, R, Sigma, H, out, k):
         if gmin - rho > R:
             continue
         if gmax + rho < R:
+            if first_only:
+                return 0, ta
             t_inside = min(t_inside, ta)
             continue
         m = 0.5 * (ta + tb)
         if d >= _TUBE_DEPTH or not (ta < m < tb):
+            if first_only:
+                return 0, ta
             if cnt > 0 and out[cnt - 1, 1] == ta:
                 out[cnt - 1, 1] = tb
             else:
@@ -194,6 +195,18 @@ def tube_intervals(dp, dv, da, R, Sigma, H, out, k):
 
 
 @njit(cache=True, error_model="numpy")
+def tube_intervals(dp, dv, da, R, Sigma, H, out, k):
+    """Classify [0, H] with the k-sigma tube (pair_probability: k = BROAD_PHASE_SIGMAS).
+
+    Writes the ambiguous leaf intervals [out[j, 0], out[j, 1]] (merged when
+    adjacent; out has >= 2^_TUBE_DEPTH rows) and returns (count, inside):
+    inside is True when some interval has the whole tube inside the ball (then
+    P(contact) >= 1 - TUBE_TAIL).  Outside the ambiguous intervals, no path of
+    the tube touches the sphere |x| = R."""
+    return _tube_walk(dp, dv, da, R, Sigma, H, out, k, False)
+
+
+@njit(cache=True, error_model="numpy")
 def screen_rows(dp, dv, da, R, Sigma, H, k, clear, t_first):
     """clear[i] = True when the k-sigma tube of row i never reaches the ball
     within [0, H] (no ambiguous interval, never wholly inside): then
@@ -203,39 +216,10 @@ def screen_rows(dp, dv, da, R, Sigma, H, k, clear, t_first):
     interval, or where it lies wholly inside; +inf if never): before it
     P(|X(t)| <= R) <= P(chi^2_{2D} > k^2).  Rows (n, D), Sigma (n, 2D, 2D)
     C-contiguous; each row is decided from itself alone."""
+    unused = np.empty((0, 2))
     for i in range(dp.shape[0]):
-        t_first[i] = _tube_first(dp[i], dv[i], da[i], R[i], Sigma[i], H, k)
+        _, t_first[i] = _tube_walk(dp[i], dv[i], da[i], R[i], Sigma[i], H, unused, k, True)
         clear[i] = not (t_first[i] <= H)
-
-
-@njit(cache=True, error_model="numpy")
-def _tube_first(dp, dv, da, R, Sigma, H, k):
-    """min(start of the first ambiguous leaf, t_inside) of ``tube_intervals`` (+inf: the
-    tube never reaches the ball), stopping at the first such node: nodes are visited
-    left to right, so the first terminal node that is not outside has the smallest start."""
-    sa = np.empty(_TUBE_DEPTH + 2)
-    sb = np.empty(_TUBE_DEPTH + 2)
-    sd = np.empty(_TUBE_DEPTH + 2, dtype=np.int64)
-    sa[0] = 0.0
-    sb[0] = H
-    sd[0] = 0
-    top = 1
-    while top > 0:
-        top -= 1
-        ta = sa[top]
-        tb = sb[top]
-        d = sd[top]
-        rho = k * max_sigma_over(Sigma, ta, tb)
-        gmin, gmax = _mean_range(dp, dv, da, ta, tb)
-        if gmin - rho > R:
-            continue
-        if gmax + rho < R:
-            return ta
-        m = 0.5 * (ta + tb)
-        if d >= _TUBE_DEPTH or not (ta < m < tb):
-            return ta
-        top = push_halves(sa, sb, sd, top, ta, m, tb, d)
-    return math.inf
 
 
 def screen_sigmas(threshold: float, dof: int) -> tuple[float, float]:
