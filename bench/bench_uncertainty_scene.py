@@ -3,6 +3,7 @@
 
     .venv/bin/python bench/bench_uncertainty_scene.py [--bodies 1000] [--frames 30] [--sigma 0.2]
                                                       [--velocity-sigma 0.1] [--horizon 5]
+                                                      [--budget 8]
 
 Both runs see the same frames of the same synthetic scene (the node benchmark's density,
 ~333 m^2 per body, every body moved and stamped anew each frame, so every frame is a full
@@ -16,7 +17,8 @@ alike. Timed per frame, node-side work without DDS:
 Prints medians, the ratio covariance/exact (target <= 3x), how much of the covariance run is
 the core's ``uncertain_pairs`` (the per-pair mathematics) and how much the node side (inflated
 broad phase, propagation to R, joining the rows), and how many pairs the uncertain path
-evaluated and reported. The node latency with covariance through DDS is
+evaluated and reported. --budget is the node's ``uncertain_pair_budget`` (default: the node's
+default; 0: every pair gets the full evaluation); the deferred pairs are counted. The node latency with covariance through DDS is
 ``bench/bench_node.py --covariance SIGMA`` (same run, on and off).
 """
 from __future__ import annotations
@@ -30,10 +32,12 @@ import numpy as np
 
 from circle_collision_ros.core import uncertainty
 from circle_collision_ros.demo.demo_scene import SyntheticScene
+from circle_collision_ros.node.parameters import SPECS
 from circle_collision_ros.pipeline.predictor import CollisionPredictor, PredictorConfig
 from circle_collision_ros.pipeline.state_batch import StateBatch
 
 BASE_NS = 1_700_000_000 * 1_000_000_000
+NODE_BUDGET = SPECS["uncertain_pair_budget"].default
 
 
 def covariance_rows(n: int, sigma: float, velocity_sigma: float) -> np.ndarray:
@@ -57,12 +61,16 @@ def main() -> int:
     parser.add_argument("--sigma", type=float, default=0.2, help="position sigma, m (every axis)")
     parser.add_argument("--velocity-sigma", type=float, default=0.1, help="velocity sigma, m/s")
     parser.add_argument("--horizon", type=float, default=5.0)
+    parser.add_argument("--budget", type=int, default=None,
+                        help="uncertain_pair_budget (default: the node parameter's default; 0: no limit)")
     parser.add_argument("--quick", action="store_true", help="5 frames")
     opts = parser.parse_args()
     frames = 5 if opts.quick else opts.frames
     n = opts.bodies
     scene = SyntheticScene(n, size=float(np.sqrt(n * 333.0)), dimensions=2, seed=n)
-    config = PredictorConfig(horizon=opts.horizon, max_bodies=max(10_000, n), stale_timeout=3600.0)
+    budget = NODE_BUDGET if opts.budget is None else opts.budget
+    config = PredictorConfig(horizon=opts.horizon, max_bodies=max(10_000, n), stale_timeout=3600.0,
+                             uncertain_pair_budget=budget)
     exact, uncertain = CollisionPredictor(config), CollisionPredictor(config)
     cov = covariance_rows(n, opts.sigma, opts.velocity_sigma)
     times = {"exact scene": [], "covariance scene": [], "exact pipeline": [], "covariance pipeline": []}
@@ -78,7 +86,7 @@ def main() -> int:
 
     uncertainty.uncertain_pairs = timed_core
     core_per_frame = []
-    evaluated, reported, contacts = [], [], []
+    evaluated, reported, contacts, deferred = [], [], [], []
     for k in range(frames + 2):  # two warm-up frames (numba caches, first allocation), not counted
         stamp = BASE_NS + k * 33_000_000
         scene.step(0.033)
@@ -98,12 +106,13 @@ def main() -> int:
                     core_per_frame.append(core_s[0])
                     u = prediction.uncertainty
                     evaluated.append(len(u))
+                    deferred.append(u.deferred)
                     reported.append(len(prediction.columns))
                     contacts.append(len(prediction.contacts))
     med = {k: statistics.median(v) * 1e3 for k, v in times.items()}
     print(f"{n} bodies, {frames} frames (every body moved and restamped each frame), horizon "
           f"{opts.horizon} s, covariance: position sigma {opts.sigma} m, velocity sigma "
-          f"{opts.velocity_sigma} m/s on every body")
+          f"{opts.velocity_sigma} m/s on every body; uncertain_pair_budget {budget}")
     print("| step | exact ms (median) | covariance ms (median) | ratio | target |")
     print("|---|---:|---:|---:|---:|")
     for step in ("scene", "pipeline"):
@@ -115,7 +124,7 @@ def main() -> int:
           f"= {(med['covariance scene'] - core_ms) / med['exact scene']:.2f}x the exact step")
     print(f"uncertain pairs evaluated per frame (median): {statistics.median(evaluated):.0f}; rows "
           f"published: {statistics.median(reported):.0f} (of which mean contacts "
-          f"{statistics.median(contacts):.0f})")
+          f"{statistics.median(contacts):.0f}); deferred (budget) {statistics.median(deferred):.0f}")
     return 0
 
 

@@ -234,3 +234,22 @@ def test_markers_show_probability_as_opacity() -> None:
         assert (c.r, c.g, c.b) == pytest.approx(tuple(band[:3]))
         assert c.a == pytest.approx(band[3] * Urgency.opacity(np.array([p]))[0], rel=1e-6)
         assert c.a < band[3]
+
+
+def test_uncertain_pair_budget_defers_and_counts() -> None:
+    """uncertain_pair_budget = m: at most m uncertain pairs fully evaluated per prediction; the
+    deferred rest are published as probability 1.0 with bound 1.0, counted in the stats, and the
+    same input gives the same bytes (a count, not a clock)."""
+    batch = _batch(16, seed=9, sigma=0.4, spread=7.0)
+    _, full = _predict(batch)
+    predictor, part = _predict(batch, uncertain_pair_budget=2)
+    u = part.uncertainty
+    deferred = u.probability_bound == 1.0
+    assert u.deferred == predictor.stats.uncertain_deferred == np.count_nonzero(deferred) > 0
+    assert np.all(u.probability[deferred] == 1.0)
+    assert np.count_nonzero((u.probability_bound != full.uncertainty.probability_bound)) == u.deferred
+    listed = set(zip(part.columns.id_a, part.columns.id_b))
+    assert {(a, b) for a, b in zip(u.id_a[deferred].tolist(), u.id_b[deferred].tolist())} <= listed
+    _, again = _predict(batch, uncertain_pair_budget=2)
+    assert again.to_cdr() == part.to_cdr()
+    assert full.uncertainty.deferred == 0

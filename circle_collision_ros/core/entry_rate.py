@@ -152,26 +152,24 @@ def _state(dp, dv, da, Sigma, t):
 
 
 @njit(cache=True, error_model="numpy")
-def _surface_integrand(x, n, g, gd, A, norm, K, Vc, cap):
-    """f_t(x) E[(-n.Xdot)^+ | X = x] at the sphere point x with normal n."""
-    D = x.shape[0]
+def _surface_integrand(n0, n1, n2, R, g, gd, A, norm, K, Vc, cap):
+    """f_t(x) E[(-n.Xdot)^+ | X = x] at the sphere point x = R n, n = (n0, n1, n2):
+    scalar code (no temporaries: this is the innermost loop of the 3-D cap)."""
+    d0 = R * n0 - g[0]
+    d1 = R * n1 - g[1]
+    d2 = R * n2 - g[2]
     q = 0.0
     m = 0.0
     s2 = 0.0
-    d = np.empty(D)
-    for i in range(D):
-        d[i] = x[i] - g[i]
-    for i in range(D):
-        Ad = 0.0
-        Kd = 0.0
-        Vn = 0.0
-        for j in range(D):
-            Ad += A[i, j] * d[j]
-            Kd += K[i, j] * d[j]
-            Vn += Vc[i, j] * n[j]
-        q += d[i] * Ad
-        m += n[i] * (gd[i] + Kd)
-        s2 += n[i] * Vn
+    for i in range(3):
+        Ad = A[i, 0] * d0 + A[i, 1] * d1 + A[i, 2] * d2
+        Kd = K[i, 0] * d0 + K[i, 1] * d1 + K[i, 2] * d2
+        Vn = Vc[i, 0] * n0 + Vc[i, 1] * n1 + Vc[i, 2] * n2
+        di = d0 if i == 0 else (d1 if i == 1 else d2)
+        ni = n0 if i == 0 else (n1 if i == 1 else n2)
+        q += di * Ad
+        m += ni * (gd[i] + Kd)
+        s2 += ni * Vn
     if not (q < 1400.0):
         return 0.0
     return norm * math.exp(-0.5 * q) * _rate(m, math.sqrt(max(s2, 0.0)), cap)
@@ -296,11 +294,10 @@ def _ring_integrand(psi, prm):
     st = math.sin(th)
     cp = math.cos(psi)
     sp = math.sin(psi)
-    n = np.empty(3)
-    for i in range(3):
-        n[i] = ct * u[i] + st * (cp * e1[i] + sp * e2[i])
-    x = R * n
-    return _surface_integrand(x, n, prm[5], prm[6], prm[7], prm[8], prm[9], prm[10], prm[11])
+    n0 = ct * u[0] + st * (cp * e1[0] + sp * e2[0])
+    n1 = ct * u[1] + st * (cp * e1[1] + sp * e2[1])
+    n2 = ct * u[2] + st * (cp * e1[2] + sp * e2[2])
+    return _surface_integrand(n0, n1, n2, R, prm[5], prm[6], prm[7], prm[8], prm[9], prm[10], prm[11])
 
 
 _ring_adaptive = make_adaptive(_ring_integrand)

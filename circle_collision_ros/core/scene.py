@@ -137,6 +137,8 @@ class SceneUncertainty:
     probability: np.ndarray
     probability_bound: np.ndarray
     plausible_ttc: np.ndarray
+    #: rows not evaluated for lack of budget (``max_evaluated``): probability 1.0, bound 1.0
+    deferred: int = 0
 
     def __len__(self) -> int:
         return int(self.probability.shape[0])
@@ -1022,22 +1024,27 @@ class Scene:
 
 
     # ------------------------------------------------------------ uncertain pairs
-    def uncertain_pairs(self, threshold: float, contacts: SceneContacts | None = None) -> SceneUncertainty:
+    def uncertain_pairs(self, threshold: float, contacts: SceneContacts | None = None,
+                        max_evaluated: int | None = None) -> SceneUncertainty:
         """Probabilities of the pairs with an uncertain body, at the reference time R over [0, H].
 
         Evaluated afresh at R on every call that follows a change (the exact path's
         shift-by-d rule does not hold for probabilities); cached while the scene and
         `threshold` are unchanged.  `contacts` (the exact path's rows) adds their
-        uncertain pairs should the inflated broad phase not list them.  See SceneUncertainty.
+        uncertain pairs should the inflated broad phase not list them.  Pairs certified below
+        threshold / 2 skip the full evaluation (``core.uncertainty.uncertain_pairs(screen=True)``);
+        `max_evaluated` caps the full evaluations (the rest are deferred, see there).
+        See SceneUncertainty.
         """
-        key = (self._version, float(threshold))
+        key = (self._version, float(threshold), max_evaluated)
         if self._uncertain_cache is not None and self._uncertain_cache[0] == key:
             return self._uncertain_cache[1]
-        res = self._uncertain_pairs(float(threshold), contacts)
+        res = self._uncertain_pairs(float(threshold), contacts, max_evaluated)
         self._uncertain_cache = (key, res)
         return res
 
-    def _uncertain_pairs(self, threshold: float, contacts: SceneContacts | None) -> SceneUncertainty:
+    def _uncertain_pairs(self, threshold: float, contacts: SceneContacts | None,
+                         max_evaluated: int | None) -> SceneUncertainty:
         R = self.reference_ns
         e = np.empty(0)
         if R is None or not (self._alive & self._U).any():
@@ -1071,10 +1078,11 @@ class Scene:
         if I.size == 0:
             return SceneUncertainty(R, np.empty(0, dtype=object), np.empty(0, dtype=object), e, e, e)
         res = unc.uncertain_pairs(P[I], V[I], A[I], Rad[I], C[I], P[J], V[J], A[J], Rad[J], C[J],
-                                  self._h, threshold)
+                                  self._h, threshold, screen=True, max_evaluated=max_evaluated)
         ids = self._ids[slots]
         return SceneUncertainty(R, ids[I], ids[J], res.collision_probability,
-                                res.collision_probability_bound, res.plausible_time)
+                                res.collision_probability_bound, res.plausible_time,
+                                unc.deferred_count(res) if max_evaluated is not None else 0)
 
 
 class _Capture:

@@ -84,13 +84,16 @@ def S_at(Sigma, t):
 @njit(cache=True, error_model="numpy")
 def _lam_max(Sigma, t):
     """Largest eigenvalue of S(t) (closed form in 2-D, Jacobi in 3-D)."""
-    S = S_at(Sigma, t)
-    if S.shape[0] == 2:
-        h = 0.5 * (S[0, 0] + S[1, 1])
-        d = 0.5 * (S[0, 0] - S[1, 1])
-        o = 0.5 * (S[0, 1] + S[1, 0])
+    if Sigma.shape[0] == 4:  # scalar (no temporaries: the tube calls this per node); as S_at
+        s00 = Sigma[0, 0] + t * (Sigma[0, 2] + Sigma[2, 0]) + t * t * Sigma[2, 2]
+        s11 = Sigma[1, 1] + t * (Sigma[1, 3] + Sigma[3, 1]) + t * t * Sigma[3, 3]
+        s01 = Sigma[0, 1] + t * (Sigma[0, 3] + Sigma[2, 1]) + t * t * Sigma[2, 3]
+        s10 = Sigma[1, 0] + t * (Sigma[1, 2] + Sigma[3, 0]) + t * t * Sigma[3, 2]
+        h = 0.5 * (s00 + s11)
+        d = 0.5 * (s00 - s11)
+        o = 0.5 * (s01 + s10)
         return h + math.sqrt(d * d + o * o)
-    lam, _ = eig_sym(S)
+    lam, _ = eig_sym(S_at(Sigma, t))
     return lam[lam.shape[0] - 1]
 
 
@@ -137,19 +140,22 @@ def _mean_range(dp, dv, da, ta, tb):
     return math.sqrt(dmin), math.sqrt(dmax)
 
 
+@njit(cache=True, error_model="numpy")
+def max_sigma_rows(cov, ta, tb, out):
+    """out[i] = max_sigma_over(cov[i], ta, tb) for a C-contiguous (n, 2D, 2D) stack."""
+    for i in range(cov.shape[0]):
+        out[i] = max_sigma_over(cov[i], ta, tb)
+
+
 _TUBE_DEPTH = 8  # leaves of width >= H / 256
 
 
 @njit(cache=True, error_model="numpy")
-def tube_intervals(dp, dv, da, R, Sigma, H, out):
-    """Classify [0, H] with the k-sigma tube (k = BROAD_PHASE_SIGMAS).
-
-    Writes the ambiguous leaf intervals [out[j, 0], out[j, 1]] (merged when
-    adjacent; out has >= 2^_TUBE_DEPTH rows) and returns (count, inside):
-    inside is True when some interval has the whole tube inside the ball (then
-    P(contact) >= 1 - TUBE_TAIL).  Outside the ambiguous intervals, no path of
-    the tube touches the sphere |x| = R."""
-    k = BROAD_PHASE_SIGMAS
+def _tube_walk(dp, dv, da, R, Sigma, H, out, k, first_only):
+    """The k-sigma tube's interval tree over [0, H], nodes visited depth first, left
+    to right.  Returns (count of ambiguous leaves written to out, t_inside); with
+    first_only it stops at the first terminal node that is not outside and returns
+    (0, its start): by the visiting order, the smallest start of any such node."""
     sa = np.empty(_TUBE_DEPTH + 2)
     sb = np.empty(_TUBE_DEPTH + 2)
     sd = np.empty(_TUBE_DEPTH + 2, dtype=np.int64)
@@ -169,10 +175,14 @@ def tube_intervals(dp, dv, da, R, Sigma, H, out):
         if gmin - rho > R:
             continue
         if gmax + rho < R:
+            if first_only:
+                return 0, ta
             t_inside = min(t_inside, ta)
             continue
         m = 0.5 * (ta + tb)
         if d >= _TUBE_DEPTH or not (ta < m < tb):
+            if first_only:
+                return 0, ta
             if cnt > 0 and out[cnt - 1, 1] == ta:
                 out[cnt - 1, 1] = tb
             else:
@@ -182,6 +192,50 @@ def tube_intervals(dp, dv, da, R, Sigma, H, out):
             continue
         top = push_halves(sa, sb, sd, top, ta, m, tb, d)
     return cnt, t_inside
+
+
+@njit(cache=True, error_model="numpy")
+def tube_intervals(dp, dv, da, R, Sigma, H, out, k):
+    """Classify [0, H] with the k-sigma tube (pair_probability: k = BROAD_PHASE_SIGMAS).
+
+    Writes the ambiguous leaf intervals [out[j, 0], out[j, 1]] (merged when
+    adjacent; out has >= 2^_TUBE_DEPTH rows) and returns (count, inside):
+    inside is True when some interval has the whole tube inside the ball (then
+    P(contact) >= 1 - TUBE_TAIL).  Outside the ambiguous intervals, no path of
+    the tube touches the sphere |x| = R."""
+    return _tube_walk(dp, dv, da, R, Sigma, H, out, k, False)
+
+
+@njit(cache=True, error_model="numpy")
+def screen_rows(dp, dv, da, R, Sigma, H, k, clear, t_first):
+    """clear[i] = True when the k-sigma tube of row i never reaches the ball
+    within [0, H] (no ambiguous interval, never wholly inside): then
+    P(contact within [0, H]) <= P(chi^2_{2D} > k^2) for that row (a contact
+    path has |z| > k, docs/uncertainty.md "Screening").  t_first[i] = the
+    first t where the tube may reach the ball (start of the first ambiguous
+    interval, or where it lies wholly inside; +inf if never): before it
+    P(|X(t)| <= R) <= P(chi^2_{2D} > k^2).  Rows (n, D), Sigma (n, 2D, 2D)
+    C-contiguous; each row is decided from itself alone."""
+    unused = np.empty((0, 2))
+    for i in range(dp.shape[0]):
+        _, t_first[i] = _tube_walk(dp[i], dv[i], da[i], R[i], Sigma[i], H, unused, k, True)
+        clear[i] = not (t_first[i] <= H)
+
+
+def screen_sigmas(threshold: float, dof: int) -> tuple[float, float]:
+    """(k, U): the smallest k (to 1e-12) with U = P(chi^2_dof > k^2) <= threshold / 2,
+    dof even; (inf, 0.0) when no k <= 40 qualifies (a threshold below ~1e-300)."""
+    target = 0.5 * threshold
+    lo, hi = 0.0, 40.0
+    if chi2_tail_even(hi * hi, dof) > target:
+        return math.inf, 0.0
+    while hi - lo > 1e-12:
+        m = 0.5 * (lo + hi)
+        if chi2_tail_even(m * m, dof) <= target:
+            hi = m
+        else:
+            lo = m
+    return hi, chi2_tail_even(hi * hi, dof)
 
 
 @njit(cache=True, error_model="numpy")
@@ -282,8 +336,10 @@ class _Pair:
         if key in self.cache:
             return self.cache[key]
         self.acc[1] = 0.0
+        # slow_H passed explicitly: a call that omits a defaulted argument misses numba's
+        # fast dispatch and costs ~3 ms of type resolution every time
         v, e = entry_rate_integral(self.dp, self.dv, self.da, self.R, self.Sigma, a, b,
-                                   _RICE_TOL, self.acc)
+                                   _RICE_TOL, self.acc, -1.0)
         if self.acc[1] != 0.0:
             self.degenerate = True
         self.cache[key] = (v, e)
@@ -365,7 +421,7 @@ def pair_probability(dp, dv, da, R, Sigma, H, thr):
     D = dp.shape[0]
     pair = _Pair(dp, dv, da, R, Sigma)
     leaves = np.empty((1 << _TUBE_DEPTH, 2))
-    cnt, t_inside = tube_intervals(dp, dv, da, R, Sigma, H, leaves)
+    cnt, t_inside = tube_intervals(dp, dv, da, R, Sigma, H, leaves, BROAD_PHASE_SIGMAS)
     if cnt == 0 and thr > TUBE_TAIL and thr <= 1.0 - TUBE_TAIL:
         # the tube alone decides (far pairs, tiny sigma): P <= TUBE_TAIL < thr
         # wherever it is outside, >= 1 - TUBE_TAIL >= thr from t_inside on

@@ -182,7 +182,8 @@ class CollisionNode(Node):
         self.predictor = CollisionPredictor(PredictorConfig(
             horizon=p("horizon"), dimensions=p("dimensions"), frame_id=p("frame_id"),
             stale_timeout=p("stale_timeout"), report_all_pairs=p("report_all_pairs"),
-            max_bodies=p("max_bodies"), probability_threshold=p("probability_threshold")))
+            max_bodies=p("max_bodies"), probability_threshold=p("probability_threshold"),
+            uncertain_pair_budget=p("uncertain_pair_budget")))
         self.predictor.warm_up()  # pay numba's compile/cache load before the first message
         self.counters = Counters()
         # Receive (rmw timestamp of the oldest input answered) to publish, s.
@@ -446,6 +447,7 @@ class CollisionNode(Node):
             "bodies_expired": c.expired, "predictions_published": c.published,
             "inputs_coalesced": c.coalesced, "inputs_missing": self.input_loss.missing,
             "candidate_pairs": s.candidate_pairs, "contacts": s.contacts,
+            "uncertain_pairs_deferred": s.uncertain_deferred,
             "compute_ms_last": f"{s.compute_s * 1e3:.3f}",
             # From the rmw receive timestamp of the oldest input answered to publication:
             # queue wait, coalescing, decoding, prediction and encoding included.

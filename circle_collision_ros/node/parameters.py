@@ -86,6 +86,11 @@ PARAMS: tuple[ParamSpec, ...] = (
               "In (0, 1]: an uncertain pair (covariance given) whose mean paths miss is reported when "
               "its probability of contact within the horizon reaches this; plausible_time_to_collision "
               "is the first time the overlap probability does.", float_range=(0.0, 1.0)),
+    ParamSpec("uncertain_pair_budget", Parameter.Type.INTEGER, 4,
+              "Uncertain pairs given the full probability evaluation per prediction, earliest possible "
+              "contact first (0: all); the others are reported with probability 1.0, bound 1.0 "
+              "(deferred, counted in /diagnostics). A count, so replay is bit-identical.",
+              read_only=True, int_range=(0, 1_000_000)),
     ParamSpec("report_all_pairs", Parameter.Type.BOOL, False,
               "Also list NO_CONTACT pairs (time +inf); only for scenes of at most 100 bodies."),
     ParamSpec("stale_timeout", Parameter.Type.DOUBLE, 2.0,

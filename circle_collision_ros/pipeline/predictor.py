@@ -37,6 +37,10 @@ class PredictorConfig:
     frame_id : "" adopts the first frame seen. probability_threshold : in (0, 1];
     an uncertain pair whose mean paths miss is reported when its probability of
     contact reaches it, and the plausible time is when the overlap probability does.
+    uncertain_pair_budget : at most this many uncertain pairs get the full probability
+    evaluation per prediction (0: all); the rest are deferred, reported with probability
+    1.0 and bound 1.0 (core.uncertainty.uncertain_pairs(max_evaluated=...)). A count, not
+    a time: replay reproduces it bit for bit.
     """
 
     horizon: float = 5.0
@@ -46,6 +50,7 @@ class PredictorConfig:
     report_all_pairs: bool = False
     max_bodies: int = 10_000
     probability_threshold: float = 0.01
+    uncertain_pair_budget: int = 0
 
 
 #: The PredictorConfig fields that may change while running (node parameters
@@ -76,6 +81,7 @@ class PredictionStats:
     bodies: int = 0
     contacts: int = 0
     candidate_pairs: int = 0  # pairs the narrow phase evaluated (only changed bodies' pairs when incremental)
+    uncertain_deferred: int = 0  # uncertain pairs not evaluated for lack of uncertain_pair_budget
     compute_s: float = 0.0
 
 
@@ -183,12 +189,14 @@ class CollisionPredictor:
         horizon = self.config.horizon if horizon is None else float(horizon)
         self._scene.set_horizon(horizon)
         contacts = self._scene.predictions()
-        uncertainty = self._scene.uncertain_pairs(self.config.probability_threshold, contacts)
+        uncertainty = self._scene.uncertain_pairs(self.config.probability_threshold, contacts,
+                                                  self.config.uncertain_pair_budget or None)
         prediction = ScenePrediction(contacts, self._scene.capture(), horizon, self.frame_id,
                                      self.config.report_all_pairs, uncertainty,
                                      self.config.probability_threshold)
         self.stats = PredictionStats(bodies=len(self._scene), contacts=len(contacts),
                                      candidate_pairs=self._scene.evaluated_pairs,
+                                     uncertain_deferred=uncertainty.deferred,
                                      compute_s=time.perf_counter() - started)
         return prediction
 
