@@ -50,8 +50,11 @@ use 0.0 for the z components in 2-D).  Both follow the same contract.
 Input range: finite values with magnitudes below ~1e150.  The relative
 state is scaled exactly by a power of two so that its largest component lies
 in [2, 4) (``narrow_eval._rel2``); every error bound is relative to that
-scale, so components far below it (even where their squares underflow) do
-not void a certified decision.
+scale.  A row with a nonzero relative component (of dp, dv, da or R) below
+2^-240 of the largest (``narrow_eval._SPAN``: scaling would round it on the
+subnormal grid or flush it to 0 -- da = 0 would then look straight -- or its
+squares would underflow) is decided by the exact path
+(tests/core/test_narrow_phase_span.py).
 """
 from __future__ import annotations
 
@@ -303,9 +306,9 @@ def _ttc_scalar(pax, pay, paz, vax, vay, vaz, aax, aay, aaz, r_a,
     if straight or horizon < _INF:
         chk = (pax + pay + paz + vax + vay + vaz + aax + aay + aaz + r_a
                + pbx + pby + pbz + vbx + vby + vbz + abx + aby + abz + r_b)
-        h = horizon if _valid(chk, r_a, r_b, horizon) else _NAN
-        Ph, Pl, Vh, Vl, Ah, Al, Rh, Rl = _rel3(pax, pay, paz, vax, vay, vaz, aax, aay, aaz, r_a,
-                                               pbx, pby, pbz, vbx, vby, vbz, abx, aby, abz, r_b)
+        Ph, Pl, Vh, Vl, Ah, Al, Rh, Rl, fine = _rel3(pax, pay, paz, vax, vay, vaz, aax, aay, aaz, r_a,
+                                                     pbx, pby, pbz, vbx, vby, vbz, abx, aby, abz, r_b)
+        h = horizon if (_valid(chk, r_a, r_b, horizon) & fine) else _NAN
         if straight:
             t = _straight_rel(Ph, Pl, Vh, Vl, Ah, Al, Rh, Rl, h)
         else:
@@ -327,9 +330,9 @@ def _ttc_scalar2(pax, pay, vax, vay, aax, aay, r_a, pbx, pby, vbx, vby, abx, aby
     straight = (aax == abx) & (aay == aby)
     if straight or horizon < _INF:
         chk = (pax + pay + vax + vay + aax + aay + r_a + pbx + pby + vbx + vby + abx + aby + r_b)
-        h = horizon if _valid(chk, r_a, r_b, horizon) else _NAN
-        Ph, Pl, Vh, Vl, Ah, Al, Rh, Rl = _rel2(pax, pay, vax, vay, aax, aay, r_a,
-                                               pbx, pby, vbx, vby, abx, aby, r_b)
+        Ph, Pl, Vh, Vl, Ah, Al, Rh, Rl, fine = _rel2(pax, pay, vax, vay, aax, aay, r_a,
+                                                     pbx, pby, vbx, vby, abx, aby, r_b)
+        h = horizon if (_valid(chk, r_a, r_b, horizon) & fine) else _NAN
         if straight:
             t = _straight_rel(Ph, Pl, Vh, Vl, Ah, Al, Rh, Rl, h)
         else:
