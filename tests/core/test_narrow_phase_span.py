@@ -84,6 +84,13 @@ def gen_tiny_da(rng, n, D):
     return rows
 
 
+def _closing(rng, D, ep, ev):
+    """(w, dp, dv): dp = w 2^ep along a small-integer vector w, dv closing
+    along the same line at 1-3 x 2^ev."""
+    w = _ivec(rng, D)
+    return w, w * _p2(ep), -w * _p2(ev) * float(rng.integers(1, 4))
+
+
 def gen_tiny_dv(rng, n, D):
     """Constant velocity (da = 0) with dv 2^241 to 2^1020 times smaller than
     dp: along the line (contact after up to ~2^1020 s), beside it, or
@@ -93,9 +100,7 @@ def gen_tiny_dv(rng, n, D):
     for _ in range(n):
         ep = int(rng.integers(-200, 495))
         ev = int(rng.integers(max(ep - 1100, -1070), ep - SPAN_BITS - 1))
-        w = _ivec(rng, D)
-        dp = w * _p2(ep)
-        dv = -w * _p2(ev) * float(rng.integers(1, 4))
+        w, dp, dv = _closing(rng, D, ep, ev)
         if rng.random() < 0.3:
             dv = dv + _ivec(rng, D, 1) * _p2(ev)
         da = np.zeros(D)
@@ -119,9 +124,7 @@ def gen_tiny_dp(rng, n, D):
     for _ in range(n):
         ev = int(rng.integers(-100, 495))
         ep = int(rng.integers(max(ev - 1000, -1060), ev - SPAN_BITS - 1))
-        w = _ivec(rng, D)
-        dp = w * _p2(ep)
-        dv = -w * _p2(ev) * float(rng.integers(1, 4))
+        w, dp, dv = _closing(rng, D, ep, ev)
         R = _p2(ep) * rng.choice([0.0, 0.5, 0.75, 1.0])
         da = np.zeros(D) if rng.random() < 0.5 else w * _p2(ev) * rng.choice([-1.0, 1.0])
         if R > 0.0 and rng.random() < 0.5:
