@@ -4,8 +4,8 @@ Issue 17 asks for one pair from Python in at most 0.8 us (pooltool's jitted
 ``ball_ball_collision_time``).  Measured in one run (bench/bench_core.py,
 ``--one-pair``): calling the numba dispatcher directly with the pair's 15
 floats already costs ~2x a trivial jitted call (~0.6 us idle), 9 arguments
-as tuples ~3x, 1-D arrays ~3.4x; with the Python wrapper and the 0-d result
-array on top no numba entry gets under 0.8 us.  So ``_one_pair.c`` reads the
+as tuples ~3x, 1-D arrays ~3.4x; with the Python wrapper and the result
+on top no numba entry gets under 0.8 us.  So ``_one_pair.c`` reads the
 sequences with the CPython API and calls the certified kernels
 (``narrow_phase._certified_pair2/3``: fast or straight path, then the
 robust solver -- the code the batch runs on a row) through numba ``cfunc``

@@ -449,7 +449,7 @@ def _one_pair_first(p_a, v_a, a_a, r_a, p_b, v_b, a_b, r_b, horizon):
     return _one_pair(p_a, v_a, a_a, r_a, p_b, v_b, a_b, r_b, horizon)
 
 
-# one pair as 1-D vectors -> 0-d result array, or None (then the general path)
+# one pair as 1-D vectors -> numpy.float64, or None (then the general path)
 _one_pair = _one_pair_first
 
 
@@ -481,7 +481,8 @@ def time_to_collision(p_a, v_a, a_a, r_a, p_b, v_b, a_b, r_b, horizon=math.inf) 
 
     Returns
     -------
-    numpy.ndarray of float64, the broadcast batch shape (0-d for scalars)
+    numpy.ndarray of float64 of the broadcast batch shape; for batch shape
+    () (one pair) a numpy.float64, as numpy returns for a 0-d result
         0.0 if the bodies overlap at t = 0 or touch while approaching;
         otherwise the smallest t in (0, horizon] with centre distance equal
         to r_a + r_b (tangent grazes count); inf if none.  A pair touching at
@@ -558,4 +559,4 @@ def time_to_collision(p_a, v_a, a_a, r_a, p_b, v_b, a_b, r_b, horizon=math.inf) 
     else:
         hz = _as_rows(sc[2], batch, n, 0)
     _run(n >= PARALLEL_MIN_ROWS, pa, va, aa, ra, pb, vb, ab, rb, hz, out)
-    return out.reshape(batch)
+    return out.reshape(batch) if batch else out[0]  # batch shape (): a numpy.float64
