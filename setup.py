@@ -1,7 +1,8 @@
 """ament_python package circle_collision_ros (works with colcon and with pip)."""
 from glob import glob
 
-from setuptools import find_packages, setup
+import numpy
+from setuptools import Extension, find_packages, setup
 
 PACKAGE = "circle_collision_ros"
 
@@ -14,10 +15,16 @@ CONSOLE_SCRIPTS = [
     "replay = circle_collision_ros.recording.replay:main",
 ]
 
+# The one-pair entry of time_to_collision (issue 17: <= 0.8 us per call; the
+# measured reason for C is in circle_collision_ros/core/narrow_one_pair.py).
+ONE_PAIR = Extension(f"{PACKAGE}.core._one_pair", [f"{PACKAGE}/core/_one_pair.c"],
+                     include_dirs=[numpy.get_include()], extra_compile_args=["-O2"])
+
 setup(
     name=PACKAGE,
     version="0.1.0",
     packages=find_packages(exclude=["tests", "tests.*", "bench", "bench.*"]),
+    ext_modules=[ONE_PAIR],
     data_files=[
         ("share/ament_index/resource_index/packages", [f"resource/{PACKAGE}"]),
         (f"share/{PACKAGE}", ["package.xml"]),

@@ -5,6 +5,7 @@ Usage::
     .venv/bin/python bench/bench_core.py            # 200,000 pairs
     .venv/bin/python bench/bench_core.py --quick    # 20,000 pairs, fewer repeats
     .venv/bin/python bench/bench_core.py --pairs N
+    .venv/bin/python bench/bench_core.py --one-pair # only the one-pair-per-call figures
 
 Pairs: half aimed to collide within ~10 s, half random; 2-D; horizon 10 s.
 Prints ns/pair for ours (``time_to_collision``: threaded from
@@ -76,12 +77,64 @@ def start_cost(cache_dir: str | None) -> float:
     return float(out.stdout.strip().splitlines()[-1])
 
 
+def one_pair_costs(P, H: float, reps: int, rounds: int = 7):
+    """Seconds per call of one pair from Python (issue 17: <= 0.8 us) in each
+    input form, and of the same-run baselines: a trivial jitted call, and
+    numba's dispatcher called directly with the pair's 15 floats (the core of
+    the previous numba one-pair entry, which took 3.4-3.8 us per call).
+
+    Interleaved rounds (every case once per round, best round each): on a
+    shared machine the load changes within seconds; interleaving exposes
+    every case to the same load, so the ratios to the baseline hold."""
+    from circle_collision_ros.core import time_to_collision
+    from circle_collision_ros.core.narrow_phase import _ttc_scalar2
+
+    one = tuple(x[0] for x in P)
+    one_list = tuple(x.tolist() if np.ndim(x) else float(x) for x in one)
+    one_tuple = tuple(tuple(x) if isinstance(x, list) else x for x in one_list)
+    flat = tuple(v for x in one_list for v in (x if isinstance(x, list) else [x])) + (H,)
+    one3 = tuple(x + [0.25] if isinstance(x, list) else x for x in one_list)
+    cases = {"1-D arrays": lambda: time_to_collision(*one, horizon=H),
+             "lists": lambda: time_to_collision(*one_list, horizon=H),
+             "tuples": lambda: time_to_collision(*one_tuple, horizon=H),
+             "lists 3-D": lambda: time_to_collision(*one3, horizon=H),
+             "(1, D) arrays": lambda: time_to_collision(*(x[:1] for x in P), horizon=H),
+             "1-D arrays, general path": lambda: time_to_collision(*one, horizon=np.array(H)),
+             "numba dispatcher, 15 floats": lambda: _ttc_scalar2(*flat),
+             "trivial jitted call": lambda: _trivial_jit(1.0)}
+    t_one = {k: math.inf for k in cases}
+    for fn in cases.values():
+        fn()
+    for _ in range(rounds):
+        for k, fn in cases.items():
+            t0 = time.perf_counter()
+            for _ in range(reps):
+                fn()
+            t_one[k] = min(t_one[k], (time.perf_counter() - t0) / reps)
+    t_trivial = t_one.pop("trivial jitted call")
+    return t_one, t_trivial
+
+
+def print_one_pair(t_one: dict, t_trivial: float) -> None:
+    print("one pair per call: " + ", ".join(f"{k} {v * 1e6:.2f} us ({v / t_trivial:.1f}x)"
+                                            for k, v in t_one.items())
+          + f"; (Nx): N times the same-run baseline, a trivial jitted call, {t_trivial * 1e6:.2f} us")
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--pairs", type=int, default=200_000)
     ap.add_argument("--quick", action="store_true", help="20,000 pairs, 1 repeat, small roots subsample")
     ap.add_argument("--roots-sample", type=int, default=4000)
+    ap.add_argument("--one-pair", action="store_true",
+                    help="only the one-pair-per-call figures (issue 17: <= 0.8 us)")
     args = ap.parse_args()
+    if args.one_pair:
+        from circle_collision_ros.core import time_to_collision
+        P = make_pairs(16)
+        time_to_collision(*P, horizon=10.0)
+        print_one_pair(*one_pair_costs(P, 10.0, 20000))
+        return
     n = 20_000 if args.quick and args.pairs == 200_000 else args.pairs
     # best of several runs: the machine is shared, and the minimum is the run
     # least disturbed by other processes (applied to every method alike)
@@ -152,33 +205,7 @@ def main() -> None:
     t_small = per_call(small)
     t_small_b = per_call(small_b)
 
-    # one pair from Python (issue 17: <= 0.8 us): 1-D arrays, lists, tuples
-    # take the scalar entry point; a 0-d array horizon forces the general
-    # (broadcasting) path on the same rows, for the same-run comparison
-    one = tuple(x[0] for x in P)
-    one_list = tuple(x.tolist() if np.ndim(x) else float(x) for x in one)
-    one_tuple = tuple(tuple(x) if isinstance(x, list) else x for x in one_list)
-
-    # Interleaved rounds (every case once per round, best round each) with a
-    # same-run baseline: the cheapest call of a jitted function.  On a shared
-    # machine the load changes within seconds; interleaving exposes every
-    # case to the same load, so the ratios to the baseline hold.
-    cases = {"1-D arrays": lambda: time_to_collision(*one, horizon=H),
-             "lists": lambda: time_to_collision(*one_list, horizon=H),
-             "tuples": lambda: time_to_collision(*one_tuple, horizon=H),
-             "(1, D) arrays": lambda: time_to_collision(*(x[:1] for x in P), horizon=H),
-             "1-D arrays, general path": lambda: time_to_collision(*one, horizon=np.array(H)),
-             "trivial jitted call": lambda: _trivial_jit(1.0)}
-    t_one = {k: math.inf for k in cases}
-    for fn in cases.values():
-        fn()
-    for _ in range(7):
-        for k, fn in cases.items():
-            t0 = time.perf_counter()
-            for _ in range(reps):
-                fn()
-            t_one[k] = min(t_one[k], (time.perf_counter() - t0) / reps)
-    t_trivial = t_one.pop("trivial jitted call")
+    t_one, t_trivial = one_pair_costs(P, H, reps)
 
     ns = lambda t, m: 1e9 * t / m  # noqa: E731
     rows = [
@@ -198,9 +225,7 @@ def main() -> None:
     print(f"small batch (10 pairs) per call: {t_small * 1e6:.1f} us (row arrays, fast path), "
           f"{t_small_b * 1e6:.1f} us (scalar radii, general path)")
     print(f"constant velocity (da = 0) / accelerating rows, serial kernel: {t_straight / t_ours1:.2f}")
-    print("one pair per call: " + ", ".join(f"{k} {v * 1e6:.2f} us ({v / t_trivial:.1f}x)"
-                                            for k, v in t_one.items())
-          + f"; (Nx): N times the same-run baseline, a trivial jitted call, {t_trivial * 1e6:.2f} us")
+    print_one_pair(t_one, t_trivial)
     print(f"numba start (import + first call): cold compile {cold:.2f} s, cached {cached:.3f} s")
 
 

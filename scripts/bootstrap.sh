@@ -79,7 +79,7 @@ fi
 # layout that colcon would install, linked like `colcon build --symlink-install`:
 # every data_files entry of setup.py under <venv>/share/..., and every console
 # script under <venv>/lib/circle_collision_ros/ so that `ros2 run` finds it.
-h=$(inputs_hash setup.py setup.cfg package.xml resource/circle_collision_ros \
+h=$(inputs_hash setup.py setup.cfg package.xml resource/circle_collision_ros circle_collision_ros/core/_one_pair.c \
       $(cd "$ROOT" && ls launch/*.launch.py config/*.yaml 2>/dev/null))
 if ! is_current package "$h"; then
   say "installing circle_collision_ros (editable) and its ROS layout"

@@ -67,12 +67,39 @@ def _max(a, b):
 # same length degree, every bound is relative), so wherever the unscaled
 # state did not under- or overflow the results are bitwise those of the
 # unscaled solver (checked on 1.8 million rows).
+#
+# Span of magnitudes.  Scaling down is exact only above the subnormal range:
+# a component far below the largest one is rounded on the subnormal grid or
+# flushed to 0, and then da looks exactly 0 (the straight-line closed form
+# answered rows that accelerate: dp = 1e150, da = -1e-175 gave inf, the
+# exact answer is 4.47e162 s), and even an exact small component makes its
+# squares underflow (|dv|^2 = 0 for dv = 1e-163 dp: "static", inf instead of
+# 5e162 s).  So a row is solved in floating point only when every nonzero
+# high part (dp, dv, da components, R) of the scaled state is >= _SPAN =
+# 2^-240 (the largest is >= 2): products of up to four of them are then
+# >= 2^-960, normal, and every rounding error is relative as the bounds
+# assume.  Low parts only enter double-double residuals, where a subnormal
+# rounding (<= 2^-1075 absolute) is far below the dd error bound
+# (16 eps^2 S^2 with S >= 2^-240).  Rows outside the span -- never a physical
+# scene: 72 orders of magnitude between two quantities -- come out of
+# _rel2/_rel3 with ``fine`` False and are decided exactly (narrow_exact).
+_SPAN = 2.0 ** -240
+
+
+@register_jitable(error_model="numpy")
+def _kept(c, cs):
+    """The raw relative component c, scaled to cs, is 0 or inside the span."""
+    return (c == 0.0) | (abs(cs) >= _SPAN)
+
+
 @njit(cache=True, error_model="numpy", inline="always")
 def _rel3(pax, pay, paz, vax, vay, vaz, aax, aay, aaz, r_a,
           pbx, pby, pbz, vbx, vby, vbz, abx, aby, abz, r_b):
-    """Exact relative state (TwoSum) as (Ph, Pl, Vh, Vl, Ah, Al, Rh, Rl): the
-    only place absolute coordinates meet, so ~1e6 m map offsets cost nothing.
-    The state is scaled by a power of two (see above; times are unchanged)."""
+    """Exact relative state (TwoSum) as (Ph, Pl, Vh, Vl, Ah, Al, Rh, Rl, fine):
+    the only place absolute coordinates meet, so ~1e6 m map offsets cost
+    nothing.  The state is scaled by a power of two (see above; times are
+    unchanged); ``fine``: every nonzero high part lies inside the span
+    (_SPAN), else the row must be decided exactly."""
     x0, x1 = two_sum(pax, -pbx)
     y0, y1 = two_sum(pay, -pby)
     z0, z1 = two_sum(paz, -pbz)
@@ -86,10 +113,16 @@ def _rel3(pax, pay, paz, vax, vay, vaz, aax, aay, aaz, r_a,
     m = _max(_max(_max(abs(x0), abs(y0)), _max(abs(z0), abs(u0))),
              _max(_max(_max(abs(v0), abs(w0)), _max(abs(i0), abs(j0))), _max(abs(k0), Rh)))
     s, t = pow2_scales(m)
-    return (((x0 * s) * t, (y0 * s) * t, (z0 * s) * t), ((x1 * s) * t, (y1 * s) * t, (z1 * s) * t),
-            ((u0 * s) * t, (v0 * s) * t, (w0 * s) * t), ((u1 * s) * t, (v1 * s) * t, (w1 * s) * t),
-            ((i0 * s) * t, (j0 * s) * t, (k0 * s) * t), ((i1 * s) * t, (j1 * s) * t, (k1 * s) * t),
-            (Rh * s) * t, (Rl * s) * t)
+    X, Y, Z = (x0 * s) * t, (y0 * s) * t, (z0 * s) * t
+    U, V, W = (u0 * s) * t, (v0 * s) * t, (w0 * s) * t
+    I, J, K = (i0 * s) * t, (j0 * s) * t, (k0 * s) * t
+    Rs = (Rh * s) * t
+    fine = (_kept(x0, X) & _kept(y0, Y) & _kept(z0, Z) & _kept(u0, U) & _kept(v0, V)
+            & _kept(w0, W) & _kept(i0, I) & _kept(j0, J) & _kept(k0, K) & _kept(Rh, Rs))
+    return ((X, Y, Z), ((x1 * s) * t, (y1 * s) * t, (z1 * s) * t),
+            (U, V, W), ((u1 * s) * t, (v1 * s) * t, (w1 * s) * t),
+            (I, J, K), ((i1 * s) * t, (j1 * s) * t, (k1 * s) * t),
+            Rs, (Rl * s) * t, fine)
 
 
 @njit(cache=True, error_model="numpy", inline="always")
@@ -104,9 +137,14 @@ def _rel2(pax, pay, vax, vay, aax, aay, r_a, pbx, pby, vbx, vby, abx, aby, r_b):
     Rh, Rl = two_sum(r_a, r_b)
     m = _max(_max(_max(abs(x0), abs(y0)), _max(abs(u0), abs(v0))), _max(_max(abs(i0), abs(j0)), Rh))
     s, t = pow2_scales(m)
-    return (((x0 * s) * t, (y0 * s) * t), ((x1 * s) * t, (y1 * s) * t), ((u0 * s) * t, (v0 * s) * t),
-            ((u1 * s) * t, (v1 * s) * t), ((i0 * s) * t, (j0 * s) * t), ((i1 * s) * t, (j1 * s) * t),
-            (Rh * s) * t, (Rl * s) * t)
+    X, Y = (x0 * s) * t, (y0 * s) * t
+    U, V = (u0 * s) * t, (v0 * s) * t
+    I, J = (i0 * s) * t, (j0 * s) * t
+    Rs = (Rh * s) * t
+    fine = (_kept(x0, X) & _kept(y0, Y) & _kept(u0, U) & _kept(v0, V) & _kept(i0, I)
+            & _kept(j0, J) & _kept(Rh, Rs))
+    return ((X, Y), ((x1 * s) * t, (y1 * s) * t), (U, V), ((u1 * s) * t, (v1 * s) * t),
+            (I, J), ((i1 * s) * t, (j1 * s) * t), Rs, (Rl * s) * t, fine)
 
 
 @njit(cache=True, error_model="numpy", inline="always")

@@ -401,8 +401,9 @@ class _Interleaved2(Compiler):
 
 
 def _load(pa, va, aa, ra, pb, vb, ab, rb, i, Z):
-    """(chk, Ph, Pl, Vh, Vl, Ah, Al, Rh, Rl) of row i: the sum of its inputs
-    (non-finite if any is) and its exact relative state.  Vectors are flat
+    """(chk, Ph, Pl, Vh, Vl, Ah, Al, Rh, Rl, fine) of row i: the sum of its
+    inputs (non-finite if any is) and its exact relative state (``fine``: see
+    narrow_eval._rel3).  Vectors are flat
     1-D views of (n, D) rows with D = len(Z) (Z: a tuple of D zeros, which
     selects the implementation at compile time)."""
 
@@ -439,10 +440,12 @@ def _flat(pa, va, aa, pb, vb, ab):
 @njit(cache=True, error_model="numpy", inline="always")
 def _row(pa, va, aa, ra, pb, vb, ab, rb, Hs, hofs, jj, i, Z):
     """(h, exact relative state) of row i = i0 + jj: h its horizon, NaN for a
-    row with invalid input (the fast paths then leave it undecided)."""
-    chk, Ph, Pl, Vh, Vl, Ah, Al, Rh, Rl = _load(pa, va, aa, ra, pb, vb, ab, rb, i, Z)
+    row with invalid input or a state outside the span of magnitudes the
+    float paths solve (narrow_eval._SPAN): the fast paths then leave it
+    undecided."""
+    chk, Ph, Pl, Vh, Vl, Ah, Al, Rh, Rl, fine = _load(pa, va, aa, ra, pb, vb, ab, rb, i, Z)
     h = Hs[np.uint64(hofs + jj)]
-    h = h if _valid(chk, ra[i], rb[i], h) else _NAN
+    h = h if (_valid(chk, ra[i], rb[i], h) & fine) else _NAN
     return h, Ph, Pl, Vh, Vl, Ah, Al, Rh, Rl
 
 

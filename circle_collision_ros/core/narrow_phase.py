@@ -50,8 +50,11 @@ use 0.0 for the z components in 2-D).  Both follow the same contract.
 Input range: finite values with magnitudes below ~1e150.  The relative
 state is scaled exactly by a power of two so that its largest component lies
 in [2, 4) (``narrow_eval._rel2``); every error bound is relative to that
-scale, so components far below it (even where their squares underflow) do
-not void a certified decision.
+scale.  A row with a nonzero relative component (of dp, dv, da or R) below
+2^-240 of the largest (``narrow_eval._SPAN``: scaling would round it on the
+subnormal grid or flush it to 0 -- da = 0 would then look straight -- or its
+squares would underflow) is decided by the exact path
+(tests/core/test_narrow_phase_span.py).
 """
 from __future__ import annotations
 
@@ -288,24 +291,25 @@ def _resolve(n_und, pa, va, aa, ra, pb, vb, ab, rb, H, out):
 # The scalar entry points run a batch row's steps on one row without the
 # batch loop (no scratch arrays, no vector-loop set-up, ~0.5 us): the fast
 # path's _fast_rel (finite horizon) or, for da == 0, _straight_rel (any
-# horizon), the robust solver for what it leaves
-# undecided, the exact decision for the rest.  The arithmetic per row is the
-# same IEEE operations as in the (vectorised) loop, so the result is bitwise
-# the batch answer (tests/core/test_narrow_fast.py checks it).
+# horizon), then the robust solver for what it leaves undecided
+# (_certified_pair2/3, also compiled as the C one-pair entry's kernels, see
+# narrow_one_pair), then the exact decision for the rest.  The arithmetic
+# per row is the same IEEE operations as in the (vectorised) loop, so the
+# result is bitwise the batch answer (tests/core/test_narrow_fast.py and
+# tests/core/test_narrow_one_pair.py check it).
 @njit(cache=True, error_model="numpy")
-def _ttc_scalar(pax, pay, paz, vax, vay, vaz, aax, aay, aaz, r_a,
-                pbx, pby, pbz, vbx, vby, vbz, abx, aby, abz, r_b, horizon):
-    """First-contact time of one pair (numba-callable, same contract and
-    bitwise the same result as ``time_to_collision``; pass 0.0 for z in
-    2-D).  NaN for invalid input."""
+def _certified_pair3(pax, pay, paz, vax, vay, vaz, aax, aay, aaz, r_a,
+                     pbx, pby, pbz, vbx, vby, vbz, abx, aby, abz, r_b, horizon):
+    """``_ttc_scalar`` without the exact decision: UNDECIDED where the
+    certified float paths cannot decide (NaN for invalid input)."""
     t = UNDECIDED
     straight = (aax == abx) & (aay == aby) & (aaz == abz)
     if straight or horizon < _INF:
         chk = (pax + pay + paz + vax + vay + vaz + aax + aay + aaz + r_a
                + pbx + pby + pbz + vbx + vby + vbz + abx + aby + abz + r_b)
-        h = horizon if _valid(chk, r_a, r_b, horizon) else _NAN
-        Ph, Pl, Vh, Vl, Ah, Al, Rh, Rl = _rel3(pax, pay, paz, vax, vay, vaz, aax, aay, aaz, r_a,
-                                               pbx, pby, pbz, vbx, vby, vbz, abx, aby, abz, r_b)
+        Ph, Pl, Vh, Vl, Ah, Al, Rh, Rl, fine = _rel3(pax, pay, paz, vax, vay, vaz, aax, aay, aaz, r_a,
+                                                     pbx, pby, pbz, vbx, vby, vbz, abx, aby, abz, r_b)
+        h = horizon if (_valid(chk, r_a, r_b, horizon) & fine) else _NAN
         if straight:
             t = _straight_rel(Ph, Pl, Vh, Vl, Ah, Al, Rh, Rl, h)
         else:
@@ -313,6 +317,36 @@ def _ttc_scalar(pax, pay, paz, vax, vay, vaz, aax, aay, aaz, r_a,
     if t == UNDECIDED:
         t = _robust_pair3(pax, pay, paz, vax, vay, vaz, aax, aay, aaz, r_a,
                           pbx, pby, pbz, vbx, vby, vbz, abx, aby, abz, r_b, horizon)
+    return t
+
+
+@njit(cache=True, error_model="numpy")
+def _certified_pair2(pax, pay, vax, vay, aax, aay, r_a, pbx, pby, vbx, vby, abx, aby, r_b, horizon):
+    """Planar ``_certified_pair3`` (bitwise the same result with z = 0)."""
+    t = UNDECIDED
+    straight = (aax == abx) & (aay == aby)
+    if straight or horizon < _INF:
+        chk = (pax + pay + vax + vay + aax + aay + r_a + pbx + pby + vbx + vby + abx + aby + r_b)
+        Ph, Pl, Vh, Vl, Ah, Al, Rh, Rl, fine = _rel2(pax, pay, vax, vay, aax, aay, r_a,
+                                                     pbx, pby, vbx, vby, abx, aby, r_b)
+        h = horizon if (_valid(chk, r_a, r_b, horizon) & fine) else _NAN
+        if straight:
+            t = _straight_rel(Ph, Pl, Vh, Vl, Ah, Al, Rh, Rl, h)
+        else:
+            t = _fast_rel(Ph, Pl, Vh, Vl, Ah, Al, Rh, Rl, h)
+    if t == UNDECIDED:
+        t = _robust_pair2(pax, pay, vax, vay, aax, aay, r_a, pbx, pby, vbx, vby, abx, aby, r_b, horizon)
+    return t
+
+
+@njit(cache=True, error_model="numpy")
+def _ttc_scalar(pax, pay, paz, vax, vay, vaz, aax, aay, aaz, r_a,
+                pbx, pby, pbz, vbx, vby, vbz, abx, aby, abz, r_b, horizon):
+    """First-contact time of one pair (numba-callable, same contract and
+    bitwise the same result as ``time_to_collision``; pass 0.0 for z in
+    2-D).  NaN for invalid input."""
+    t = _certified_pair3(pax, pay, paz, vax, vay, vaz, aax, aay, aaz, r_a,
+                         pbx, pby, pbz, vbx, vby, vbz, abx, aby, abz, r_b, horizon)
     if t == UNDECIDED:
         with objmode(t="float64"):
             t = _exact_pair(pax, pay, paz, vax, vay, vaz, aax, aay, aaz, r_a,
@@ -323,19 +357,7 @@ def _ttc_scalar(pax, pay, paz, vax, vay, vaz, aax, aay, aaz, r_a,
 @njit(cache=True, error_model="numpy")
 def _ttc_scalar2(pax, pay, vax, vay, aax, aay, r_a, pbx, pby, vbx, vby, abx, aby, r_b, horizon):
     """Planar twin of ``_ttc_scalar`` (bitwise the same result with z = 0)."""
-    t = UNDECIDED
-    straight = (aax == abx) & (aay == aby)
-    if straight or horizon < _INF:
-        chk = (pax + pay + vax + vay + aax + aay + r_a + pbx + pby + vbx + vby + abx + aby + r_b)
-        h = horizon if _valid(chk, r_a, r_b, horizon) else _NAN
-        Ph, Pl, Vh, Vl, Ah, Al, Rh, Rl = _rel2(pax, pay, vax, vay, aax, aay, r_a,
-                                               pbx, pby, vbx, vby, abx, aby, r_b)
-        if straight:
-            t = _straight_rel(Ph, Pl, Vh, Vl, Ah, Al, Rh, Rl, h)
-        else:
-            t = _fast_rel(Ph, Pl, Vh, Vl, Ah, Al, Rh, Rl, h)
-    if t == UNDECIDED:
-        t = _robust_pair2(pax, pay, vax, vay, aax, aay, r_a, pbx, pby, vbx, vby, abx, aby, r_b, horizon)
+    t = _certified_pair2(pax, pay, vax, vay, aax, aay, r_a, pbx, pby, vbx, vby, abx, aby, r_b, horizon)
     if t == UNDECIDED:
         with objmode(t="float64"):
             t = _exact_pair(pax, pay, 0.0, vax, vay, 0.0, aax, aay, 0.0, r_a,
@@ -416,54 +438,33 @@ def _rows_ok(p_a, v_a, a_a, r_a, p_b, v_b, a_b, r_b) -> bool:
             and a_b.flags.c_contiguous and r_b.flags.c_contiguous)
 
 
-_SCALARS = frozenset((float, int, np.float64))
-_NOT_ONE_PAIR = -2.0  # _pair_of_arrays*: the arrays are not one pair of length D
+def _one_pair_first(p_a, v_a, a_a, r_a, p_b, v_b, a_b, r_b, horizon):
+    """The first call of the one-pair entry: loads it (narrow_one_pair: the C
+    extension and its compiled kernels, ~0.1 s from the cache) and puts it in
+    place of this function."""
+    global _one_pair
+    from circle_collision_ros.core.narrow_one_pair import load_one_pair
+
+    _one_pair = load_one_pair()
+    return _one_pair(p_a, v_a, a_a, r_a, p_b, v_b, a_b, r_b, horizon)
 
 
-@njit(cache=True, error_model="numpy")
-def _pair_of_arrays2(p_a, v_a, a_a, r_a, p_b, v_b, a_b, r_b, horizon):
-    """``_ttc_scalar2`` on 1-D arrays of length 2 (else _NOT_ONE_PAIR)."""
-    if not (p_a.shape[0] == v_a.shape[0] == a_a.shape[0] == p_b.shape[0] == v_b.shape[0]
-            == a_b.shape[0] == 2):
-        return _NOT_ONE_PAIR
-    return _ttc_scalar2(p_a[0], p_a[1], v_a[0], v_a[1], a_a[0], a_a[1], r_a,
-                        p_b[0], p_b[1], v_b[0], v_b[1], a_b[0], a_b[1], r_b, horizon)
+# one pair as 1-D vectors -> numpy.float64, or None (then the general path)
+_one_pair = _one_pair_first
 
 
-@njit(cache=True, error_model="numpy")
-def _pair_of_arrays3(p_a, v_a, a_a, r_a, p_b, v_b, a_b, r_b, horizon):
-    """``_ttc_scalar`` on 1-D arrays of length 3 (else _NOT_ONE_PAIR)."""
-    if not (p_a.shape[0] == v_a.shape[0] == a_a.shape[0] == p_b.shape[0] == v_b.shape[0]
-            == a_b.shape[0] == 3):
-        return _NOT_ONE_PAIR
-    return _ttc_scalar(p_a[0], p_a[1], p_a[2], v_a[0], v_a[1], v_a[2], a_a[0], a_a[1], a_a[2], r_a,
-                       p_b[0], p_b[1], p_b[2], v_b[0], v_b[1], v_b[2], a_b[0], a_b[1], a_b[2], r_b,
-                       horizon)
+_VEC_NAMES = ("p_a", "v_a", "a_a", "p_b", "v_b", "a_b")
 
 
-def _entry(kind, D):
-    """The one-pair entry point for ("floats" | "arrays", D) with its
-    all-float64 signature(s) only: compiled (or loaded from the cache) on
-    first use, then no further specialisation -- ints and numpy floats are
-    cast to float64, as the general path's np.asarray(..., float64) does;
-    arrays of other types are rejected (TypeError)."""
-    if D not in (2, 3):
-        raise KeyError(D)
-    if kind == "floats":
-        fn = _ttc_scalar2 if D == 2 else _ttc_scalar
-        fn.compile((types.float64,) * (15 if D == 2 else 21))
-    else:
-        fn = _pair_of_arrays2 if D == 2 else _pair_of_arrays3
-        f8 = types.float64
-        for vec in (f8[::1], f8[:]):  # contiguous first: the exact match of a plain 1-D array
-            fn.compile((vec, vec, vec, f8, vec, vec, vec, f8, f8))
-    fn.disable_compile()
-    (_FLOAT_ENTRIES if kind == "floats" else _ARRAY_ENTRIES)[D] = fn
-    return fn
-
-
-_FLOAT_ENTRIES: dict = {}
-_ARRAY_ENTRIES: dict = {}
+def _floats(x, name: str) -> np.ndarray:
+    """x as a float64 array, or an error naming the argument (None would
+    silently become NaN)."""
+    if x is None:
+        raise TypeError(f"time_to_collision: {name} is None (expected numbers)")
+    try:
+        return np.asarray(x, dtype=np.float64)
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f"time_to_collision: {name} is not numeric ({exc})") from None
 
 
 def time_to_collision(p_a, v_a, a_a, r_a, p_b, v_b, a_b, r_b, horizon=math.inf) -> np.ndarray:
@@ -480,7 +481,8 @@ def time_to_collision(p_a, v_a, a_a, r_a, p_b, v_b, a_b, r_b, horizon=math.inf) 
 
     Returns
     -------
-    numpy.ndarray of float64, the broadcast batch shape (0-d for scalars)
+    numpy.ndarray of float64 of the broadcast batch shape; for batch shape
+    () (one pair) a numpy.float64, as numpy returns for a 0-d result
         0.0 if the bodies overlap at t = 0 or touch while approaching;
         otherwise the smallest t in (0, horizon] with centre distance equal
         to r_a + r_b (tangent grazes count); inf if none.  A pair touching at
@@ -505,37 +507,24 @@ def time_to_collision(p_a, v_a, a_a, r_a, p_b, v_b, a_b, r_b, horizon=math.inf) 
     Raises
     ------
     ValueError
-        If the vector shapes disagree in D, D is not 2 or 3, or the shapes
-        do not broadcast.
+        If the vector shapes disagree in D, D is not 2 or 3, the shapes do
+        not broadcast, or an argument is not numeric (the message names the
+        arguments and their shapes).
+    TypeError
+        If an argument is None.
+
+    One pair given as 1-D vectors (lists, tuples or 1-D float64 arrays) and
+    numbers takes a C entry (``narrow_one_pair``; issue 17's target is
+    <= 0.8 us per call, ``bench/bench_core.py --one-pair`` prints it) with
+    the same answers, bit for bit, as the batch.
     """
-    # One pair as 1-D vectors (all lists, all tuples or 1-D float64 arrays) and
-    # numbers: the one-row scalar entry points (the same kernel code, bitwise
-    # the batch answer) without the array conversions of the general path.
-    # Per call: a few type and length checks here, one dispatcher call (numba
-    # checks the argument types: anything else raises TypeError and takes
-    # the general path, which decides or raises its message).
-    tp = type(p_a)
-    if not (type(r_a) in _SCALARS and type(r_b) in _SCALARS and type(horizon) in _SCALARS):
-        pass  # (a dispatcher's TypeError costs ~100 us: not for a common mismatch)
-    elif tp is list or tp is tuple:
-        D = len(p_a)
-        if ((D == 2 or D == 3) and type(v_a) is tp and type(a_a) is tp and type(p_b) is tp
-                and type(v_b) is tp and type(a_b) is tp and len(v_a) == D and len(a_a) == D
-                and len(p_b) == D and len(v_b) == D and len(a_b) == D):
-            try:
-                return np.array((_FLOAT_ENTRIES.get(D) or _entry("floats", D))(
-                    *p_a, *v_a, *a_a, r_a, *p_b, *v_b, *a_b, r_b, horizon))
-            except TypeError:
-                pass
-    elif tp is _ND and p_a.ndim == 1 and p_a.dtype is _F8 and (p_a.shape[0] == 2 or p_a.shape[0] == 3):
-        D = p_a.shape[0]
-        try:
-            t = (_ARRAY_ENTRIES.get(D) or _entry("arrays", D))(
-                p_a, v_a, a_a, r_a, p_b, v_b, a_b, r_b, horizon)
-            if t != _NOT_ONE_PAIR:
-                return np.array(t)
-        except TypeError:
-            pass
+    # One pair as 1-D vectors (lists, tuples or 1-D float64 arrays, D = 2 or
+    # 3) and numbers: the C entry (narrow_one_pair), which runs the batch's
+    # certified kernels on the row, bitwise the batch answer; None where it
+    # does not apply (other types, shapes, a row for the exact path).
+    t = _one_pair(p_a, v_a, a_a, r_a, p_b, v_b, a_b, r_b, horizon)
+    if t is not None:
+        return t
     # Fast path (Scene / node hot path): inputs already in kernel layout and
     # a scalar horizon -- no conversions, no temporaries besides the output.
     th = type(horizon)
@@ -545,15 +534,22 @@ def time_to_collision(p_a, v_a, a_a, r_a, p_b, v_b, a_b, r_b, horizon=math.inf) 
         out = np.empty(n)
         _run(n >= PARALLEL_MIN_ROWS, p_a, v_a, a_a, r_a, p_b, v_b, a_b, r_b, float(horizon), out)
         return out
-    vecs = [np.asarray(x, dtype=np.float64) for x in (p_a, v_a, a_a, p_b, v_b, a_b)]
+    vecs = [_floats(x, nm) for x, nm in zip((p_a, v_a, a_a, p_b, v_b, a_b), _VEC_NAMES)]
     D = vecs[0].shape[-1] if vecs[0].ndim else 0
     if D not in (2, 3) or any(x.ndim == 0 or x.shape[-1] != D for x in vecs):
-        raise ValueError("position/velocity/acceleration must share a last axis of size 2 or 3")
-    sc = [np.asarray(x, dtype=np.float64) for x in (r_a, r_b, horizon)]
+        raise ValueError("time_to_collision: position/velocity/acceleration must share a last axis "
+                         "of size 2 or 3; got shapes "
+                         + ", ".join(f"{nm} {x.shape}" for nm, x in zip(_VEC_NAMES, vecs)))
+    sc = [_floats(x, nm) for x, nm in zip((r_a, r_b, horizon), ("r_a", "r_b", "horizon"))]
     shapes = {x.shape[:-1] for x in vecs} | {x.shape for x in sc[:2]}
     if sc[2].ndim:
         shapes.add(sc[2].shape)
-    batch = shapes.pop() if len(shapes) == 1 else np.broadcast_shapes(*shapes)
+    try:
+        batch = shapes.pop() if len(shapes) == 1 else np.broadcast_shapes(*shapes)
+    except ValueError:
+        raise ValueError("time_to_collision: batch shapes do not broadcast: "
+                         + ", ".join(f"{nm} {x.shape[:-1]}" for nm, x in zip(_VEC_NAMES, vecs))
+                         + f", r_a {sc[0].shape}, r_b {sc[1].shape}, horizon {sc[2].shape}") from None
     n = math.prod(batch)
     out = np.empty(n, dtype=np.float64)
     pa, va, aa, pb, vb, ab = (_as_rows(x, batch, n, D) for x in vecs)
@@ -563,4 +559,4 @@ def time_to_collision(p_a, v_a, a_a, r_a, p_b, v_b, a_b, r_b, horizon=math.inf) 
     else:
         hz = _as_rows(sc[2], batch, n, 0)
     _run(n >= PARALLEL_MIN_ROWS, pa, va, aa, ra, pb, vb, ab, rb, hz, out)
-    return out.reshape(batch)
+    return out.reshape(batch) if batch else out[0]  # batch shape (): a numpy.float64

@@ -7,7 +7,10 @@ Method (numerical decisions are justified next to the code, DynamO
 ``stable_poly.hpp`` style):
 
 1. The relative quantities arrive *exactly* as double-double values
-   (``narrow_eval._rel2/_rel3``: TwoSum, then an exact power-of-two scaling).
+   (``narrow_eval._rel2/_rel3``: TwoSum, then an exact power-of-two scaling);
+   a row whose nonzero components span more than 2^240 (``_SPAN``: the
+   scaling would flush or round the small ones, or their squares underflow)
+   is left UNDECIDED for the exact path.
 2. t = 0: the sign of f(0) decides overlap (-> 0) when it clears its error
    bound (float64, else double-double).  Closer to 0 -- an exact touch in
    particular -- the row is left UNDECIDED: the order of contact (the
@@ -529,9 +532,9 @@ def _ttc_walk(Ph, Pl, Vh, Vl, Ah, Al, Rh, Rl, H, f0, P2):
     if _reach_miss(nP, nV, nA, Rh, Rl, H):
         return _INF
     if A2 == 0.0:
-        # da != 0 (the caller took da == 0) but |da|^2 underflows (components
-        # below ~1e-154 of the scale): the straight-line answers (inf for a
-        # separating pair, in particular) would ignore a real acceleration.
+        # da != 0 (the caller took da == 0) but |da|^2 underflows: cannot
+        # happen for a state inside the span (narrow_eval._SPAN), kept so
+        # that the straight-line answers never ignore a real acceleration.
         return UNDECIDED
     # Turning points of c (roots of the quadratic q = c', closed form about
     # its vertex t0, _turning_points): they split [0, inf) into pieces on
@@ -652,10 +655,12 @@ def _robust_pair3(pax, pay, paz, vax, vay, vaz, aax, aay, aaz, r_a,
            + pbx + pby + pbz + vbx + vby + vbz + abx + aby + abz + r_b)
     if not _valid(chk, r_a, r_b, horizon):
         return _NAN
-    Ph, Pl, Vh, Vl, Ah, Al, Rh, Rl = _rel3(pax, pay, paz, vax, vay, vaz, aax, aay, aaz, r_a,
-                                           pbx, pby, pbz, vbx, vby, vbz, abx, aby, abz, r_b)
+    Ph, Pl, Vh, Vl, Ah, Al, Rh, Rl, fine = _rel3(pax, pay, paz, vax, vay, vaz, aax, aay, aaz, r_a,
+                                                 pbx, pby, pbz, vbx, vby, vbz, abx, aby, abz, r_b)
     if Rh != Rh:  # the relative state overflowed (out of range): NaN, see pow2_scales
         return _NAN
+    if not fine:  # outside the span of magnitudes solved in floating point (_SPAN)
+        return UNDECIDED
     t = _ttc_rel(Ph, Pl, Vh, Vl, Ah, Al, Rh, Rl, horizon)
     return _NAN if t != t else t
 
@@ -667,9 +672,11 @@ def _robust_pair2(pax, pay, vax, vay, aax, aay, r_a, pbx, pby, vbx, vby, abx, ab
     chk = (pax + pay + vax + vay + aax + aay + r_a + pbx + pby + vbx + vby + abx + aby + r_b)
     if not _valid(chk, r_a, r_b, horizon):
         return _NAN
-    Ph, Pl, Vh, Vl, Ah, Al, Rh, Rl = _rel2(pax, pay, vax, vay, aax, aay, r_a,
-                                           pbx, pby, vbx, vby, abx, aby, r_b)
+    Ph, Pl, Vh, Vl, Ah, Al, Rh, Rl, fine = _rel2(pax, pay, vax, vay, aax, aay, r_a,
+                                                 pbx, pby, vbx, vby, abx, aby, r_b)
     if Rh != Rh:  # the relative state overflowed (out of range): NaN, see pow2_scales
         return _NAN
+    if not fine:  # outside the span of magnitudes solved in floating point (_SPAN)
+        return UNDECIDED
     t = _ttc_rel(Ph, Pl, Vh, Vl, Ah, Al, Rh, Rl, horizon)
     return _NAN if t != t else t

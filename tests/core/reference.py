@@ -18,6 +18,8 @@ a definite answer when ``|f_min| > 1e-9 R^2``, far above the threshold
 from __future__ import annotations
 
 import math
+import struct
+import sys
 from dataclasses import dataclass
 
 import mpmath
@@ -216,6 +218,19 @@ def _descartes(p, a, b):
     return sum(1 for u, v in zip(signs, signs[1:]) if u != v)
 
 
+def _split(lo, hi):
+    """A dyadic point strictly inside (lo, hi) (0 <= lo < hi <= max float64):
+    the float64 halfway between them in bit-pattern order, so intervals from
+    2^-1000 to 2^1000 shrink like a binary search over the float64 grid
+    (~64 splits) instead of one bit per split; the arithmetic midpoint where
+    no float64 lies strictly inside.  Any interior point is a valid split
+    for the root counts, so only the speed depends on it."""
+    bl = struct.unpack("<q", struct.pack("<d", float(lo)))[0]
+    bh = struct.unpack("<q", struct.pack("<d", float(hi)))[0]
+    mid = Fraction(struct.unpack("<d", struct.pack("<q", (bl + bh) // 2))[0])
+    return mid if lo < mid < hi else (lo + hi) / 2
+
+
 def _isolate_first(p, a, b):
     """Isolating interval (lo, hi) of the smallest root of square-free p in
     (a, b], or None.  Endpoints are checked exactly."""
@@ -233,7 +248,7 @@ def _isolate_first(p, a, b):
                 continue
             if v == 1:
                 return lo, hi
-        mid = (lo + hi) / 2
+        mid = _split(lo, hi)
         stack.append((mid, hi))
         stack.append((lo, mid))  # left half first
     return None
@@ -264,8 +279,9 @@ def exact_reference(p_a, v_a, a_a, r_a, p_b, v_b, a_b, r_b, horizon=math.inf) ->
         return never
     if math.isfinite(horizon):
         B = F(horizon)
-    else:  # Cauchy bound on the roots
-        B = 1 + max(abs(x / p[-1]) for x in p[:-1])
+    else:  # Cauchy bound on the roots, at most the largest float64: a first
+        # root beyond it has no float64 time (inf, as narrow_exact reports)
+        B = min(1 + max(abs(x / p[-1]) for x in p[:-1]), Fraction(sys.float_info.max))
     p = _squarefree(p)
     iso = _isolate_first(p, Fraction(0), B)
     if iso is None:
@@ -273,7 +289,7 @@ def exact_reference(p_a, v_a, a_a, r_a, p_b, v_b, a_b, r_b, horizon=math.inf) ->
     lo, hi = iso
     pos_lo = _p_eval(p, lo) > 0  # p(lo) != 0: a root at lo would be found first
     while lo != hi and float(lo) != float(hi):
-        mid = (lo + hi) / 2
+        mid = _split(lo, hi)
         fm = _p_eval(p, mid)
         if fm == 0:
             lo = hi = mid
