@@ -178,6 +178,9 @@ def _propagate_covariance(C, dt_ns):
 
 
 _EMPTY_I = np.empty(0, dtype=np.int64)
+_NEVER = 1 << 62  # later than any receive time, ns
+_FIRST_ROW = np.zeros(1, dtype=np.int64)
+_FIRST_ROW.flags.writeable = False
 
 
 class Scene:
@@ -265,6 +268,11 @@ class Scene:
         self._n_new = 0
         self.reference_ns: int | None = None
         self._epoch: int | None = None
+        # Lower bounds of the receive times of the bodies / remembered removals: expire scans
+        # only when its limit passes them (once per stale_timeout of a steady stream, not per call).
+        self._recv_floor = _NEVER
+        self._removal_floor = _NEVER
+        self._rhead = np.full(cap, -1, dtype=np.int64)  # each slot's newest record (see _REC)
         self._clear_records()
         self._version = getattr(self, "_version", 0) + 1
         self._cache = None
@@ -274,7 +282,9 @@ class Scene:
 
     # Pair records: one row per pair with a contact within H + S of its t_p, in
     # growable buffers; rows of updated bodies are marked dead (compacted when
-    # dead rows dominate) so an update touches O(its pairs) rows.
+    # dead rows dominate) so an update touches O(its pairs) rows.  Each slot's
+    # records form a linked list (_rhead[slot], _rnext[row, 0 for a / 1 for b])
+    # so an update finds its rows without a scan of all records.
     _REC = ("_ra", "_rb", "_rtp", "_rtau", "_rpt", "_rnm", "_rcs", "_rov")
 
     def _clear_records(self, cap: int = 256) -> None:
@@ -288,6 +298,8 @@ class Scene:
         self._rcs = np.zeros(cap)
         self._rov = np.zeros(cap, dtype=bool)      # overlapping at t_p (tau == 0, gap < 0)
         self._rlive = np.zeros(cap, dtype=bool)
+        self._rnext = np.full((cap, 2), -1, dtype=np.int64)
+        self._rhead[:] = -1
         self._rn = 0
         self._rdead = 0
         self._new_rows: list[np.ndarray] = []
@@ -383,6 +395,9 @@ class Scene:
         covariances : None (all exact) or (k, 2 dim, 2 dim) joint covariances of
         (position, velocity), symmetric PSD (all zero = exact); see uncertain_pairs.
         """
+        if len(ids) == 1 and covariances is None and not remove[0]:
+            return self._merge_state(ids[0], int(stamps_ns[0]), positions, velocities, accelerations,
+                                     radii, int(received_ns))
         self._detach_captures()
         stamps = np.asarray(stamps_ns, dtype=np.int64)
         remove = np.asarray(remove, dtype=bool)
@@ -397,6 +412,7 @@ class Scene:
             old = self._removals.get(bid)
             if old is None or st >= old[0]:
                 self._removals[bid] = (st, received_ns)
+                self._removal_floor = min(self._removal_floor, received_ns)
             if s is None:
                 removal_ignored.append(k)
             else:
@@ -448,6 +464,7 @@ class Scene:
                 self._U[sl] = (self._C[sl] != 0.0).any(axis=(1, 2))
             self._T[sl] = stamps[src]
             self._recv[sl] = received_ns
+            self._recv_floor = min(self._recv_floor, received_ns)
             self._dirty.update(sl.tolist())
             newest = int(stamps[src].max())
             if self.reference_ns is None or newest > self.reference_ns:
@@ -457,6 +474,48 @@ class Scene:
         return MergeResult(accepted=src, not_newer=rows[~newer], full=rows[full],
                            removed=np.array(removed, dtype=np.int64),
                            removal_ignored=np.array(removal_ignored, dtype=np.int64))
+
+    def _merge_state(self, bid, stamp: int, positions, velocities, accelerations, radii,
+                     received_ns: int) -> MergeResult:
+        """merge of one exact state (a per-body stream's message) on scalars: the same rules
+        and stored bits as the general path, without its array set-up."""
+        none = MergeResult(_EMPTY_I, _EMPTY_I, _EMPTY_I, _EMPTY_I, _EMPTY_I)
+        s = self._slot.get(bid)
+        if s is None:
+            gone = self._removals.get(bid) if self._removals else None
+            if gone is not None:
+                if stamp <= gone[0]:
+                    return none._replace(not_newer=_FIRST_ROW)  # a late state of a removed body
+                del self._removals[bid]
+            if self.max_bodies is not None and len(self._slot) >= self.max_bodies:
+                return none._replace(full=_FIRST_ROW)
+            self._detach_captures()
+            s = self._alloc()
+            self._slot[bid] = s
+            self._ids[s] = bid
+            self._alive[s] = True
+            self._n_new = 1
+            self._rank_insert(s)
+            self._add_utf8(np.array([s], dtype=np.int64))
+        elif stamp <= self._T[s]:
+            return none._replace(not_newer=_FIRST_ROW)
+        else:
+            self._detach_captures()
+            self._n_new = 0
+        D = self._dim
+        self._P[s] = np.asarray(positions)[0, :D]
+        self._V[s] = np.asarray(velocities)[0, :D]
+        self._A[s] = np.asarray(accelerations)[0, :D]
+        self._R[s] = np.asarray(radii)[0]
+        self._U[s] = False
+        self._T[s] = stamp
+        self._recv[s] = received_ns
+        self._recv_floor = min(self._recv_floor, received_ns)
+        self._dirty.add(s)
+        if self.reference_ns is None or stamp > self.reference_ns:
+            self.reference_ns = stamp
+        self._version += 1
+        return none._replace(accepted=_FIRST_ROW)
 
     def upsert_many(self, ids: Sequence[Hashable], positions, velocities, accelerations, radii,
                     stamps_ns, received_ns: int = 0) -> MergeResult:
@@ -486,9 +545,14 @@ class Scene:
     def expire(self, now_ns: int, timeout_ns: int) -> list:
         """Drop bodies (and remembered removals) received before ``now_ns - timeout_ns``; ids dropped, sorted."""
         limit = int(now_ns) - int(timeout_ns)
-        if self._removals:
+        if self._removals and limit > self._removal_floor:
             self._removals = {k: v for k, v in self._removals.items() if v[1] >= limit}
+            self._removal_floor = min((v[1] for v in self._removals.values()), default=_NEVER)
+        if limit <= self._recv_floor:
+            return []  # every body was received at or after the floor
         stale = np.flatnonzero(self._alive & (self._recv < limit))
+        kept = self._alive & (self._recv >= limit)
+        self._recv_floor = int(self._recv[kept].min()) if kept.any() else _NEVER
         if stale.size:
             self._detach_captures()
         gone = sorted(self._ids[s] for s in stale.tolist())
@@ -534,6 +598,9 @@ class Scene:
             ids = np.full(new, None, dtype=object)
             ids[:old] = self._ids
             self._ids = ids
+            head = np.full(new, -1, dtype=np.int64)
+            head[:old] = self._rhead
+            self._rhead = head
             if self._grid_built:
                 stale = np.ones(new, dtype=bool)
                 stale[:old] = self._gstale
@@ -715,6 +782,7 @@ class Scene:
         self._rcs[sl] = cs
         self._rov[sl] = ov
         self._rlive[sl] = True
+        _sk.link_records(self._ra, self._rb, self._rnext, self._rhead, n, n + k)
         self._rn = n + k
         self._new_rows.append(np.arange(n, n + k))
 
@@ -731,6 +799,7 @@ class Scene:
         for name, arr in zip(self._REC, old):
             getattr(self, name)[:live.size] = arr
         self._rlive[:live.size] = True
+        _sk.link_records(self._ra, self._rb, self._rnext, self._rhead, 0, live.size)
         self._rn = live.size
         self._new_rows = [r[r >= 0] for r in new_rows]
         if fut is not None:
@@ -741,17 +810,9 @@ class Scene:
             self._past = p[p >= 0]
 
     def _kill_rows(self, slots: np.ndarray) -> None:
-        n = self._rn
-        if n == 0 or slots.size == 0:
-            return
-        if slots.size == 1:
-            s = slots[0]
-            m = (self._ra[:n] == s) | (self._rb[:n] == s)
-        else:
-            m = np.isin(self._ra[:n], slots) | np.isin(self._rb[:n], slots)
-        m &= self._rlive[:n]
-        self._rdead += int(np.count_nonzero(m))
-        self._rlive[:n][m] = False
+        """Mark the records of `slots` dead (walks their lists: O(their records))."""
+        if self._rn and slots.size:
+            self._rdead += int(_sk.kill_records(slots, self._ra, self._rnext, self._rhead, self._rlive))
 
     def _rebuild_all(self) -> None:
         self._clear_records()

@@ -26,7 +26,8 @@ from circle_collision_ros.core.broad_phase import swept_bound_row
 from circle_collision_ros.core.contact import contact_row
 from circle_collision_ros.core.narrow_phase import _ttc_scalar
 
-__all__ = ["evaluate_rows", "order_rows", "split_past", "pair_keys", "assemble", "swept_bound_rows"]
+__all__ = ["evaluate_rows", "order_rows", "split_past", "pair_keys", "assemble", "swept_bound_rows",
+           "link_records", "kill_records"]
 
 #: Overlap decided without the narrow phase: only for values well inside the
 #: narrow phase's input range, so no rounding bound below can fail.
@@ -239,3 +240,32 @@ def swept_bound_rows(P, V, A, Rad, slots, t0, t1, lo, hi):
     for a few bodies at a time (no numpy set-up): the same per-row function."""
     for k in range(slots.shape[0]):
         swept_bound_row(P, V, A, Rad, slots[k], t0[k], t1[k], lo, hi, slots[k])
+
+
+@njit(cache=True)
+def link_records(ra, rb, rnext, rhead, first, end):
+    """Put records first..end-1 at the heads of their two slots' lists."""
+    for r in range(first, end):
+        a = ra[r]
+        b = rb[r]
+        rnext[r, 0] = rhead[a]
+        rhead[a] = r
+        rnext[r, 1] = rhead[b]
+        rhead[b] = r
+
+
+@njit(cache=True)
+def kill_records(slots, ra, rnext, rhead, rlive):
+    """Mark every live record of `slots` dead, walking each slot's list (then emptied);
+    returns how many were live.  A record stays in its other slot's list, dead."""
+    killed = 0
+    for x in range(slots.shape[0]):
+        s = slots[x]
+        r = rhead[s]
+        while r >= 0:
+            if rlive[r]:
+                rlive[r] = False
+                killed += 1
+            r = rnext[r, 0] if ra[r] == s else rnext[r, 1]
+        rhead[s] = -1
+    return killed
