@@ -741,12 +741,6 @@ class Scene:
         t_p = np.maximum(self._epoch, np.maximum(self._T[A], self._T[B]))
         return self._evaluate(A, B, t_p, self._h_eval, compiled)
 
-    def _orient(self, X: np.ndarray, Y: np.ndarray):
-        """Order each slot pair so that the first body's id sorts first."""
-        self._ensure_rank()
-        swap = self._rank[X] > self._rank[Y]
-        return np.where(swap, Y, X), np.where(swap, X, Y)
-
     def _pairs_full(self):
         """All candidate slot pairs (a before b by id), from scratch; sets bounds."""
         slots = self._sorted_slots()
@@ -893,21 +887,17 @@ class Scene:
         X, Y = [], []
         for s in live.tolist():
             cand = self._grid_insert_query(s)
-            cand = cand[cand != s]
-            ov = np.all((self._lo[cand] <= self._hi[s]) & (self._hi[cand] >= self._lo[s]), axis=1)
-            cand = cand[ov]
             X.append(np.full(cand.shape[0], s, dtype=np.int64))
             Y.append(cand)
         self._dirty.clear()
         if not X:
             return
-        X = np.concatenate(X)
-        Y = np.concatenate(Y)
-        # a pair of two updated bodies (or a body listed in two cells) appears
-        # more than once: keep one copy
-        cap = np.int64(self._R.shape[0])
-        key = np.unique(np.minimum(X, Y) * cap + np.maximum(X, Y))
-        A, B = self._orient(key // cap, key % cap)
+        X = np.concatenate(X) if len(X) > 1 else X[0]
+        Y = np.concatenate(Y) if len(Y) > 1 else Y[0]
+        # the bound test; a pair of two updated bodies (or a body listed in two cells)
+        # appears more than once: keep one copy, oriented by id
+        self._ensure_rank()
+        A, B = _sk.bounded_pairs(X, Y, self._lo, self._hi, self._rank, np.int64(self._R.shape[0]))
         keep = _bp.relative_filter(self._P, self._V, self._A, self._R, self._Tf, A, B,
                                    0.0, self._slack_ns * 1e-9 + self._h)
         A, B = A[keep], B[keep]
@@ -977,32 +967,21 @@ class Scene:
         else:
             prev, prev_past = self._fut, self._past
             new = np.concatenate(self._new_rows) if self._new_rows else _EMPTY_I
-        m = prev.size + new.size
-        fut = np.empty(m, dtype=np.int64)
-        ttc = np.empty(m)
-        past = np.empty(m + prev_past.size, dtype=np.int64)
-        nf, npast = _sk.split_past(prev, live, tp_all, tau_all, R, ttc, fut, past, 0, 0)
-        n_sorted = nf
-        nf, npast = _sk.split_past(new, live, tp_all, tau_all, R, ttc, fut, past, nf, npast)
-        nf, npast = _sk.split_past(prev_past, live, tp_all, tau_all, R, ttc, fut, past, nf, npast)
-        fut, ttc, past = fut[:nf], ttc[:nf], past[:npast]
         self._ensure_rank()
         rank, cap = self._rank, np.int64(self._R.shape[0])
-        key = _sk.pair_keys(fut, self._ra, self._rb, rank, cap)
-        if not _sk.order_rows(fut, ttc, key, n_sorted, 8 * nf + 1024):
+        fut, ttc, past, ordered = _sk.split_and_order(prev, new, prev_past, live, self._ra, self._rb,
+                                                      tp_all, tau_all, R, rank, cap, 1024)
+        if not ordered:
+            key = _sk.pair_keys(fut, self._ra, self._rb, rank, cap)
             o = np.lexsort((key, ttc))  # rows in some order: sort afresh
             fut, ttc = fut[o], ttc[o]
         self._fut, self._fut_ttc, self._past = fut, ttc, past
         # reported: the future rows with ttc <= H, and the past pairs' first contact from R
-        kf = int(np.searchsorted(ttc, self._h, side="right"))
-        Ap, Bp = self._ra[past], self._rb[past]
-        hit, _, tau2, pt2, nm2, cs2, ov2 = self._evaluate(Ap, Bp, np.full(past.size, R, dtype=np.int64),
-                                                          self._h)
-        if not hit.all():
-            Ap, Bp = Ap[hit], Bp[hit]
-        return _sk.assemble(fut[:kf], ttc[:kf], self._ra, self._rb, tp_all, tau_all, self._rov,
-                            self._rpt, self._rnm, self._rcs, Ap, Bp, tau2, ov2, pt2, nm2, cs2, R,
-                            rank, cap)
+        rows, evaluated = _sk.reported_rows(fut, ttc, past, self._ra, self._rb, tp_all, tau_all, self._rov,
+                                            self._rpt, self._rnm, self._rcs, self._P, self._V, self._A,
+                                            self._R, self._T, R, self._h, rank, cap)
+        self.evaluated_pairs += evaluated
+        return rows
 
     def _resolve(self, A, B, tp, tau, pt, nm, cs, compiled: bool | None = None):
         """Records -> reportable rows ``(A, B, ttc, contact_ns, overlapping, pt, nm, cs)`` at R
