@@ -68,6 +68,7 @@ from __future__ import annotations
 
 import bisect
 import math
+import threading
 import weakref
 from dataclasses import dataclass
 from typing import Hashable, NamedTuple, Sequence
@@ -230,8 +231,6 @@ class Scene:
     # ------------------------------------------------------------------ basics
     def clear(self) -> None:
         """Forget every body, every remembered removal and the reference time."""
-        if getattr(self, "_captures", None):
-            self._detach_captures()
         cap = 16
         D = self._dim
         self._P = np.zeros((cap, D))
@@ -398,7 +397,6 @@ class Scene:
         if len(ids) == 1 and covariances is None and not remove[0]:
             return self._merge_state(ids[0], int(stamps_ns[0]), positions, velocities, accelerations,
                                      radii, int(received_ns))
-        self._detach_captures()
         stamps = np.asarray(stamps_ns, dtype=np.int64)
         remove = np.asarray(remove, dtype=bool)
         received_ns = int(received_ns)
@@ -441,6 +439,7 @@ class Scene:
         self._n_new = int(fresh.size)
         for x in fresh.tolist():
             s = self._alloc()
+            self._preserve((s,))
             bid = ids[rows[x]]
             self._slot[bid] = s
             self._ids[s] = bid
@@ -453,6 +452,7 @@ class Scene:
         take[full] = False
         sl, src = slots[take], rows[take]
         if src.size:
+            self._preserve(sl)
             self._P[sl] = np.asarray(positions)[src, :D]
             self._V[sl] = np.asarray(velocities)[src, :D]
             self._A[sl] = np.asarray(accelerations)[src, :D]
@@ -489,8 +489,8 @@ class Scene:
                 del self._removals[bid]
             if self.max_bodies is not None and len(self._slot) >= self.max_bodies:
                 return none._replace(full=_FIRST_ROW)
-            self._detach_captures()
             s = self._alloc()
+            self._preserve((s,))
             self._slot[bid] = s
             self._ids[s] = bid
             self._alive[s] = True
@@ -500,7 +500,7 @@ class Scene:
         elif stamp <= self._T[s]:
             return none._replace(not_newer=_FIRST_ROW)
         else:
-            self._detach_captures()
+            self._preserve((s,))
             self._n_new = 0
         D = self._dim
         self._P[s] = np.asarray(positions)[0, :D]
@@ -553,8 +553,6 @@ class Scene:
         stale = np.flatnonzero(self._alive & (self._recv < limit))
         kept = self._alive & (self._recv >= limit)
         self._recv_floor = int(self._recv[kept].min()) if kept.any() else _NEVER
-        if stale.size:
-            self._detach_captures()
         gone = sorted(self._ids[s] for s in stale.tolist())
         for s in stale.tolist():
             self._drop(s)
@@ -563,6 +561,7 @@ class Scene:
         return gone
 
     def _drop(self, s: int) -> None:
+        self._preserve((s,))
         del self._slot[self._ids[s]]
         self._rank_remove(s)
         self._ids[s] = None
@@ -658,19 +657,22 @@ class Scene:
         """The stored states as of now, for a snapshot on demand (markers).
 
         Free while the scene is unchanged: the capture shares the scene's
-        arrays and is given its own copy only when the scene is about to
-        change while the capture is still referenced.
+        arrays, and a row about to change while the capture is still
+        referenced is copied into it first (an update costs O(its rows), not a
+        copy of the scene; a capture with many changed rows takes a private
+        copy of everything and is no longer tracked).
         """
         cap = _Capture(self.reference_ns or 0, self._sorted_slots(), self._ids, self._P, self._V,
                        self._A, self._R, self._T)
         self._captures.add(cap)
         return cap
 
-    def _detach_captures(self) -> None:
+    def _preserve(self, slots) -> None:
+        """Before rows `slots` change: live captures keep their values (copy on write, per row)."""
         if self._captures:
             for cap in list(self._captures):
-                cap.detach()
-            self._captures.clear()
+                if not cap.preserve(slots):
+                    self._captures.discard(cap)  # it took a private copy of everything
 
     def stored_states(self):
         """``(ids, P, V, A, R, T_ns)`` exactly as stored, ids sorted."""
@@ -1126,30 +1128,69 @@ class Scene:
 
 
 class _Capture:
-    """Stored states as of a prediction, propagated to the reference time on demand."""
+    """Stored states as of a prediction, propagated to the reference time on demand.
+
+    Shares the scene's arrays; the scene calls preserve() before it changes
+    rows, and the captured values of those rows are kept here.  The lock
+    makes a reader on another thread (markers) see either the rows before a
+    change or their preserved copies: preserve() completes before the scene
+    writes, and a reader gathers and patches under the lock.
+    """
+
+    #: Preserved rows beyond this fraction of the capture: take a private copy instead.
+    COPY_FRACTION = 0.125
 
     def __init__(self, reference_ns, order, ids, P, V, A, R, T) -> None:
         self._args = (reference_ns, order, ids, P, V, A, R, T)
+        self._saved: dict = {}  # slot -> (id, p, v, a, r, t) as captured
+        self._private = False
+        self._lock = threading.Lock()
         self._snapshot = None
 
-    def detach(self) -> None:
-        """Take a private copy of the rows in use (the scene is about to change)."""
+    def preserve(self, slots) -> bool:
+        """Keep the captured values of rows about to change; False once the capture holds a
+        private copy (the scene need not tell it again)."""
+        with self._lock:
+            if self._private:
+                return False
+            ref, order, ids, P, V, A, R, T = self._args
+            for s in slots:
+                s = int(s)
+                # a slot past these arrays was added after the scene grew: not captured here
+                if s < ids.shape[0] and s not in self._saved:
+                    self._saved[s] = (ids[s], P[s].copy(), V[s].copy(), A[s].copy(), R[s], T[s])
+            if len(self._saved) > self.COPY_FRACTION * order.shape[0] + 8:
+                ids, P, V, A, R, T = self._gather()
+                self._args = (ref, np.arange(order.shape[0]), ids, P, V, A, R, T)
+                self._saved = {}
+                self._private = True
+                return False
+            return True
+
+    def _gather(self):
+        """(ids, P, V, A, R, T) of the captured rows, in capture order (hold the lock)."""
         ref, order, ids, P, V, A, R, T = self._args
-        self._args = (ref, order, ids.copy(), P.copy(), V.copy(), A.copy(), R.copy(), T.copy())
+        out = [ids[order], P[order], V[order], A[order], R[order], T[order]]
+        if self._saved:
+            where = {s: k for k, s in enumerate(order.tolist()) if s in self._saved}
+            for s, k in where.items():
+                for column, value in zip(out, self._saved[s]):
+                    column[k] = value
+        return tuple(out)
 
     def __len__(self) -> int:
         return int(self._args[1].shape[0])
 
     def ids(self) -> list:
         """Body ids, sorted."""
-        ids = self._args[2]
-        return [ids[s] for s in self._args[1].tolist()]
+        with self._lock:
+            return self._gather()[0].tolist()
 
     def snapshot(self) -> SceneSnapshot:
         if self._snapshot is None:
-            ref, order, ids, P, V, A, R, T = self._args
-            p, v = _propagate_ns(P[order], V[order], A[order], ref - T[order])
-            self._snapshot = SceneSnapshot(ref, [ids[s] for s in order.tolist()],
-                                           np.ascontiguousarray(p), np.ascontiguousarray(v),
-                                           A[order], R[order])
+            with self._lock:
+                ids, P, V, A, R, T = self._gather()
+            p, v = _propagate_ns(P, V, A, self._args[0] - T)
+            self._snapshot = SceneSnapshot(self._args[0], ids.tolist(), np.ascontiguousarray(p),
+                                           np.ascontiguousarray(v), A, R)
         return self._snapshot
