@@ -304,19 +304,26 @@ def _put_string(buf, u32, pos, src, start, n):
 
 
 @njit(cache=True)
-def _encode_predictions(buf, u32, f64, sec, nanosec, frame, horizon, names, name_start, name_len,
-                        status, ttc, contact_sec, contact_nanosec, point, normal, closing,
-                        uncertainty, probability, bound, plausible):
-    """Write a CollisionPredictionArray into zeroed `buf`; u32/f64 view it from _ORIGIN on."""
+def _put_array_header(buf, u32, f64, sec, nanosec, frame, horizon, count):
+    """CollisionPredictionArray's header stamp, frame_id, horizon and sequence count; the
+    position of the first element."""
     u32[0] = np.uint32(sec & 0xFFFFFFFF)
     u32[1] = nanosec
     pos = _put_string(buf, u32, _ORIGIN + 8, frame, 0, frame.shape[0])
     pos = _align(pos, 8)
     f64[(pos - _ORIGIN) // 8] = horizon
     pos = _align(pos + 8, 4)
-    count = ttc.shape[0]
     u32[(pos - _ORIGIN) // 4] = count
-    pos += 4
+    return pos + 4
+
+
+@njit(cache=True)
+def _encode_predictions(buf, u32, f64, sec, nanosec, frame, horizon, names, name_start, name_len,
+                        status, ttc, contact_sec, contact_nanosec, point, normal, closing,
+                        uncertainty, probability, bound, plausible):
+    """Write a CollisionPredictionArray into zeroed `buf`; u32/f64 view it from _ORIGIN on."""
+    count = ttc.shape[0]
+    pos = _put_array_header(buf, u32, f64, sec, nanosec, frame, horizon, count)
     for k in range(count):
         pos = _put_string(buf, u32, pos, names, name_start[2 * k], name_len[2 * k])
         pos = _put_string(buf, u32, pos, names, name_start[2 * k + 1], name_len[2 * k + 1])
@@ -402,16 +409,9 @@ def _encode_contacts(buf, u32, f64, sec, nanosec, frame, horizon, names, start_a
     prediction_messages.ScenePrediction.columns derives them (status from `overlapping`,
     point/normal padded with +0.0 to 3-D, probability 1, bound 0, plausible time = ttc).
     Returns the end position, or -1 (buf partly written) at the first non-finite row."""
-    u32[0] = np.uint32(sec & 0xFFFFFFFF)
-    u32[1] = nanosec
-    pos = _put_string(buf, u32, _ORIGIN + 8, frame, 0, frame.shape[0])
-    pos = _align(pos, 8)
-    f64[(pos - _ORIGIN) // 8] = horizon
-    pos = _align(pos + 8, 4)
     count = ttc.shape[0]
     D = point.shape[1]
-    u32[(pos - _ORIGIN) // 4] = count
-    pos += 4
+    pos = _put_array_header(buf, u32, f64, sec, nanosec, frame, horizon, count)
     for k in range(count):
         finite = np.isfinite(ttc[k]) and np.isfinite(closing[k])
         for j in range(D):
