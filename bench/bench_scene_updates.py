@@ -203,6 +203,7 @@ def main() -> int:
             cpu.append(time.thread_time() - c0)
             kept = kept_now if opts.keep_previous else None
             del kept_now
+    assert stamp < start + slack_ns, "the timed one-body runs must stay inside one epoch (fewer --updates)"
     total = sum(cpu)
     print(f"   by stage (thread CPU, {updates} more updates with timers; mean per update):")
     for name in StageTimers.STAGES[:-2]:
