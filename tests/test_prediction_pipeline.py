@@ -289,3 +289,38 @@ def test_one_state_validation_on_scalars_equals_the_vectorised_checks() -> None:
             assert got.frame_id == (frame or s.header.frame_id)
         assert not got.uncertain[0]
     assert 40 < fast_taken < 360  # both paths exercised
+
+
+_FIRST_REBUILD = """
+import numpy as np
+import numba.core.dispatcher as dispatcher
+from circle_collision_ros.core.scene import Scene
+from circle_collision_ros.pipeline.predictor import CollisionPredictor, PredictorConfig
+CollisionPredictor(PredictorConfig(dimensions={d})).warm_up()
+loaded = []
+original = dispatcher.Dispatcher._compile_for_args
+def spy(self, *args, **kwargs):
+    loaded.append(self.py_func.__name__)
+    return original(self, *args, **kwargs)
+dispatcher.Dispatcher._compile_for_args = spy
+k = 120  # a rebuild of k (k - 1) / 2 = 7,140 overlapping pairs: the vectorised, threaded path
+scene = Scene(5.0, {d})
+scene.upsert_many([f"b{{i}}" for i in range(k)], np.random.default_rng(1).uniform(0, 1, (k, {d})),
+                  np.zeros((k, {d})), np.zeros((k, {d})), np.ones(k), 10**18)
+assert len(scene.predictions()) == k * (k - 1) // 2
+print("loaded:", loaded)
+"""
+
+
+@pytest.mark.parametrize("dimensions", [2, 3])
+def test_warm_up_loads_the_large_scene_kernels(dimensions) -> None:
+    """CollisionPredictor.warm_up (the node calls it at start) also loads the kernels of a large
+    rebuild (vectorised, threaded: a tracker array, an epoch crossing), so the first such cycle
+    pays no numba cache load (~0.15 s; seconds where the cache is stale). Fresh process: earlier
+    tests must not have loaded them."""
+    import subprocess
+    import sys
+    out = subprocess.run([sys.executable, "-c", _FIRST_REBUILD.format(d=dimensions)], capture_output=True,
+                         text=True, timeout=600)
+    assert out.returncode == 0, out.stderr
+    assert "loaded: []" in out.stdout, out.stdout
