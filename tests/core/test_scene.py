@@ -18,7 +18,15 @@ every pair, in ``tests/scene_rule.py``).  Guarantees proved here:
   newer ones bring the body back), the memory is forgotten at expiry, and
   max_bodies counts after the removals of the same call -- test_removal_*,
   test_max_bodies_counts_after_removals;
-* bad input is rejected without changing the scene -- test_bad_inputs.
+* bad input is rejected without changing the scene -- test_bad_inputs;
+* the small path's bookkeeping changes no result: expiry through receive-time
+  floors drops exactly the bodies and removals received before the limit, also
+  with receive times out of order -- test_expiry_with_receive_times_out_of_order;
+  each body's record list survives compaction, growth and slot reuse
+  -- test_record_lists_survive_compaction_and_growth;
+* a capture (what a published prediction keeps) stays bitwise the states of its
+  time through updates, removals, slot reuse, growth, expiry and clear(), also
+  read on another thread during updates -- test_capture_*.
 """
 from __future__ import annotations
 
