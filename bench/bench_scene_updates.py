@@ -17,7 +17,16 @@ Printed figures (same run, so ratios are comparable on a busy machine):
 3. a whole N-body CircleStateArray (every body moves, newer stamp): the
    full-scene path the scene chooses by itself;
 4. the epoch roll (every slack = horizon/4 of stamp time every pair is
-   re-evaluated once): one update crossing it.
+   re-evaluated once): one update crossing it, and the update after it.
+
+The one-body figure is also split finer (CPU time of this thread per stage, in a
+second pass with timers around the pipeline's functions): decode, validation
+(state_validation.check_batch), merge into the scene (Scene.merge), expiry
+(Scene.expire), the scene query (Scene.predictions: the changed body's pairs,
+the kept order, the rows), the rest (uncertain-pair query, prediction wrapper,
+glue), and encoding (ScenePrediction.to_cdr).  "--keep-previous" keeps each prediction
+referenced until the next one (as the node's marker thread may), so the scene
+must preserve the states that prediction captured.
 """
 from __future__ import annotations
 
@@ -35,7 +44,10 @@ from rclpy.serialization import serialize_message
 
 from circle_collision_msgs.msg import CircleState, CircleStateArray
 from circle_collision_ros.demo.demo_scene import SyntheticScene
+from circle_collision_ros.core.scene import Scene
+from circle_collision_ros.pipeline import predictor as predictor_module
 from circle_collision_ros.pipeline.cdr_codec import decode_states
+from circle_collision_ros.pipeline.prediction_messages import ScenePrediction
 from circle_collision_ros.pipeline.predictor import CollisionPredictor, PredictorConfig
 from bench_node import scene_bytes  # the same CircleStateArray bytes the node benchmark sends
 
@@ -70,6 +82,52 @@ def node_side(predictor: CollisionPredictor, data: bytes, msg_type: type, now_ns
     return (t1 - t0, t2 - t1, t3 - t2, t4 - t3, t4 - t0, c1 - c0), prediction, out
 
 
+class StageTimers:
+    """Thread CPU time spent in each pipeline stage, by timers wrapped around its function."""
+
+    STAGES = ("decode", "validate", "merge", "expire", "scene query", "the rest", "encode")
+
+    def __init__(self) -> None:
+        self.spent = {name: 0.0 for name in self.STAGES}
+        self._patches = []
+
+    def _wrap(self, owner, attr: str, stage: str) -> None:
+        original = getattr(owner, attr)
+        spent = self.spent
+
+        def timed(*args, **kwargs):
+            t0 = time.thread_time()
+            try:
+                return original(*args, **kwargs)
+            finally:
+                spent[stage] += time.thread_time() - t0
+        self._patches.append((owner, attr, original))
+        setattr(owner, attr, timed)
+
+    def __enter__(self) -> "StageTimers":
+        self._wrap(predictor_module, "check_batch", "validate")
+        self._wrap(Scene, "merge", "merge")
+        self._wrap(Scene, "expire", "expire")
+        self._wrap(Scene, "predictions", "scene query")
+        self._wrap(ScenePrediction, "to_cdr", "encode")
+        return self
+
+    def __exit__(self, *exc) -> None:
+        for owner, attr, original in reversed(self._patches):
+            setattr(owner, attr, original)
+
+    def run(self, predictor: CollisionPredictor, data: bytes, now_ns: int):
+        """node_side's calls, with the stages not behind one function timed here."""
+        t0 = time.thread_time()
+        batch = decode_states(data, CircleState)
+        t1 = time.thread_time()
+        self.spent["decode"] += t1 - t0
+        predictor.receive_batch(batch, now_ns)
+        prediction = predictor.predict()
+        prediction.to_cdr()
+        return prediction
+
+
 def _ms(values) -> str:
     a = np.array(values) * 1e3
     return f"median {np.median(a):.3f} ms, p90 {np.percentile(a, 90):.3f} ms, p99 {np.percentile(a, 99):.3f} ms"
@@ -81,6 +139,8 @@ def main() -> int:
     parser.add_argument("--updates", type=int, default=300)
     parser.add_argument("--arrays", type=int, default=10)
     parser.add_argument("--quick", action="store_true", help="2,000 bodies, fewer repetitions")
+    parser.add_argument("--keep-previous", action="store_true",
+                        help="keep each prediction referenced until the next one (as the marker thread may)")
     opts = parser.parse_args()
     n, updates, arrays = (2000, 60, 3) if opts.quick else (opts.bodies, opts.updates, opts.arrays)
     load = os.getloadavg()[0]
@@ -105,13 +165,15 @@ def main() -> int:
     bodies = rng.integers(0, n, updates)
     stages, full_s = [], []
     evaluated = []
+    kept = None
     for k, body in enumerate(bodies.tolist()):
         stamp += MS  # a per-body stream: every state newer than the last
         scene.p[body] += scene.v[body] * 1e-3
         data = _state_bytes(scene, body, stamp)
         times, prediction, _ = node_side(predictor, data, CircleState, stamp)
         inc = prediction.contacts
-        del prediction  # the node drops it after publishing (a kept one is copied at the next change)
+        kept = prediction if opts.keep_previous else None
+        del prediction
         stages.append(times)
         evaluated.append(predictor.stats.candidate_pairs)
         if k % max(1, updates // 30) == 0:
@@ -127,7 +189,31 @@ def main() -> int:
     print(f"   total CPU:    {_ms(st[:, 5])}")
     for name, col in (("decode", 0), ("receive_batch", 1), ("predict", 2), ("to_cdr", 3)):
         print(f"   {name:13s} {_ms(st[:, col])}")
-    print(f"   narrow-phase pairs per update: median {statistics.median(evaluated):.0f}")
+    print(f"   narrow-phase pairs per update: median {statistics.median(evaluated):.0f} "
+          f"(the body's candidate pairs + the pairs whose contact began before R, evaluated at R)")
+    # the finer split: a second pass of one-body updates with timers around each stage
+    timers = StageTimers()
+    cpu = []
+    with timers:
+        for body in rng.integers(0, n, updates).tolist():
+            stamp += MS
+            scene.p[body] += scene.v[body] * 1e-3
+            c0 = time.thread_time()
+            kept_now = timers.run(predictor, _state_bytes(scene, body, stamp), stamp)
+            cpu.append(time.thread_time() - c0)
+            kept = kept_now if opts.keep_previous else None
+            del kept_now
+    assert stamp < start + slack_ns, "the timed one-body runs must stay inside one epoch (fewer --updates)"
+    total = sum(cpu)
+    print(f"   by stage (thread CPU, {updates} more updates with timers; mean per update):")
+    for name in StageTimers.STAGES[:-2]:
+        print(f"     {name:17s} {timers.spent[name] / updates * 1e3:.3f} ms")
+    rest = total - sum(timers.spent.values())
+    print(f"     {'the rest':17s} {max(rest, 0.0) / updates * 1e3:.3f} ms  (uncertain-pair query, prediction "
+          "wrapper, glue)")
+    print(f"     {'encode':17s} {timers.spent['encode'] / updates * 1e3:.3f} ms")
+    print(f"     {'all':17s} {total / updates * 1e3:.3f} ms")
+    del kept
     print(f"\n2. the same scene recomputed from scratch (Scene.full_recomputation): {_ms(full_s)}")
     print(f"   full / incremental (medians): {np.median(full_s) / np.median(st[:, 4]):.0f}x; "
           f"results bit-identical: yes ({len(full_s)} checks)")
@@ -147,13 +233,19 @@ def main() -> int:
     print(f"   one-body update / whole array (medians): {np.median(st[:, 4]) / np.median(at[:, 4]):.4f}")
 
     # 4: the epoch roll.
-    roll = []
-    for _ in range(3):
+    roll, after = [], []
+    for _ in range(5):
         stamp = (stamp // slack_ns + 1) * slack_ns + MS
         body = int(rng.integers(0, n))
-        roll.append(node_side(predictor, _state_bytes(scene, body, stamp), CircleState, stamp)[0][4])
+        roll.append(node_side(predictor, _state_bytes(scene, body, stamp), CircleState, stamp)[0])
+        stamp += MS
+        body = int(rng.integers(0, n))
+        after.append(node_side(predictor, _state_bytes(scene, body, stamp), CircleState, stamp)[0])
+    roll, after = np.array(roll), np.array(after)
     print(f"\n4. one-body update crossing an epoch boundary (every {slack_ns / 1e9:g} s of stamp time): "
-          f"median {np.median(roll) * 1e3:.1f} ms")
+          f"median {np.median(roll[:, 4]) * 1e3:.1f} ms (CPU {np.median(roll[:, 5]) * 1e3:.1f} ms); "
+          f"the next update: median {np.median(after[:, 4]) * 1e3:.1f} ms (CPU {np.median(after[:, 5]) * 1e3:.1f} ms)")
+    print(f"   crossing / one-body update (CPU medians): {np.median(roll[:, 5]) / np.median(st[:, 5]):.0f}x")
     print(f"\nload average at end {os.getloadavg()[0]:.2f}")
     return 0
 

@@ -3,14 +3,16 @@ from __future__ import annotations
 
 import argparse
 import os
+import signal
 import sys
 from collections.abc import Callable
 from pathlib import Path
 
 import rclpy
 from rclpy.exceptions import NameValidationException, ParameterException
-from rclpy.executors import ExternalShutdownException
+from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
+from rclpy.signals import SignalHandlerOptions
 
 
 COLLISION_NODE_EPILOG = ("ROS arguments follow --ros-args, e.g. --ros-args -p horizon:=3.0 "
@@ -91,18 +93,41 @@ def apply_ros_environment_defaults() -> None:
     use_large_scene_transport()
 
 
+class ShutdownSignal:
+    """How long a spinning executable may take to notice Ctrl-C/SIGTERM, s (its wait is cut to this)."""
+
+    POLL_S = 0.1
+
+
+def _raise_keyboard_interrupt(signum, frame) -> None:
+    raise KeyboardInterrupt
+
+
 def spin_node(make_node: Callable[[], Node], argv: list[str], name: str) -> int:
     """rclpy.init, build the node, spin until Ctrl-C/SIGTERM, shut down cleanly.
+
+    Shutdown order (lifecycle style): the node is destroyed -- its threads
+    joined, its last messages (e.g. the markers' DELETEALL) published, its
+    recording closed -- while the context is still valid, then the context is
+    shut down. rclpy's own signal handlers would shut the context down first,
+    inside the signal (so a marker publication at exit failed with "publisher's
+    context is invalid"); they are not installed, and Ctrl-C/SIGTERM raise
+    KeyboardInterrupt in the spinning thread instead.
 
     Start-up errors (invalid parameters, bad topic names, unusable paths) print
     one line naming the problem and return exit code 2, without a traceback.
     """
     apply_ros_environment_defaults()
-    rclpy.init(args=argv)
+    rclpy.init(args=argv, signal_handler_options=SignalHandlerOptions.NO)
+    previous_term = signal.signal(signal.SIGTERM, _raise_keyboard_interrupt)
     node = None
     try:
         node = make_node()
-        rclpy.spin(node)
+        executor = SingleThreadedExecutor()
+        executor.add_node(node)
+        # A bounded wait: the Python signal handler runs only between waits.
+        while rclpy.ok():
+            executor.spin_once(timeout_sec=ShutdownSignal.POLL_S)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     except (ValueError, OSError, ParameterException, NameValidationException) as exc:
@@ -112,4 +137,5 @@ def spin_node(make_node: Callable[[], Node], argv: list[str], name: str) -> int:
         if node is not None:
             node.destroy_node()
         rclpy.try_shutdown()
+        signal.signal(signal.SIGTERM, previous_term)
     return 0

@@ -6,19 +6,23 @@ report_all_pairs NO_CONTACT rows, non-ASCII and empty ids, empty and long frame 
   before (kept below as the reference), byte for byte, padding included;
 - the layout before issue 18 (uncertainty=False, what old recordings hold) is the
   same bytes without the three probability fields;
+- the one-pass encoder of exact contacts (the node's common case) writes the same
+  bytes as the general path, and a non-finite row sends it to the general path;
 - the bytes equal rclpy's serialize_message of the same message object (except
   alignment padding, which Fast CDR leaves uninitialised; ours is zero), and
   rclpy's deserialize_message gives back exactly that message.
 """
 from __future__ import annotations
 
+import dataclasses
 import struct
 
 import numpy as np
 import pytest
 from rclpy.serialization import deserialize_message, serialize_message
 
-from circle_collision_msgs.msg import CollisionPredictionArray
+from circle_collision_msgs.msg import CollisionPrediction, CollisionPredictionArray
+from circle_collision_ros.pipeline.cdr_codec import encode_contact_rows, encode_prediction_array
 from circle_collision_ros.pipeline.predictor import CollisionPredictor, PredictorConfig
 from circle_collision_ros.pipeline.state_batch import StateBatch
 from tests.ros.node_helpers import BASE_NS, random_states
@@ -143,3 +147,33 @@ def test_encoded_ids_survive_churn() -> None:
             kept.append((prediction, data))
     for prediction, data in kept:
         assert prediction.to_cdr() == data
+
+
+@pytest.mark.parametrize("seed, n, dim, report_all, frame", [c for c in CASES if not c[3]])
+def test_exact_contacts_encoder_equals_the_columns_path(seed, n, dim, report_all, frame) -> None:
+    """The node's common case (exact contacts only) is written by one compiled pass straight from
+    the scene's rows (cdr_codec.encode_contact_rows); its bytes equal the general path's
+    (ScenePrediction.columns + encode_prediction_array), and to_cdr takes it."""
+    prediction = predictions(seed, n, dim, report_all, frame)
+    fast = encode_contact_rows(prediction.stamp, prediction.frame_id, prediction.horizon,
+                               prediction.contacts, CollisionPrediction.CONTACT,
+                               CollisionPrediction.OVERLAPPING)
+    general = encode_prediction_array(prediction.stamp, prediction.frame_id, prediction.horizon,
+                                      prediction.columns)
+    assert fast is not None and fast == general == prediction.to_cdr()
+
+
+def test_non_finite_contact_row_takes_the_general_path() -> None:
+    """A contact row with a non-finite value is left out (the "never publishes NaN" guarantee):
+    the one-pass encoder refuses it and to_cdr falls back to the columns path, which drops it."""
+    prediction = predictions(200, 200, 2, False, "map")
+    c = prediction.contacts
+    assert len(c) > 3
+    closing = c.closing_speed.copy()
+    closing[1] = np.nan
+    bad = dataclasses.replace(prediction, contacts=dataclasses.replace(c, closing_speed=closing))
+    assert encode_contact_rows(bad.stamp, bad.frame_id, bad.horizon, bad.contacts,
+                               CollisionPrediction.CONTACT, CollisionPrediction.OVERLAPPING) is None
+    rows = list(bad.rows())
+    assert len(rows) == len(c) - 1
+    assert bad.to_cdr() == reference_encoding(bad.stamp, bad.frame_id, bad.horizon, rows)[0]

@@ -251,3 +251,76 @@ def test_one_body_updates_equal_full_recomputation_and_fresh_predictor() -> None
     assert final.to_cdr() == fresh.predict().to_cdr()
     assert contacts_of(final.to_message()) == expected_contacts(list(current.values()), 4.0)
     assert len(final.contacts) > 10
+
+
+def test_one_state_validation_on_scalars_equals_the_vectorised_checks() -> None:
+    """A one-state message is checked on Python scalars (state_validation._clean_single_state) and
+    falls back to the vectorised checks whenever anything might be wrong: over random clean and
+    bad single states (each bad-input class, removals, frames, stamps) check_batch gives the same
+    verdict, reasons and adopted frame as for the same state checked in a two-state batch."""
+    from circle_collision_ros.pipeline.state_validation import _clean_single_state, check_batch
+    rng = np.random.default_rng(3)
+    bad_values = [math.nan, math.inf, -math.inf, 2e12, -2e12, -1.0]
+    fast_taken = 0
+    for k in range(400):
+        s = state(rng.choice(["a", "", "körper"]), rng.uniform(-5, 5, 3), rng.uniform(-2, 2, 3),
+                  rng.uniform(-1, 1, 3), r=float(rng.uniform(0, 2)),
+                  stamp_ns=int(rng.choice([NOW, NOW + 2_000_000_000, 0, -5, NOW - 10**9])),
+                  frame=str(rng.choice(["map", "odom", ""])), remove=bool(rng.random() < 0.2))
+        if rng.random() < 0.5:
+            field = rng.choice(["radius", "position", "velocity", "acceleration"])
+            value = float(rng.choice(bad_values))
+            if field == "radius":
+                s.radius = value
+            else:
+                setattr(getattr(s, field), str(rng.choice(["x", "y", "z"])), value)
+        # a removal beside it: never adopts a frame, so row 0 is judged as when alone
+        other = state("zz_other", (0.0, 0.0, 0.0), stamp_ns=NOW, frame="", remove=True)
+        frame = str(rng.choice(["", "map"]))
+        now = None if rng.random() < 0.2 else NOW
+        one = StateBatch.from_messages([s])
+        fast_taken += _clean_single_state(one, frame, now) is not None
+        got = check_batch(one, frame_id=frame, now_ns=now)
+        want = check_batch(StateBatch.from_messages([s, other]), frame_id=frame, now_ns=now)
+        assert bool(got.good[0]) == bool(want.good[0]), (k, s)
+        assert [(r.index, r.body_id, r.reason) for r in got.rejections] == \
+            [(r.index, r.body_id, r.reason) for r in want.rejections if r.index == 0], (k, s)
+        if got.good[0] and not s.remove:
+            assert got.frame_id == (frame or s.header.frame_id)
+        assert not got.uncertain[0]
+    assert 40 < fast_taken < 360  # both paths exercised
+
+
+_FIRST_REBUILD = """
+import numpy as np
+import numba.core.dispatcher as dispatcher
+from circle_collision_ros.core.scene import Scene
+from circle_collision_ros.pipeline.predictor import CollisionPredictor, PredictorConfig
+CollisionPredictor(PredictorConfig(dimensions={d})).warm_up()
+loaded = []
+original = dispatcher.Dispatcher._compile_for_args
+def spy(self, *args, **kwargs):
+    loaded.append(self.py_func.__name__)
+    return original(self, *args, **kwargs)
+dispatcher.Dispatcher._compile_for_args = spy
+k = 120  # a rebuild of k (k - 1) / 2 = 7,140 overlapping pairs: the vectorised, threaded path
+scene = Scene(5.0, {d})
+scene.upsert_many([f"b{{i}}" for i in range(k)], np.random.default_rng(1).uniform(0, 1, (k, {d})),
+                  np.zeros((k, {d})), np.zeros((k, {d})), np.ones(k), 10**18)
+assert len(scene.predictions()) == k * (k - 1) // 2
+print("loaded:", loaded)
+"""
+
+
+@pytest.mark.parametrize("dimensions", [2, 3])
+def test_warm_up_loads_the_large_scene_kernels(dimensions) -> None:
+    """CollisionPredictor.warm_up (the node calls it at start) also loads the kernels of a large
+    rebuild (vectorised, threaded: a tracker array, an epoch crossing), so the first such cycle
+    pays no numba cache load (~0.15 s; seconds where the cache is stale). Fresh process: earlier
+    tests must not have loaded them."""
+    import subprocess
+    import sys
+    out = subprocess.run([sys.executable, "-c", _FIRST_REBUILD.format(d=dimensions)], capture_output=True,
+                         text=True, timeout=600)
+    assert out.returncode == 0, out.stderr
+    assert "loaded: []" in out.stdout, out.stdout

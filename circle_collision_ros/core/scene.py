@@ -68,6 +68,7 @@ from __future__ import annotations
 
 import bisect
 import math
+import threading
 import weakref
 from dataclasses import dataclass
 from typing import Hashable, NamedTuple, Sequence
@@ -178,6 +179,9 @@ def _propagate_covariance(C, dt_ns):
 
 
 _EMPTY_I = np.empty(0, dtype=np.int64)
+_NEVER = 1 << 62  # later than any receive time, ns
+_FIRST_ROW = np.zeros(1, dtype=np.int64)
+_FIRST_ROW.flags.writeable = False
 
 
 class Scene:
@@ -227,8 +231,6 @@ class Scene:
     # ------------------------------------------------------------------ basics
     def clear(self) -> None:
         """Forget every body, every remembered removal and the reference time."""
-        if getattr(self, "_captures", None):
-            self._detach_captures()
         cap = 16
         D = self._dim
         self._P = np.zeros((cap, D))
@@ -265,6 +267,11 @@ class Scene:
         self._n_new = 0
         self.reference_ns: int | None = None
         self._epoch: int | None = None
+        # Lower bounds of the receive times of the bodies / remembered removals: expire scans
+        # only when its limit passes them (once per stale_timeout of a steady stream, not per call).
+        self._recv_floor = _NEVER
+        self._removal_floor = _NEVER
+        self._rhead = np.full(cap, -1, dtype=np.int64)  # each slot's newest record (see _REC)
         self._clear_records()
         self._version = getattr(self, "_version", 0) + 1
         self._cache = None
@@ -274,7 +281,9 @@ class Scene:
 
     # Pair records: one row per pair with a contact within H + S of its t_p, in
     # growable buffers; rows of updated bodies are marked dead (compacted when
-    # dead rows dominate) so an update touches O(its pairs) rows.
+    # dead rows dominate) so an update touches O(its pairs) rows.  Each slot's
+    # records form a linked list (_rhead[slot], _rnext[row, 0 for a / 1 for b])
+    # so an update finds its rows without a scan of all records.
     _REC = ("_ra", "_rb", "_rtp", "_rtau", "_rpt", "_rnm", "_rcs", "_rov")
 
     def _clear_records(self, cap: int = 256) -> None:
@@ -288,6 +297,8 @@ class Scene:
         self._rcs = np.zeros(cap)
         self._rov = np.zeros(cap, dtype=bool)      # overlapping at t_p (tau == 0, gap < 0)
         self._rlive = np.zeros(cap, dtype=bool)
+        self._rnext = np.full((cap, 2), -1, dtype=np.int64)
+        self._rhead[:] = -1
         self._rn = 0
         self._rdead = 0
         self._new_rows: list[np.ndarray] = []
@@ -383,7 +394,9 @@ class Scene:
         covariances : None (all exact) or (k, 2 dim, 2 dim) joint covariances of
         (position, velocity), symmetric PSD (all zero = exact); see uncertain_pairs.
         """
-        self._detach_captures()
+        if len(ids) == 1 and covariances is None and not remove[0]:
+            return self._merge_state(ids[0], int(stamps_ns[0]), positions, velocities, accelerations,
+                                     radii, int(received_ns))
         stamps = np.asarray(stamps_ns, dtype=np.int64)
         remove = np.asarray(remove, dtype=bool)
         received_ns = int(received_ns)
@@ -397,6 +410,7 @@ class Scene:
             old = self._removals.get(bid)
             if old is None or st >= old[0]:
                 self._removals[bid] = (st, received_ns)
+                self._removal_floor = min(self._removal_floor, received_ns)
             if s is None:
                 removal_ignored.append(k)
             else:
@@ -425,6 +439,7 @@ class Scene:
         self._n_new = int(fresh.size)
         for x in fresh.tolist():
             s = self._alloc()
+            self._preserve((s,))
             bid = ids[rows[x]]
             self._slot[bid] = s
             self._ids[s] = bid
@@ -437,6 +452,7 @@ class Scene:
         take[full] = False
         sl, src = slots[take], rows[take]
         if src.size:
+            self._preserve(sl)
             self._P[sl] = np.asarray(positions)[src, :D]
             self._V[sl] = np.asarray(velocities)[src, :D]
             self._A[sl] = np.asarray(accelerations)[src, :D]
@@ -448,6 +464,7 @@ class Scene:
                 self._U[sl] = (self._C[sl] != 0.0).any(axis=(1, 2))
             self._T[sl] = stamps[src]
             self._recv[sl] = received_ns
+            self._recv_floor = min(self._recv_floor, received_ns)
             self._dirty.update(sl.tolist())
             newest = int(stamps[src].max())
             if self.reference_ns is None or newest > self.reference_ns:
@@ -457,6 +474,48 @@ class Scene:
         return MergeResult(accepted=src, not_newer=rows[~newer], full=rows[full],
                            removed=np.array(removed, dtype=np.int64),
                            removal_ignored=np.array(removal_ignored, dtype=np.int64))
+
+    def _merge_state(self, bid, stamp: int, positions, velocities, accelerations, radii,
+                     received_ns: int) -> MergeResult:
+        """merge of one exact state (a per-body stream's message) on scalars: the same rules
+        and stored bits as the general path, without its array set-up."""
+        none = MergeResult(_EMPTY_I, _EMPTY_I, _EMPTY_I, _EMPTY_I, _EMPTY_I)
+        s = self._slot.get(bid)
+        if s is None:
+            gone = self._removals.get(bid) if self._removals else None
+            if gone is not None:
+                if stamp <= gone[0]:
+                    return none._replace(not_newer=_FIRST_ROW)  # a late state of a removed body
+                del self._removals[bid]
+            if self.max_bodies is not None and len(self._slot) >= self.max_bodies:
+                return none._replace(full=_FIRST_ROW)
+            s = self._alloc()
+            self._preserve((s,))
+            self._slot[bid] = s
+            self._ids[s] = bid
+            self._alive[s] = True
+            self._n_new = 1
+            self._rank_insert(s)
+            self._add_utf8(np.array([s], dtype=np.int64))
+        elif stamp <= self._T[s]:
+            return none._replace(not_newer=_FIRST_ROW)
+        else:
+            self._preserve((s,))
+            self._n_new = 0
+        D = self._dim
+        self._P[s] = np.asarray(positions)[0, :D]
+        self._V[s] = np.asarray(velocities)[0, :D]
+        self._A[s] = np.asarray(accelerations)[0, :D]
+        self._R[s] = np.asarray(radii)[0]
+        self._U[s] = False
+        self._T[s] = stamp
+        self._recv[s] = received_ns
+        self._recv_floor = min(self._recv_floor, received_ns)
+        self._dirty.add(s)
+        if self.reference_ns is None or stamp > self.reference_ns:
+            self.reference_ns = stamp
+        self._version += 1
+        return none._replace(accepted=_FIRST_ROW)
 
     def upsert_many(self, ids: Sequence[Hashable], positions, velocities, accelerations, radii,
                     stamps_ns, received_ns: int = 0) -> MergeResult:
@@ -486,11 +545,14 @@ class Scene:
     def expire(self, now_ns: int, timeout_ns: int) -> list:
         """Drop bodies (and remembered removals) received before ``now_ns - timeout_ns``; ids dropped, sorted."""
         limit = int(now_ns) - int(timeout_ns)
-        if self._removals:
+        if self._removals and limit > self._removal_floor:
             self._removals = {k: v for k, v in self._removals.items() if v[1] >= limit}
+            self._removal_floor = min((v[1] for v in self._removals.values()), default=_NEVER)
+        if limit <= self._recv_floor:
+            return []  # every body was received at or after the floor
         stale = np.flatnonzero(self._alive & (self._recv < limit))
-        if stale.size:
-            self._detach_captures()
+        kept = self._alive & (self._recv >= limit)
+        self._recv_floor = int(self._recv[kept].min()) if kept.any() else _NEVER
         gone = sorted(self._ids[s] for s in stale.tolist())
         for s in stale.tolist():
             self._drop(s)
@@ -499,6 +561,7 @@ class Scene:
         return gone
 
     def _drop(self, s: int) -> None:
+        self._preserve((s,))
         del self._slot[self._ids[s]]
         self._rank_remove(s)
         self._ids[s] = None
@@ -534,6 +597,9 @@ class Scene:
             ids = np.full(new, None, dtype=object)
             ids[:old] = self._ids
             self._ids = ids
+            head = np.full(new, -1, dtype=np.int64)
+            head[:old] = self._rhead
+            self._rhead = head
             if self._grid_built:
                 stale = np.ones(new, dtype=bool)
                 stale[:old] = self._gstale
@@ -591,19 +657,22 @@ class Scene:
         """The stored states as of now, for a snapshot on demand (markers).
 
         Free while the scene is unchanged: the capture shares the scene's
-        arrays and is given its own copy only when the scene is about to
-        change while the capture is still referenced.
+        arrays, and a row about to change while the capture is still
+        referenced is copied into it first (an update costs O(its rows), not a
+        copy of the scene; a capture with many changed rows takes a private
+        copy of everything and is no longer tracked).
         """
         cap = _Capture(self.reference_ns or 0, self._sorted_slots(), self._ids, self._P, self._V,
                        self._A, self._R, self._T)
         self._captures.add(cap)
         return cap
 
-    def _detach_captures(self) -> None:
+    def _preserve(self, slots) -> None:
+        """Before rows `slots` change: live captures keep their values (copy on write, per row)."""
         if self._captures:
             for cap in list(self._captures):
-                cap.detach()
-            self._captures.clear()
+                if not cap.preserve(slots):
+                    self._captures.discard(cap)  # it took a private copy of everything
 
     def stored_states(self):
         """``(ids, P, V, A, R, T_ns)`` exactly as stored, ids sorted."""
@@ -674,12 +743,6 @@ class Scene:
         t_p = np.maximum(self._epoch, np.maximum(self._T[A], self._T[B]))
         return self._evaluate(A, B, t_p, self._h_eval, compiled)
 
-    def _orient(self, X: np.ndarray, Y: np.ndarray):
-        """Order each slot pair so that the first body's id sorts first."""
-        self._ensure_rank()
-        swap = self._rank[X] > self._rank[Y]
-        return np.where(swap, Y, X), np.where(swap, X, Y)
-
     def _pairs_full(self):
         """All candidate slot pairs (a before b by id), from scratch; sets bounds."""
         slots = self._sorted_slots()
@@ -715,6 +778,7 @@ class Scene:
         self._rcs[sl] = cs
         self._rov[sl] = ov
         self._rlive[sl] = True
+        _sk.link_records(self._ra, self._rb, self._rnext, self._rhead, n, n + k)
         self._rn = n + k
         self._new_rows.append(np.arange(n, n + k))
 
@@ -731,6 +795,7 @@ class Scene:
         for name, arr in zip(self._REC, old):
             getattr(self, name)[:live.size] = arr
         self._rlive[:live.size] = True
+        _sk.link_records(self._ra, self._rb, self._rnext, self._rhead, 0, live.size)
         self._rn = live.size
         self._new_rows = [r[r >= 0] for r in new_rows]
         if fut is not None:
@@ -741,17 +806,9 @@ class Scene:
             self._past = p[p >= 0]
 
     def _kill_rows(self, slots: np.ndarray) -> None:
-        n = self._rn
-        if n == 0 or slots.size == 0:
-            return
-        if slots.size == 1:
-            s = slots[0]
-            m = (self._ra[:n] == s) | (self._rb[:n] == s)
-        else:
-            m = np.isin(self._ra[:n], slots) | np.isin(self._rb[:n], slots)
-        m &= self._rlive[:n]
-        self._rdead += int(np.count_nonzero(m))
-        self._rlive[:n][m] = False
+        """Mark the records of `slots` dead (walks their lists: O(their records))."""
+        if self._rn and slots.size:
+            self._rdead += int(_sk.kill_records(slots, self._ra, self._rnext, self._rhead, self._rlive))
 
     def _rebuild_all(self) -> None:
         self._clear_records()
@@ -832,21 +889,17 @@ class Scene:
         X, Y = [], []
         for s in live.tolist():
             cand = self._grid_insert_query(s)
-            cand = cand[cand != s]
-            ov = np.all((self._lo[cand] <= self._hi[s]) & (self._hi[cand] >= self._lo[s]), axis=1)
-            cand = cand[ov]
             X.append(np.full(cand.shape[0], s, dtype=np.int64))
             Y.append(cand)
         self._dirty.clear()
         if not X:
             return
-        X = np.concatenate(X)
-        Y = np.concatenate(Y)
-        # a pair of two updated bodies (or a body listed in two cells) appears
-        # more than once: keep one copy
-        cap = np.int64(self._R.shape[0])
-        key = np.unique(np.minimum(X, Y) * cap + np.maximum(X, Y))
-        A, B = self._orient(key // cap, key % cap)
+        X = np.concatenate(X) if len(X) > 1 else X[0]
+        Y = np.concatenate(Y) if len(Y) > 1 else Y[0]
+        # the bound test; a pair of two updated bodies (or a body listed in two cells)
+        # appears more than once: keep one copy, oriented by id
+        self._ensure_rank()
+        A, B = _sk.bounded_pairs(X, Y, self._lo, self._hi, self._rank, np.int64(self._R.shape[0]))
         keep = _bp.relative_filter(self._P, self._V, self._A, self._R, self._Tf, A, B,
                                    0.0, self._slack_ns * 1e-9 + self._h)
         A, B = A[keep], B[keep]
@@ -916,32 +969,21 @@ class Scene:
         else:
             prev, prev_past = self._fut, self._past
             new = np.concatenate(self._new_rows) if self._new_rows else _EMPTY_I
-        m = prev.size + new.size
-        fut = np.empty(m, dtype=np.int64)
-        ttc = np.empty(m)
-        past = np.empty(m + prev_past.size, dtype=np.int64)
-        nf, npast = _sk.split_past(prev, live, tp_all, tau_all, R, ttc, fut, past, 0, 0)
-        n_sorted = nf
-        nf, npast = _sk.split_past(new, live, tp_all, tau_all, R, ttc, fut, past, nf, npast)
-        nf, npast = _sk.split_past(prev_past, live, tp_all, tau_all, R, ttc, fut, past, nf, npast)
-        fut, ttc, past = fut[:nf], ttc[:nf], past[:npast]
         self._ensure_rank()
         rank, cap = self._rank, np.int64(self._R.shape[0])
-        key = _sk.pair_keys(fut, self._ra, self._rb, rank, cap)
-        if not _sk.order_rows(fut, ttc, key, n_sorted, 8 * nf + 1024):
+        fut, ttc, past, ordered = _sk.split_and_order(prev, new, prev_past, live, self._ra, self._rb,
+                                                      tp_all, tau_all, R, rank, cap, 1024)
+        if not ordered:
+            key = _sk.pair_keys(fut, self._ra, self._rb, rank, cap)
             o = np.lexsort((key, ttc))  # rows in some order: sort afresh
             fut, ttc = fut[o], ttc[o]
         self._fut, self._fut_ttc, self._past = fut, ttc, past
         # reported: the future rows with ttc <= H, and the past pairs' first contact from R
-        kf = int(np.searchsorted(ttc, self._h, side="right"))
-        Ap, Bp = self._ra[past], self._rb[past]
-        hit, _, tau2, pt2, nm2, cs2, ov2 = self._evaluate(Ap, Bp, np.full(past.size, R, dtype=np.int64),
-                                                          self._h)
-        if not hit.all():
-            Ap, Bp = Ap[hit], Bp[hit]
-        return _sk.assemble(fut[:kf], ttc[:kf], self._ra, self._rb, tp_all, tau_all, self._rov,
-                            self._rpt, self._rnm, self._rcs, Ap, Bp, tau2, ov2, pt2, nm2, cs2, R,
-                            rank, cap)
+        rows, evaluated = _sk.reported_rows(fut, ttc, past, self._ra, self._rb, tp_all, tau_all, self._rov,
+                                            self._rpt, self._rnm, self._rcs, self._P, self._V, self._A,
+                                            self._R, self._T, R, self._h, rank, cap)
+        self.evaluated_pairs += evaluated
+        return rows
 
     def _resolve(self, A, B, tp, tau, pt, nm, cs, compiled: bool | None = None):
         """Records -> reportable rows ``(A, B, ttc, contact_ns, overlapping, pt, nm, cs)`` at R
@@ -1086,30 +1128,69 @@ class Scene:
 
 
 class _Capture:
-    """Stored states as of a prediction, propagated to the reference time on demand."""
+    """Stored states as of a prediction, propagated to the reference time on demand.
+
+    Shares the scene's arrays; the scene calls preserve() before it changes
+    rows, and the captured values of those rows are kept here.  The lock
+    makes a reader on another thread (markers) see either the rows before a
+    change or their preserved copies: preserve() completes before the scene
+    writes, and a reader gathers and patches under the lock.
+    """
+
+    #: Preserved rows beyond this fraction of the capture: take a private copy instead.
+    COPY_FRACTION = 0.125
 
     def __init__(self, reference_ns, order, ids, P, V, A, R, T) -> None:
         self._args = (reference_ns, order, ids, P, V, A, R, T)
+        self._saved: dict = {}  # slot -> (id, p, v, a, r, t) as captured
+        self._private = False
+        self._lock = threading.Lock()
         self._snapshot = None
 
-    def detach(self) -> None:
-        """Take a private copy of the rows in use (the scene is about to change)."""
+    def preserve(self, slots) -> bool:
+        """Keep the captured values of rows about to change; False once the capture holds a
+        private copy (the scene need not tell it again)."""
+        with self._lock:
+            if self._private:
+                return False
+            ref, order, ids, P, V, A, R, T = self._args
+            for s in slots:
+                s = int(s)
+                # a slot past these arrays was added after the scene grew: not captured here
+                if s < ids.shape[0] and s not in self._saved:
+                    self._saved[s] = (ids[s], P[s].copy(), V[s].copy(), A[s].copy(), R[s], T[s])
+            if len(self._saved) > self.COPY_FRACTION * order.shape[0] + 8:
+                ids, P, V, A, R, T = self._gather()
+                self._args = (ref, np.arange(order.shape[0]), ids, P, V, A, R, T)
+                self._saved = {}
+                self._private = True
+                return False
+            return True
+
+    def _gather(self):
+        """(ids, P, V, A, R, T) of the captured rows, in capture order (hold the lock)."""
         ref, order, ids, P, V, A, R, T = self._args
-        self._args = (ref, order, ids.copy(), P.copy(), V.copy(), A.copy(), R.copy(), T.copy())
+        out = [ids[order], P[order], V[order], A[order], R[order], T[order]]
+        if self._saved:
+            where = {s: k for k, s in enumerate(order.tolist()) if s in self._saved}
+            for s, k in where.items():
+                for column, value in zip(out, self._saved[s]):
+                    column[k] = value
+        return tuple(out)
 
     def __len__(self) -> int:
         return int(self._args[1].shape[0])
 
     def ids(self) -> list:
         """Body ids, sorted."""
-        ids = self._args[2]
-        return [ids[s] for s in self._args[1].tolist()]
+        with self._lock:
+            return self._gather()[0].tolist()
 
     def snapshot(self) -> SceneSnapshot:
         if self._snapshot is None:
-            ref, order, ids, P, V, A, R, T = self._args
-            p, v = _propagate_ns(P[order], V[order], A[order], ref - T[order])
-            self._snapshot = SceneSnapshot(ref, [ids[s] for s in order.tolist()],
-                                           np.ascontiguousarray(p), np.ascontiguousarray(v),
-                                           A[order], R[order])
+            with self._lock:
+                ids, P, V, A, R, T = self._gather()
+            p, v = _propagate_ns(P, V, A, self._args[0] - T)
+            self._snapshot = SceneSnapshot(self._args[0], ids.tolist(), np.ascontiguousarray(p),
+                                           np.ascontiguousarray(v), A, R)
         return self._snapshot

@@ -26,7 +26,8 @@ from circle_collision_ros.core.broad_phase import swept_bound_row
 from circle_collision_ros.core.contact import contact_row
 from circle_collision_ros.core.narrow_phase import _ttc_scalar
 
-__all__ = ["evaluate_rows", "order_rows", "split_past", "pair_keys", "assemble", "swept_bound_rows"]
+__all__ = ["evaluate_rows", "order_rows", "split_past", "pair_keys", "assemble", "swept_bound_rows",
+           "link_records", "kill_records", "bounded_pairs", "split_and_order", "reported_rows"]
 
 #: Overlap decided without the narrow phase: only for values well inside the
 #: narrow phase's input range, so no rounding bound below can fail.
@@ -239,3 +240,129 @@ def swept_bound_rows(P, V, A, Rad, slots, t0, t1, lo, hi):
     for a few bodies at a time (no numpy set-up): the same per-row function."""
     for k in range(slots.shape[0]):
         swept_bound_row(P, V, A, Rad, slots[k], t0[k], t1[k], lo, hi, slots[k])
+
+
+@njit(cache=True)
+def link_records(ra, rb, rnext, rhead, first, end):
+    """Put records first..end-1 at the heads of their two slots' lists."""
+    for r in range(first, end):
+        a = ra[r]
+        b = rb[r]
+        rnext[r, 0] = rhead[a]
+        rhead[a] = r
+        rnext[r, 1] = rhead[b]
+        rhead[b] = r
+
+
+@njit(cache=True)
+def kill_records(slots, ra, rnext, rhead, rlive):
+    """Mark every live record of `slots` dead, walking each slot's list (then emptied);
+    returns how many were live.  A record stays in its other slot's list, dead."""
+    killed = 0
+    for x in range(slots.shape[0]):
+        s = slots[x]
+        r = rhead[s]
+        while r >= 0:
+            if rlive[r]:
+                rlive[r] = False
+                killed += 1
+            r = rnext[r, 0] if ra[r] == s else rnext[r, 1]
+        rhead[s] = -1
+    return killed
+
+
+@njit(cache=True)
+def bounded_pairs(X, Y, lo, hi, rank, cap):
+    """The distinct slot pairs {X[k], Y[k]} (X[k] != Y[k]) whose bounds overlap on every axis,
+    in the order of min * cap + max, each oriented so that the first body's rank is smaller:
+    Scene._update_incremental's bound test, np.unique and _orient in one pass."""
+    D = lo.shape[1]
+    key = np.empty(X.shape[0], dtype=np.int64)
+    m = 0
+    for k in range(X.shape[0]):
+        x = X[k]
+        y = Y[k]
+        if x == y:
+            continue
+        ok = True
+        for d in range(D):
+            if not (lo[y, d] <= hi[x, d] and hi[y, d] >= lo[x, d]):
+                ok = False
+                break
+        if ok:
+            key[m] = min(x, y) * cap + max(x, y)
+            m += 1
+    key = np.sort(key[:m])
+    A = np.empty(m, dtype=np.int64)
+    B = np.empty(m, dtype=np.int64)
+    u = 0
+    for k in range(m):
+        if k > 0 and key[k] == key[k - 1]:
+            continue
+        x = key[k] // cap
+        y = key[k] % cap
+        if rank[x] > rank[y]:
+            x, y = y, x
+        A[u] = x
+        B[u] = y
+        u += 1
+    return A[:u], B[:u]
+
+
+@njit(cache=True)
+def split_and_order(prev, new, prev_past, live, ra, rb, rtp, rtau, R, rank, cap, max_moves):
+    """Scene._ordered_rows' first half: the live records of the kept order `prev`, the new
+    records and the past ones, split at R into future rows (ttc at R) and past ones, and the
+    future rows ordered by (ttc, id_a, id_b) (see split_past, pair_keys, order_rows).
+    Returns (fut, ttc, past, ordered); ordered False: fut/ttc in some order (sort afresh)."""
+    m = prev.shape[0] + new.shape[0]
+    fut = np.empty(m, dtype=np.int64)
+    ttc = np.empty(m)
+    past = np.empty(m + prev_past.shape[0], dtype=np.int64)
+    nf, npast = split_past(prev, live, rtp, rtau, R, ttc, fut, past, 0, 0)
+    n_sorted = nf
+    nf, npast = split_past(new, live, rtp, rtau, R, ttc, fut, past, nf, npast)
+    nf, npast = split_past(prev_past, live, rtp, rtau, R, ttc, fut, past, nf, npast)
+    fut = fut[:nf]
+    ttc = ttc[:nf]
+    key = pair_keys(fut, ra, rb, rank, cap)
+    ordered = order_rows(fut, ttc, key, n_sorted, max_moves + 8 * nf)
+    return fut, ttc, past[:npast], ordered
+
+
+@njit(cache=True, error_model="numpy")
+def reported_rows(fut, ttc, past, ra, rb, rtp, rtau, rov, rpt, rnm, rcs, P, V, A, Rad, T, R, H,
+                  rank, cap):
+    """Scene._ordered_rows' second half: the future rows with ttc <= H, and the past pairs
+    evaluated at R with horizon H (their hits), merged (see evaluate_rows, assemble).
+    Returns assemble's rows and the number of narrow-phase evaluations."""
+    kf = np.searchsorted(ttc, H, side="right")
+    n = past.shape[0]
+    D = rpt.shape[1]
+    Ap = np.empty(n, dtype=np.int64)
+    Bp = np.empty(n, dtype=np.int64)
+    for x in range(n):
+        Ap[x] = ra[past[x]]
+        Bp[x] = rb[past[x]]
+    t_eval = np.full(n, R, dtype=np.int64)
+    tau = np.empty(n)
+    pt = np.empty((n, D))
+    nm = np.empty((n, D))
+    cs = np.empty(n)
+    ov = np.empty(n, dtype=np.bool_)
+    evaluated = evaluate_rows(P, V, A, Rad, T, Ap, Bp, t_eval, H, tau, pt, nm, cs, ov)
+    h = 0
+    for x in range(n):  # keep the hits, in order
+        if tau[x] <= H:
+            Ap[h] = Ap[x]
+            Bp[h] = Bp[x]
+            tau[h] = tau[x]
+            for d in range(D):
+                pt[h, d] = pt[x, d]
+                nm[h, d] = nm[x, d]
+            cs[h] = cs[x]
+            ov[h] = ov[x]
+            h += 1
+    rows = assemble(fut[:kf], ttc[:kf], ra, rb, rtp, rtau, rov, rpt, rnm, rcs, Ap[:h], Bp[:h],
+                    tau[:h], ov[:h], pt[:h], nm[:h], cs[:h], R, rank, cap)
+    return rows, evaluated

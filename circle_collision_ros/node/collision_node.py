@@ -594,8 +594,15 @@ class CollisionNode(Node):
             self._recording_error = str(exc)
             self.get_logger().error(f"recording stopped, predictions continue: {exc}")
 
+    #: How long shutdown waits for subscribers to acknowledge the final markers (DELETEALL), s.
+    SHUTDOWN_ACK_S = 1.0
+
     def destroy_node(self) -> None:
         self.markers.close()  # clears the display while the publisher still exists
+        try:  # ... and delivered: the process may exit right after
+            self._markers_pub.wait_for_all_acked(Duration(seconds=self.SHUTDOWN_ACK_S))
+        except Exception as exc:  # e.g. the context was shut down from outside
+            self.get_logger().warning(f"final markers not acknowledged: {exc!r}")
         if self._recorder is not None:
             try:
                 self._recorder.close()

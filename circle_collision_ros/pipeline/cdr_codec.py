@@ -304,19 +304,26 @@ def _put_string(buf, u32, pos, src, start, n):
 
 
 @njit(cache=True)
-def _encode_predictions(buf, u32, f64, sec, nanosec, frame, horizon, names, name_start, name_len,
-                        status, ttc, contact_sec, contact_nanosec, point, normal, closing,
-                        uncertainty, probability, bound, plausible):
-    """Write a CollisionPredictionArray into zeroed `buf`; u32/f64 view it from _ORIGIN on."""
+def _put_array_header(buf, u32, f64, sec, nanosec, frame, horizon, count):
+    """CollisionPredictionArray's header stamp, frame_id, horizon and sequence count; the
+    position of the first element."""
     u32[0] = np.uint32(sec & 0xFFFFFFFF)
     u32[1] = nanosec
     pos = _put_string(buf, u32, _ORIGIN + 8, frame, 0, frame.shape[0])
     pos = _align(pos, 8)
     f64[(pos - _ORIGIN) // 8] = horizon
     pos = _align(pos + 8, 4)
-    count = ttc.shape[0]
     u32[(pos - _ORIGIN) // 4] = count
-    pos += 4
+    return pos + 4
+
+
+@njit(cache=True)
+def _encode_predictions(buf, u32, f64, sec, nanosec, frame, horizon, names, name_start, name_len,
+                        status, ttc, contact_sec, contact_nanosec, point, normal, closing,
+                        uncertainty, probability, bound, plausible):
+    """Write a CollisionPredictionArray into zeroed `buf`; u32/f64 view it from _ORIGIN on."""
+    count = ttc.shape[0]
+    pos = _put_array_header(buf, u32, f64, sec, nanosec, frame, horizon, count)
     for k in range(count):
         pos = _put_string(buf, u32, pos, names, name_start[2 * k], name_len[2 * k])
         pos = _put_string(buf, u32, pos, names, name_start[2 * k + 1], name_len[2 * k + 1])
@@ -392,4 +399,78 @@ def encode_prediction_array(stamp: tuple[int, int], frame_id: str, horizon: floa
                         contact_sec, contact_nanosec, np.ascontiguousarray(columns.point),
                         np.ascontiguousarray(columns.normal), columns.closing_speed, uncertainty,
                         columns.probability, columns.probability_bound, columns.plausible_ttc)
+    return buf[:end].tobytes()
+
+
+@njit(cache=True)
+def _encode_contacts(buf, u32, f64, sec, nanosec, frame, horizon, names, start_a, len_a, start_b, len_b,
+                     ttc, contact_ns, overlapping, point, normal, closing, contact, overlap_status):
+    """_encode_predictions of exact contact rows, with the columns derived row by row as
+    prediction_messages.ScenePrediction.columns derives them (status from `overlapping`,
+    point/normal padded with +0.0 to 3-D, probability 1, bound 0, plausible time = ttc).
+    Returns the end position, or -1 (buf partly written) at the first non-finite row."""
+    count = ttc.shape[0]
+    D = point.shape[1]
+    pos = _put_array_header(buf, u32, f64, sec, nanosec, frame, horizon, count)
+    for k in range(count):
+        finite = np.isfinite(ttc[k]) and np.isfinite(closing[k])
+        for j in range(D):
+            finite = finite and np.isfinite(point[k, j]) and np.isfinite(normal[k, j])
+        if not finite:
+            return -1
+        pos = _put_string(buf, u32, pos, names, start_a[k], len_a[k])
+        pos = _put_string(buf, u32, pos, names, start_b[k], len_b[k])
+        buf[pos] = overlap_status if overlapping[k] else contact
+        pos = _align(pos + 1, 8)
+        f64[(pos - _ORIGIN) // 8] = ttc[k]
+        pos += 8
+        c = contact_ns[k]
+        csec = c // 1_000_000_000
+        u32[(pos - _ORIGIN) // 4] = np.uint32(csec & 0xFFFFFFFF)
+        u32[(pos - _ORIGIN) // 4 + 1] = np.uint32(c - csec * 1_000_000_000)
+        pos += 8
+        q = (pos - _ORIGIN) // 8
+        for j in range(3):
+            f64[q + j] = point[k, j] if j < D else 0.0
+            f64[q + 3 + j] = normal[k, j] if j < D else 0.0
+        f64[q + 6] = closing[k]
+        f64[q + 7] = 1.0
+        f64[q + 8] = 0.0
+        f64[q + 9] = ttc[k]
+        pos += 80
+    return pos
+
+
+@njit(cache=True)
+def _contacts_end(frame_len, len_a, len_b):
+    pos = _align(_ORIGIN + 8, 4) + 4 + frame_len + 1
+    pos = _align(pos, 8) + 8
+    pos = _align(pos, 4) + 4
+    for k in range(len_a.shape[0]):
+        pos = _align(pos, 4) + 4 + len_a[k] + 1
+        pos = _align(pos, 4) + 4 + len_b[k] + 1
+        pos = _align(pos + 1, 8) + 8 + 8 + 56 + 24
+    return pos
+
+
+def encode_contact_rows(stamp: tuple[int, int], frame_id: str, horizon: float, contacts,
+                        contact: int, overlapping: int) -> bytes | None:
+    """The CollisionPredictionArray of exact contacts only (no uncertain or NO_CONTACT rows),
+    straight from a core.scene.SceneContacts with UTF-8 ids: the bytes encode_prediction_array
+    writes for ScenePrediction.columns of it, without building the columns (one compiled pass).
+    contact, overlapping: the status values. None if a row is not finite (the caller then
+    takes the general path, which leaves such rows out)."""
+    if sys.byteorder != "little":
+        raise NotImplementedError("the compiled CDR encoder needs a little-endian machine")
+    blob, start_a, len_a, start_b, len_b = contacts.id_utf8
+    frame = np.frombuffer(frame_id.encode(), dtype=np.uint8)
+    end = int(_contacts_end(frame.shape[0], len_a, len_b))
+    buf = np.zeros(_ORIGIN + 8 * -(-(end - _ORIGIN) // 8), dtype=np.uint8)
+    buf[:_ORIGIN] = np.frombuffer(CDR_LE + b"\x00\x00", dtype=np.uint8)
+    body = buf[_ORIGIN:]
+    if _encode_contacts(buf, body.view(np.uint32), body.view(np.float64), int(stamp[0]), int(stamp[1]),
+                        frame, float(horizon), blob, start_a, len_a, start_b, len_b, contacts.ttc,
+                        contacts.contact_ns, contacts.overlapping, contacts.point, contacts.normal,
+                        contacts.closing_speed, contact, overlapping) < 0:
+        return None
     return buf[:end].tobytes()

@@ -31,7 +31,7 @@ from std_msgs.msg import Header
 
 from circle_collision_msgs.msg import CollisionPrediction, CollisionPredictionArray
 from circle_collision_ros.core.scene import SceneContacts, SceneSnapshot, SceneUncertainty
-from circle_collision_ros.pipeline.cdr_codec import encode_prediction_array
+from circle_collision_ros.pipeline.cdr_codec import encode_contact_rows, encode_prediction_array
 
 _NS_PER_S = 1_000_000_000
 
@@ -172,6 +172,13 @@ class ScenePrediction:
                                  col["normal"], f64(col["closing"]), f64(col["probability"]), f64(col["bound"]),
                                  f64(col["plausible"]))
 
+    @property
+    def _exact_contacts_only(self) -> bool:
+        """Whether the published rows are exactly the scene's contacts (no uncertain pair and no
+        report_all_pairs rows appended)."""
+        return (self.uncertainty is None or len(self.uncertainty) == 0) and not (
+            self.report_all_pairs and len(self.capture) <= ReportAll.MAX_BODIES)
+
     @cached_property
     def _finite_rows(self):
         """The contacts' rows with finite values (slice(None): all of them)."""
@@ -218,6 +225,13 @@ class ScenePrediction:
 
         uncertainty=False: the layout before the probability fields (replay of old recordings).
         """
+        if uncertainty and self._exact_contacts_only and self.contacts.id_utf8 is not None:
+            # The common case in one compiled pass, bytes equal to the general path's
+            # (tests/test_prediction_cdr.py): no columns built, no id strings touched.
+            data = encode_contact_rows(self.stamp, self.frame_id, float(self.horizon), self.contacts,
+                                       CollisionPrediction.CONTACT, CollisionPrediction.OVERLAPPING)
+            if data is not None:
+                return data
         columns = self.columns
         # No contact row dropped and none appended: the scene's encoded ids fit the columns.
         same_rows = isinstance(self._finite_rows, slice) and len(columns) == len(self.contacts)

@@ -127,6 +127,15 @@ class CollisionPredictor:
         d = self.config.dimensions
         scene.upsert_many(["a", "b"], np.eye(2, d), np.zeros((2, d)), np.zeros((2, d)), np.ones(2), 1)
         scene.predictions()
+        # ... and the large-scene path: a rebuild (a tracker array, an epoch crossing) of more than
+        # Scene._COMPILED_ROWS pairs runs the vectorised, threaded kernels, whose cache load cost
+        # ~0.15 s in the first such cycle (3 s where the cache was stale): 100 overlapping bodies.
+        k = 100
+        rows = np.random.default_rng(0).uniform(0.0, 1.0, (k, d))
+        crowd = Scene(self.config.horizon, d)
+        crowd.upsert_many([f"w{i:03d}" for i in range(k)], rows, np.zeros((k, d)), np.zeros((k, d)),
+                          np.ones(k), 1)
+        crowd.predictions()
         # and the uncertain path's kernels (a first uncertain state would otherwise wait for them)
         scene.merge(["a"], [2], np.eye(1, d), np.zeros((1, d)), np.zeros((1, d)), [1.0], [False], 0,
                     covariances=np.eye(2 * d)[None] * 0.01)

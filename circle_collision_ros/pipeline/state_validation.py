@@ -173,6 +173,34 @@ def _reasons(batch: StateBatch, k: int, frame_id: str, now_ns: int | None, dup: 
     return "; ".join(found)
 
 
+_GOOD = np.ones(1, dtype=bool)
+_GOOD.flags.writeable = False
+_EXACT = np.zeros(1, dtype=bool)
+_EXACT.flags.writeable = False
+
+
+def _clean_single_state(batch: StateBatch, frame_id: str, now_ns: int | None) -> BatchCheck | None:
+    """check_batch of a one-state batch without covariance that passes every check, on Python
+    scalars (a per-body stream's message: the vectorised checks cost ~0.1 ms of numpy set-up);
+    None when any check might fail (the general path then words the reasons)."""
+    body_id, frame, stamp = batch.ids[0], batch.frames[0], int(batch.stamp_ns[0])
+    if not body_id or stamp <= 0 or (now_ns is not None and stamp - now_ns > StampLimits.MAX_FUTURE_NS):
+        return None
+    if not bool(batch.remove[0]):
+        limit = ValueLimits.MAX_MAGNITUDE
+        r = float(batch.radius[0])
+        if not 0.0 <= r <= limit:  # also false for NaN
+            return None
+        for vector in (batch.position, batch.velocity, batch.acceleration):
+            for value in vector[0].tolist():
+                if not abs(value) <= limit:
+                    return None
+        if frame_id and frame != frame_id:
+            return None
+        frame_id = frame_id or frame
+    return BatchCheck(_GOOD, [], frame_id, _EXACT)
+
+
 def check_batch(batch: StateBatch, *, frame_id: str, now_ns: int | None,
                 dimensions: int = 3) -> BatchCheck:
     """Which states are usable.
@@ -187,6 +215,10 @@ def check_batch(batch: StateBatch, *, frame_id: str, now_ns: int | None,
     n = len(batch)
     if n == 0:
         return BatchCheck(np.zeros(0, dtype=bool), [], frame_id)
+    if n == 1 and batch.covariance is None:
+        clean = _clean_single_state(batch, frame_id, now_ns)
+        if clean is not None:
+            return clean
     counts = Counter(batch.ids)
     dup = np.fromiter((counts[i] > 1 for i in batch.ids), dtype=bool, count=n)
     empty = np.fromiter((not i for i in batch.ids), dtype=bool, count=n)

@@ -18,7 +18,15 @@ every pair, in ``tests/scene_rule.py``).  Guarantees proved here:
   newer ones bring the body back), the memory is forgotten at expiry, and
   max_bodies counts after the removals of the same call -- test_removal_*,
   test_max_bodies_counts_after_removals;
-* bad input is rejected without changing the scene -- test_bad_inputs.
+* bad input is rejected without changing the scene -- test_bad_inputs;
+* the small path's bookkeeping changes no result: expiry through receive-time
+  floors drops exactly the bodies and removals received before the limit, also
+  with receive times out of order -- test_expiry_with_receive_times_out_of_order;
+  each body's record list survives compaction, growth and slot reuse
+  -- test_record_lists_survive_compaction_and_growth;
+* a capture (what a published prediction keeps) stays bitwise the states of its
+  time through updates, removals, slot reuse, growth, expiry and clear(), also
+  read on another thread during updates -- test_capture_*.
 """
 from __future__ import annotations
 
@@ -248,3 +256,151 @@ def test_hypothesis_sequences(ops, slack) -> None:
             sc.expire(now, dt_ms * MS)
         assert same(sc.predictions(), sc.full_recomputation())
     assert_rule(sc)
+
+
+def test_expiry_with_receive_times_out_of_order() -> None:
+    """expire scans only when its limit passes the lowest receive time it may hold (a floor, kept
+    as states and removals arrive); with receive times out of order (the service merges with 0,
+    replayed clocks) the bodies and removals dropped are exactly those received before the limit."""
+    rng = np.random.default_rng(11)
+    sc = Scene(2.0, 2)
+    recv: dict[str, int] = {}
+    removals: dict[str, int] = {}
+    stamp = T0
+    for step in range(600):
+        stamp += MS
+        body = f"b{int(rng.integers(0, 40)):02d}"
+        received = T0 + int(rng.integers(0, 4000)) * MS
+        if rng.random() < 0.15:
+            if sc.remove(body, stamp, received):
+                del recv[body]
+            removals[body] = received
+        else:
+            res = sc.upsert(body, rng.uniform(0, 30, 2), rng.uniform(-1, 1, 2), (0.0, 0.0), 0.5, stamp, received)
+            if res.accepted.size:
+                recv[body] = received
+                removals.pop(body, None)
+        if step % 7 == 0:
+            now = T0 + int(rng.integers(0, 6000)) * MS
+            limit = now - 1000 * MS
+            gone = sc.expire(now, 1000 * MS)
+            want = sorted(b for b, t in recv.items() if t < limit)
+            assert gone == want, step
+            recv = {b: t for b, t in recv.items() if t >= limit}
+            removals = {b: t for b, t in removals.items() if t >= limit}
+            assert sc.ids() == sorted(recv) and sc.remembered_removals == len(removals), step
+        assert same(sc.predictions(), sc.full_recomputation()), step
+
+
+def test_record_lists_survive_compaction_and_growth() -> None:
+    """Each body's records are found through its own list (not a scan of all records); through
+    thousands of one-body updates in a dense scene (dead records compacted, buffers grown, slots
+    freed and reused) the incremental rows stay bitwise equal to the full recomputation."""
+    rng = np.random.default_rng(12)
+    n = 300
+    sc = Scene(4.0, 2, slack=50.0)  # a long epoch: the records live through many updates
+    ids = [f"b{k:03d}" for k in range(n)]
+    sc.upsert_many(ids, rng.uniform(0, 40, (n, 2)), rng.normal(0, 1, (n, 2)), np.zeros((n, 2)),
+                   rng.uniform(0.5, 1.5, n), T0 + MS)
+    sc.predictions()
+    compactions = 0
+    for k in range(1500):
+        b = ids[int(rng.integers(0, n))]
+        dead = sc._rdead
+        if k % 50 == 49:
+            sc.remove(b, T0 + (k + 2) * MS)
+        else:
+            sc.upsert(b, rng.uniform(0, 40, 2), rng.normal(0, 1, 2), (0.0, 0.0), float(rng.uniform(0.5, 1.5)),
+                      T0 + (k + 2) * MS)
+        res = sc.predictions()
+        compactions += sc._rdead < dead
+        if k % 10 == 0:
+            assert same(res, sc.full_recomputation()), k
+    assert compactions >= 1
+    assert same(sc.predictions(), sc.full_recomputation())
+
+
+def _snapshot_equal(x, y) -> bool:
+    return (x.reference_ns == y.reference_ns and x.ids == y.ids and np.array_equal(x.positions, y.positions)
+            and np.array_equal(x.velocities, y.velocities) and np.array_equal(x.accelerations, y.accelerations)
+            and np.array_equal(x.radii, y.radii))
+
+
+@pytest.mark.parametrize("changes", [3, 200])
+def test_capture_keeps_its_states_while_the_scene_changes(changes) -> None:
+    """A capture (what a published prediction keeps for its markers) shares the scene's arrays;
+    rows are copied into it only as they change (copy on write per row, a full private copy once
+    many changed).  Through updates, removals, slot reuse, growth of the arrays, expiry and
+    clear(), its snapshot stays bitwise the one it had when taken."""
+    rng = np.random.default_rng(13)
+    sc = Scene(3.0, 2)
+    n = 60
+    ids = [f"b{k:03d}" for k in range(n)]
+    sc.upsert_many(ids, rng.uniform(0, 20, (n, 2)), rng.normal(0, 1, (n, 2)), rng.normal(0, 0.2, (n, 2)),
+                   rng.uniform(0.2, 1.0, n), T0)
+    captures = [(sc.capture(), sc.capture().snapshot())]
+    stamp, nid = T0, n
+    for k in range(changes):
+        stamp += MS
+        op = k % 4
+        if op == 0:
+            b = ids[int(rng.integers(0, len(ids)))]
+            sc.upsert(b, rng.uniform(0, 20, 2), rng.normal(0, 1, 2), (0.0, 0.0), 0.5, stamp, stamp)
+        elif op == 1:
+            b = ids.pop(int(rng.integers(0, len(ids))))
+            sc.remove(b, stamp, stamp)
+        elif op == 2:  # new ids: freed slots reused, then the arrays grow
+            new = [f"n{nid + j:04d}" for j in range(int(rng.integers(1, 40)))]
+            nid += len(new)
+            ids += new
+            m = len(new)
+            sc.upsert_many(new, rng.uniform(0, 20, (m, 2)), np.zeros((m, 2)), np.zeros((m, 2)),
+                           np.full(m, 0.3), stamp, stamp)
+        else:
+            captures.append((sc.capture(), sc.capture().snapshot()))
+    sc.expire(stamp + 10**12, 1)
+    assert len(sc) == 0
+    sc.clear()
+    sc.upsert("z", (1.0, 1.0), (0.0, 0.0), (0.0, 0.0), 1.0, stamp)
+    for capture, want in captures:
+        assert _snapshot_equal(capture.snapshot(), want)
+        assert capture.ids() == want.ids
+
+
+def test_capture_read_on_another_thread_during_updates() -> None:
+    """The marker thread snapshots a capture while the prediction path changes the scene: every
+    snapshot equals the scene's states at the capture's time (the lock orders preserve/gather)."""
+    import threading
+    rng = np.random.default_rng(14)
+    sc = Scene(3.0, 2)
+    n = 3000
+    ids = [f"b{k:04d}" for k in range(n)]
+    sc.upsert_many(ids, rng.uniform(0, 200, (n, 2)), rng.normal(0, 1, (n, 2)), np.zeros((n, 2)),
+                   rng.uniform(0.2, 1.0, n), T0)
+    pending: list = []
+    failures: list = []
+    done = threading.Event()
+
+    def reader() -> None:
+        while not done.is_set() or pending:
+            if pending:
+                capture, ref = pending.pop(0)
+                if not _snapshot_equal(capture.snapshot(), ref):
+                    failures.append(ref.reference_ns)
+
+    thread = threading.Thread(target=reader)
+    thread.start()
+    stamp = T0
+    for k in range(300):
+        stamp += MS
+        ref_states = sc.stored_states()
+        capture = sc.capture()
+        ref = Scene(3.0, 2)
+        ref.upsert_many(ref_states[0], *ref_states[1:5], ref_states[5])
+        ref.reference_ns = sc.reference_ns
+        pending.append((capture, ref.snapshot()))
+        for b in rng.choice(n, 5, replace=False).tolist():
+            sc.upsert(ids[b], rng.uniform(0, 200, 2), rng.normal(0, 1, 2), (0.0, 0.0), 0.5, stamp)
+    done.set()
+    thread.join(60)
+    assert not failures

@@ -125,6 +125,40 @@ def test_separate_process_predicts_like_the_core(ros_node) -> None:
     assert "Traceback" not in output
 
 
+@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM], ids=["SIGINT", "SIGTERM"])
+def test_shutdown_releases_markers_before_the_context(ros_node, sig) -> None:
+    """Ctrl-C/SIGTERM with markers on: the marker thread is joined and the display cleared
+    (a final DELETEALL reaches subscribers) while the context is valid; the log has no
+    "markers not published: publisher's context is invalid" (rclpy's signal handler used
+    to shut the context down before the node was destroyed)."""
+    exe = os.path.join(sys.prefix, "lib", "circle_collision_ros", "collision_node")
+    proc = subprocess.Popen([exe, "--ros-args", "-p", "horizon:=5.0", "-p", "marker_rate:=20.0"],
+                            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    try:
+        harness = Harness(ros_node)
+        harness.wait_matched()
+        states = _stamped_now(random_states(40, seed=12), ros_node)
+        harness.send(state_array(states))
+        assert spin_until(ros_node, lambda: any(len(a.markers) > 1 for a in harness.markers), 15.0)
+        # keep the marker thread drawing while the signal arrives
+        for k in range(5):
+            harness.pub.publish(state_array(_stamped_now(random_states(40, seed=13 + k), ros_node)))
+            spin_until(ros_node, lambda: False, 0.02)
+        drawn = len(harness.markers)
+    except AssertionError as exc:
+        proc.kill()
+        pytest.fail(f"{exc}\ncollision_node output:\n{proc.communicate(timeout=20)[0]}")
+    proc.send_signal(sig)
+    output = proc.communicate(timeout=20)[0]
+    assert proc.returncode == 0, output
+    assert "markers not published" not in output and "context is invalid" not in output, output
+    assert "Traceback" not in output, output
+    # the last array, received after the signal, clears the display
+    assert spin_until(ros_node, lambda: len(harness.markers) > drawn
+                      and [m.action for m in harness.markers[-1].markers] == [3], 10.0), \
+        [[m.action for m in a.markers][:3] for a in harness.markers[drawn:]]
+
+
 def test_in_process_merges_topics_by_id(in_process, ros_node) -> None:
     node, harness = in_process
     states = _stamped_now([state("a", (0, 0), (1, 0, 0)), state("b", (10, 0))], ros_node)
