@@ -5,8 +5,8 @@ urgent contact) and `contacts` (a small sphere at each predicted contact
 point). Probability (issue 18) is opacity: a body's colour band comes from its
 earliest plausible contact (= the contact time for exact states) and its alpha
 is scaled by Urgency.opacity of its most probable listed pair; a contact
-sphere's alpha by its pair's probability. Exact contacts (probability 1) look
-as before. A body or pair keeps its marker id while it is in the scene; when it
+sphere's alpha by its pair's probability. Exact contacts (probability 1) are
+fully opaque. A body or pair keeps its marker id while it is in the scene; when it
 leaves, its id returns to a free list (smallest first), so the id tables hold
 exactly the live scene and ids stay below the largest scene seen. Each array
 starts with a DELETEALL and lists the whole scene, so it is complete on its

@@ -20,7 +20,7 @@ frame check, latest-by-stamp merge, recording, replay):
   rotated into header.frame_id as R S R^T by the same orientation; no cross
   terms (Odometry carries none). Each block must be finite, symmetric and PSD
   (core.uncertainty.covariance_problem), else the message is rejected naming
-  the field. Both blocks zero (most drivers) is an exact state, as before.
+  the field. Both blocks zero (most drivers) is an exact state.
 - orientation: a quaternion whose norm is within QuaternionRule.TOLERANCE of 1
   is normalised (float32 round trips and integration drift stay usable); zero,
   non-finite or further from unit is rejected as a whole message (OdometryError):
