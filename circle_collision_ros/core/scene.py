@@ -1154,17 +1154,19 @@ class _Capture:
             if self._private:
                 return False
             ref, order, ids, P, V, A, R, T = self._args
-            for s in slots:
-                s = int(s)
-                # a slot past these arrays was added after the scene grew: not captured here
-                if s < ids.shape[0] and s not in self._saved:
-                    self._saved[s] = (ids[s], P[s].copy(), V[s].copy(), A[s].copy(), R[s], T[s])
-            if len(self._saved) > self.COPY_FRACTION * order.shape[0] + 8:
+            if len(self._saved) + len(slots) > self.COPY_FRACTION * order.shape[0] + 8:
+                # many rows change (a tracker array): one vectorised copy now, while the
+                # scene still holds the captured values, instead of a row-by-row loop
                 ids, P, V, A, R, T = self._gather()
                 self._args = (ref, np.arange(order.shape[0]), ids, P, V, A, R, T)
                 self._saved = {}
                 self._private = True
                 return False
+            for s in slots:
+                s = int(s)
+                # a slot past these arrays was added after the scene grew: not captured here
+                if s < ids.shape[0] and s not in self._saved:
+                    self._saved[s] = (ids[s], P[s].copy(), V[s].copy(), A[s].copy(), R[s], T[s])
             return True
 
     def _gather(self):
