@@ -177,6 +177,10 @@ def _reading(res: dict) -> str:
                      f"all-pairs was not run above N = {sc['all_pairs_max']}. At N = {big}, predict_all_pairs took "
                      f"{fmt_ms(min(bt))}-{fmt_ms(max(bt))} ms across the two densities and horizons, and a one-body "
                      f"Scene update with predictions() {fmt_ms(min(up))}-{fmt_ms(max(up))} ms (median).")
+        if "node_frame" in sc:
+            import scale
+
+            s.append(" Stages of a " + scale.node_frame_line(sc["node_frame"]) + " (in process, no DDS).")
     if "node" in res and res["node"]["rows"]:
         nd = sorted(res["node"]["rows"], key=lambda r: r["bodies"])
         lat = "; ".join(f"N = {r['bodies']}: p50 {fmt_ms(r['e2e_p50_ms'])} / p99 {fmt_ms(r['e2e_p99_ms'])} ms, "

@@ -17,7 +17,10 @@
 * incremental ``Scene``: one body re-reported (upsert) + ``predictions()``,
   median and p90 over many updates;
 * the stages of ``predict_all_pairs`` (broad phase, narrow phase, the rest)
-  and the broad phase's share, printed per N.
+  and the broad phase's share, printed per N;
+* the stages of the node's work on one frame of 5,000 moving bodies
+  (``node_frame_split``: decode, intake, broad phase, rest of prediction,
+  encode) and the broad phase's share of it.
 
 ``--n 5000 20000`` runs only those body counts and writes nothing.
 """
@@ -49,6 +52,7 @@ NS_FULL = (100, 300, 1000, 3000, 10000, 20000)
 NS_QUICK = (100, 300, 1000)
 ALL_PAIRS_MAX = 3000
 ALL_PAIRS_MAX_QUICK = 1000
+NODE_FRAME_BODIES = 5000  #: the node frame of issue 17's broad-phase share
 
 
 def _status_kb(field: str) -> int:
@@ -133,6 +137,83 @@ def scene_update(p, v, a, r, h, rng, updates: int) -> dict:
                 update_p90_ms=float(np.percentile(ts, 90)) * 1e3)
 
 
+def node_frame_split(n: int = 5000, frames: int = 30) -> dict:
+    """Median ms per stage of the node's work on one CircleStateArray frame of n
+    moving bodies, in process (no DDS): the scene and frame rate of
+    bench_node.py's array targets (3,000 bodies/km^2, 30 Hz, every body moves).
+
+    Stages: decode (cdr_codec.decode_states), intake (validation + merge into
+    the scene: CollisionPredictor.receive_batch), broad phase (swept bounds +
+    candidate pairs inside the scene's prediction, timed by wrapping those two
+    broad_phase functions), the rest of the prediction (narrow phase, pair
+    records, order) and encoding (ScenePrediction.to_cdr).  Issue 17 asks that
+    the broad phase not be the largest share of this frame at 5,000 bodies."""
+    from circle_collision_msgs.msg import CircleStateArray
+    from circle_collision_ros.core import broad_phase as bp
+    from circle_collision_ros.demo.demo_scene import SyntheticScene
+    from circle_collision_ros.pipeline.cdr_codec import decode_states, encode_state_array
+    from circle_collision_ros.pipeline.predictor import CollisionPredictor, PredictorConfig
+    from circle_collision_ros.pipeline.state_batch import StateBatch
+
+    scene = SyntheticScene(n, size=math.sqrt(n * 333.0), dimensions=2, seed=n)
+    ids = [f"b{k:05d}" for k in range(n)]
+    t0_ns = 1_700_000_000 * 10**9
+    period_ns = 33_333_333
+    warm = 5
+    data = []
+    for k in range(frames + warm):
+        scene.step(period_ns * 1e-9)
+        stamp = t0_ns + k * period_ns
+        batch = StateBatch(ids=ids, frames=["map"] * n, stamp_ns=np.full(n, stamp, dtype=np.int64),
+                           radius=scene.radii, position=scene.p, velocity=scene.v,
+                           acceleration=scene.a, remove=np.zeros(n, dtype=bool))
+        data.append(encode_state_array(batch, stamp, "map"))
+    predictor = CollisionPredictor(PredictorConfig(max_bodies=max(10_000, n)))
+    predictor.warm_up()
+    broad_s = [0.0]
+    originals = bp.swept_bounds, bp.candidate_pairs
+
+    def timed(fn):
+        def call(*args, **kwargs):
+            t = time.perf_counter()
+            try:
+                return fn(*args, **kwargs)
+            finally:
+                broad_s[0] += time.perf_counter() - t
+        return call
+
+    stages = {name: [] for name in ("decode", "intake", "broad phase", "rest of prediction", "encode")}
+    bp.swept_bounds, bp.candidate_pairs = (timed(f) for f in originals)
+    try:
+        for k, msg in enumerate(data):
+            broad_s[0] = 0.0
+            t0 = time.perf_counter()
+            batch = decode_states(msg, CircleStateArray)
+            t1 = time.perf_counter()
+            predictor.receive_batch(batch, t0_ns + k * period_ns)
+            t2 = time.perf_counter()
+            prediction = predictor.predict()
+            t3 = time.perf_counter()
+            prediction.to_cdr()
+            t4 = time.perf_counter()
+            if k >= warm:
+                for name, sec in zip(stages, (t1 - t0, t2 - t1, broad_s[0], t3 - t2 - broad_s[0], t4 - t3)):
+                    stages[name].append(sec * 1e3)
+    finally:
+        bp.swept_bounds, bp.candidate_pairs = originals
+    med = {name: statistics.median(v) for name, v in stages.items()}
+    total = sum(med.values())
+    largest = max(med, key=med.get)
+    return dict(n=n, frames=frames, stage_ms=med, total_ms=total,
+                broad_share=med["broad phase"] / max(total, 1e-12), largest=largest)
+
+
+def node_frame_line(nf: dict) -> str:
+    parts = ", ".join(f"{k} {v:.2f}" for k, v in nf["stage_ms"].items())
+    return (f"node frame, {nf['n']} moving bodies (median of {nf['frames']}): {parts} ms; "
+            f"broad-phase share {nf['broad_share']:.0%}, largest stage: {nf['largest']}")
+
+
 def run(quick: bool = False, log=print, ns=None) -> dict:
     ns = ns or (NS_QUICK if quick else NS_FULL)
     ap_max = ALL_PAIRS_MAX_QUICK if quick else ALL_PAIRS_MAX
@@ -177,8 +258,10 @@ def run(quick: bool = False, log=print, ns=None) -> dict:
                     + f" | stages: broad {st['stage_broad_ms']:.2f} ms, narrow {st['stage_narrow_ms']:.2f} ms"
                     + f", rest {st['stage_rest_ms']:.2f} ms (broad share "
                     + f"{st['stage_broad_ms'] / max(st['stage_total_ms'], 1e-9):.0%})")
+    nf = node_frame_split(NODE_FRAME_BODIES, 10 if quick else 30)
+    log("  " + node_frame_line(nf))
     return dict(rows=rows, all_pairs_max=ap_max, densities=DENSITIES, horizons=list(HORIZONS), ns=list(ns),
-                repeat=repeat, updates=updates)
+                repeat=repeat, updates=updates, node_frame=nf)
 
 
 def table(res: dict) -> str:
@@ -209,6 +292,8 @@ def write_markdown(res: dict, out: Path) -> Path:
         "tracemalloc (Python/numpy heap only). 1-body update: Scene.upsert of one body + predictions(), "
         f"over {res['updates']} updates. 'same result': pair set and times bitwise equal to all pairs.\n",
         table(res),
+        "\nWhere a node frame's time goes (bench/scale.py node_frame_split: in process, no DDS; "
+        "the scene of bench_node.py's array targets): " + node_frame_line(res["node_frame"]) + ".\n",
         "\n![scale](scale.png)\n",
     ]
     p.write_text("\n".join(txt))

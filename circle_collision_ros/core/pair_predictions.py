@@ -103,6 +103,45 @@ def _pair_rows(p, v, a, r, I, J):
     return _bp.gather_states(I, p, v, a, r) + _bp.gather_states(J, p, v, a, r)
 
 
+@njit(cache=True, nogil=True)
+def _sort_tied_runs(order, t, key):
+    """Within each run of equal ``t[order]``, put ``order`` in ascending ``key``."""
+    m = order.shape[0]
+    s = 0
+    while s < m:
+        ts = t[order[s]]
+        e = s + 1
+        while e < m and t[order[e]] == ts:
+            e += 1
+        if e - s > 32:
+            seg = order[s:e].copy()
+            order[s:e] = seg[np.argsort(key[seg])]
+        else:  # short runs (most ties are pairs): insertion sort
+            for q in range(s + 1, e):
+                x = order[q]
+                kx = key[x]
+                u = q - 1
+                while u >= s and key[order[u]] > kx:
+                    order[u + 1] = order[u]
+                    u -= 1
+                order[u + 1] = x
+        s = e
+
+
+def order_by_time_then_key(ttc: np.ndarray, key: np.ndarray) -> np.ndarray:
+    """Indices that sort rows by ``(ttc, key)``; keys unique, times not NaN.
+
+    One unstable argsort on the times (numpy's vectorised sort), then each run
+    of equal times (chiefly the pairs overlapping at t = 0) sorted by key: the
+    order of a key sort followed by a stable time sort, about half the cost of
+    that pair of sorts at 20,000 contacts (numpy's stable sort of floats is a
+    timsort, not vectorised).  Unique keys make the order total, so it does
+    not depend on the sort algorithm."""
+    order = np.argsort(ttc)
+    _sort_tied_runs(order, ttc, key)
+    return order
+
+
 def _check_horizon(horizon) -> float:
     h = float(horizon)
     if not (math.isfinite(h) and h > 0.0):
@@ -151,8 +190,7 @@ def predict_all_pairs(positions, velocities, accelerations, radii, horizon: floa
     ttc = narrow_on_pairs(*_pair_rows(p, v, a, r, I, J), h)
     hit = ttc <= h
     I, J, ttc = I[hit], J[hit], ttc[hit]
-    order = np.argsort(I * np.int64(n) + J)  # (i, j) order (keys unique: any sort), then
-    order = order[np.argsort(ttc[order], kind="stable")]  # stable by ttc (faster than lexsort)
+    order = order_by_time_then_key(ttc, I * np.int64(n) + J)
     I, J, ttc = I[order], J[order], ttc[order]
     point, normal, cs = details_on_index_pairs(p, v, a, r, I, J, ttc)
     res = PairPredictions(I, J, ttc, point, normal, cs)

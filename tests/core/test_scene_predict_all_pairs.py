@@ -202,3 +202,31 @@ def test_validation_names_only_bad_rows_across_the_float_range():
     with pytest.raises(ValueError, match=r"in 3 row\(s\): 2, 3, 4$"):
         validate_bodies(p, v, a, r)
     validate_bodies(p[:2], v[:2], a[:2], r[:2])  # huge but finite: accepted
+
+
+def test_order_by_time_then_key_is_the_lexicographic_order():
+    """order_by_time_then_key (unstable time sort, then runs of equal times sorted
+    by key) gives exactly the (time, key) order: short and long runs of ties,
+    zeros, a run at the end."""
+    from circle_collision_ros.core.pair_predictions import order_by_time_then_key
+    rng = np.random.default_rng(41)
+    for n, levels in ((0, 1), (1, 1), (50, 3), (5000, 40), (5000, 4000), (20000, 7)):
+        ttc = rng.integers(0, levels, n) * 0.25  # many exact ties
+        ttc[rng.random(n) < 0.3] = 0.0
+        key = rng.permutation(10 * n + 1)[:n].astype(np.int64)  # unique
+        got = order_by_time_then_key(ttc, key)
+        assert got.tolist() == np.lexsort((key, ttc)).tolist()
+
+
+def test_equal_times_across_a_lattice():
+    """A lattice of identical pairs closing at the same speed: hundreds of equal
+    nonzero contact times, reported in (ttc, i, j) order."""
+    k = 15
+    xs = np.arange(k) * 10.0
+    pa = np.stack(np.meshgrid(xs, xs), -1).reshape(-1, 2)
+    p = np.concatenate([pa, pa + [3.0, 0.0]])
+    v = np.concatenate([np.tile([0.5, 0.0], (k * k, 1)), np.tile([-0.5, 0.0], (k * k, 1))])
+    a = np.zeros_like(p)
+    r = np.full(2 * k * k, 0.5)
+    res = assert_exact(p, v, a, r, 5.0, method="sweep")
+    assert len(res) >= k * k and np.count_nonzero(res.ttc == res.ttc[0]) >= k * k
