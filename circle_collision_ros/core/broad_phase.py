@@ -40,6 +40,7 @@ from numba import njit, prange
 from numba.extending import register_jitable
 
 from circle_collision_ros.core.kinematics import arc_position, arc_velocity
+from circle_collision_ros.core.parallel_policy import threads_pay
 
 __all__ = [
     "swept_bounds",
@@ -322,14 +323,40 @@ def _strip_entries(order, first, last):
     return start, body
 
 
-@njit(cache=True, nogil=True, error_model="numpy")
-def _sweep_strips(lo, hi, ax, first, start, body):
-    """Entry pairs (S, T) of all strips whose bounds overlap, body[S] < body[T].
+@njit(cache=True, nogil=True, error_model="numpy", inline="always")
+def _sweep_strip_range(lx, hx, elo, ehi, fs, start, k0, k1, S, T, n_box):
+    """Append to S, T (from n_box) the overlapping entry pairs of strips k0..k1-1;
+    returns the new count, or -1 if S, T are too short (nothing is grown here:
+    the caller decides).
 
-    The inner loop reads contiguous per-entry copies of the bounds (memory in
-    sweep order, not bodies scattered over the scene) and tests without
-    branches (a data-dependent branch there mispredicts about every other
-    pair)."""
+    Tests without branches (a data-dependent branch there mispredicts about
+    every other pair): every visited pair is written, the count advances only
+    for a kept one.  A pair is reported in the strip of the larger first strip
+    only."""
+    D = elo.shape[1]
+    for k in range(k0, k1):
+        s1 = start[k + 1]
+        for s in range(start[k], s1):
+            if n_box + (s1 - s) > S.shape[0]:
+                return -1
+            h = hx[s]
+            fk = fs[s]
+            for t in range(s + 1, s1):
+                if lx[t] > h:
+                    break
+                ok = max(fk, fs[t]) == k
+                for d in range(D):
+                    ok &= (elo[t, d] <= ehi[s, d]) & (elo[s, d] <= ehi[t, d])
+                S[n_box] = s
+                T[n_box] = t
+                n_box += ok
+    return n_box
+
+
+@njit(cache=True, nogil=True)
+def _entry_bounds(lo, hi, ax, first, body):
+    """Per-entry copies of the bounds in sweep order (lx, hx, elo, ehi, fs): the
+    sweep then reads memory sequentially, not bodies scattered over the scene."""
     D = lo.shape[1]
     m = body.shape[0]
     lx = np.empty(m)
@@ -345,33 +372,100 @@ def _sweep_strips(lo, hi, ax, first, start, body):
         for k in range(D):
             elo[e, k] = lo[i, k]
             ehi[e, k] = hi[i, k]
-    # a pair is reported in the strip of the larger first strip only
-    cap = max(16, 4 * m)
+    return lx, hx, elo, ehi, fs
+
+
+@njit(cache=True, nogil=True)
+def _lower_body_first(S, T, body):
+    # body a of the relative test is the lower index (as relative_filter)
+    for q in range(S.shape[0]):
+        if body[S[q]] > body[T[q]]:
+            S[q], T[q] = T[q], S[q]
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def _sweep_strips(lo, hi, ax, first, start, body):
+    """Entry pairs (S, T) of all strips whose bounds overlap, body[S] < body[T]."""
+    lx, hx, elo, ehi, fs = _entry_bounds(lo, hi, ax, first, body)
+    cap = max(16, 4 * body.shape[0])
     S = np.empty(cap, dtype=np.int64)
     T = np.empty(cap, dtype=np.int64)
     n_box = 0
-    for k in range(start.shape[0] - 1):
-        s1 = start[k + 1]
-        for s in range(start[k], s1):
-            if n_box + (s1 - s) > S.shape[0]:
-                S = _grow(S, n_box)
-                T = _grow(T, n_box)
-            h = hx[s]
-            fk = fs[s]
-            for t in range(s + 1, s1):
-                if lx[t] > h:
-                    break
-                ok = max(fk, fs[t]) == k
-                for d in range(D):
-                    ok &= (elo[t, d] <= ehi[s, d]) & (elo[s, d] <= ehi[t, d])
-                S[n_box] = s
-                T[n_box] = t
-                n_box += ok
-    # body a of the relative test is the lower index (as relative_filter)
-    for q in range(n_box):
-        if body[S[q]] > body[T[q]]:
-            S[q], T[q] = T[q], S[q]
-    return S[:n_box], T[:n_box]
+    k = 0
+    ns = start.shape[0] - 1
+    while k < ns:
+        # one strip at a time, growing the buffers when a strip might not fit
+        got = _sweep_strip_range(lx, hx, elo, ehi, fs, start, k, k + 1, S, T, n_box)
+        if got < 0:
+            S = _grow(S, n_box)
+            T = _grow(T, n_box)
+            continue
+        n_box = got
+        k += 1
+    S, T = S[:n_box], T[:n_box]
+    _lower_body_first(S, T, body)
+    return S, T
+
+
+#: Strip groups of the threaded sweep (a fixed number, so the output order --
+#: strip order -- does not depend on the thread count).
+_SWEEP_GROUPS = 16
+#: Room per entry for a group's pairs in the threaded sweep (never touched
+#: beyond what is written: np.empty leaves the rest unmapped).
+_PAIRS_PER_ENTRY = 8
+
+
+@njit(cache=True, error_model="numpy", parallel=True)
+def _sweep_strips_par(lo, hi, ax, first, start, body):
+    """``_sweep_strips`` over numba's threads, the same pairs in the same order.
+
+    The strips are cut into _SWEEP_GROUPS runs of about equal entry count;
+    each is swept into its own slice of one buffer (_PAIRS_PER_ENTRY pairs per
+    entry), then the slices are moved together in strip order.  If a group
+    would overflow its slice (a cluster with more than _PAIRS_PER_ENTRY
+    overlaps per entry), the serial sweep, which grows its buffers, answers
+    instead."""
+    m = body.shape[0]
+    ns = start.shape[0] - 1
+    lx, hx, elo, ehi, fs = _entry_bounds(lo, hi, ax, first, body)
+    G = _SWEEP_GROUPS
+    kcut = np.empty(G + 1, dtype=np.int64)  # group g holds strips kcut[g]..kcut[g+1]-1
+    kcut[0] = 0
+    k = 0
+    for g in range(1, G):
+        while k < ns and start[k] < (m * g) // G:
+            k += 1
+        kcut[g] = k
+    kcut[G] = ns
+    off = np.empty(G + 1, dtype=np.int64)
+    off[0] = 0
+    for g in range(G):
+        off[g + 1] = off[g] + _PAIRS_PER_ENTRY * (start[kcut[g + 1]] - start[kcut[g]]) + 16
+    S = np.empty(off[G], dtype=np.int64)
+    T = np.empty(off[G], dtype=np.int64)
+    cnt = np.empty(G, dtype=np.int64)
+    for g in prange(G):
+        cnt[g] = _sweep_strip_range(lx, hx, elo, ehi, fs, start, kcut[g], kcut[g + 1],
+                                    S[off[g]:off[g + 1]], T[off[g]:off[g + 1]], 0)
+    for g in range(G):
+        if cnt[g] < 0:
+            return _sweep_strips(lo, hi, ax, first, start, body)
+    total = 0
+    for g in range(G):
+        if off[g] != total:  # off[g] >= total: a forward move
+            for q in range(cnt[g]):
+                S[total + q] = S[off[g] + q]
+                T[total + q] = T[off[g] + q]
+        total += cnt[g]
+    S, T = S[:total], T[:total]
+    _lower_body_first(S, T, body)
+    return S, T
+
+
+#: Bodies from which the sweep may run on numba's threads (when a core is free:
+#: parallel_policy; at 5,000 bodies the serial sweep takes ~0.2 ms, about
+#: what a parallel launch can save on an idle core).
+PARALLEL_MIN_BODIES = 4096
 
 
 @njit(cache=True, nogil=True)
@@ -419,9 +513,8 @@ def _rel_mask_par(p, v, a, r, tref, I, J, t_start, t_end):
     return out
 
 
-#: Bound-overlapping pairs from which the relative test runs on numba's
-#: threads (~40 ns per pair serial; below this a parallel launch costs more
-#: than it saves on a busy 2-core machine).
+#: Bound-overlapping pairs from which the relative test may run on numba's
+#: threads (when a core is free: parallel_policy; ~40 ns per pair serial).
 PARALLEL_MIN_PAIRS = 16384
 
 
@@ -451,28 +544,21 @@ def _sweep_axes(lo, hi):
     return ax, ay
 
 
-@njit(cache=True, nogil=True)
-def _sweep_pairs(lo, hi, ax, ay, order):
-    """Sort-and-sweep in strips: sweep along axis ax (order: the bodies by
-    lower bound on ax), strips across axis ay.  Returns (S, T, body): entry
-    pairs whose bounds overlap and each entry's body."""
-    first, last = _strips(lo, hi, ay)
-    start, body = _strip_entries(order, first, last)
-    S, T = _sweep_strips(lo, hi, ax, first, start, body)
-    return S, T, body
-
-
 def _sweep(lo, hi, p, v, a, r, tref, t_start, t_end, use_rel):
     """The sweep generator: (I, J, n_box) as ``candidate_pairs``."""
     ax, ay = _sweep_axes(lo, hi)
     order = np.argsort(lo[:, ax])  # numpy's sort: ~3x faster than numba's
-    S, T, body = _sweep_pairs(lo, hi, ax, ay, order)
+    # sort-and-sweep in strips: sweep along axis ax, strips across axis ay
+    first, last = _strips(lo, hi, ay)
+    start, body = _strip_entries(order, first, last)
+    sweep = _sweep_strips_par if threads_pay(lo.shape[0], PARALLEL_MIN_BODIES) else _sweep_strips
+    S, T = sweep(lo, hi, ax, first, start, body)
     n_box = S.shape[0]
     if use_rel and n_box:
         # the entries' states as contiguous rows: the relative test then reads
         # neighbouring memory, not bodies scattered over the scene
         states = gather_states(body, p, v, a, r) + (tref[body],)
-        mask = _rel_mask_par if n_box >= PARALLEL_MIN_PAIRS else _rel_mask
+        mask = _rel_mask_par if threads_pay(n_box, PARALLEL_MIN_PAIRS) else _rel_mask
         keep = mask(*states, S, T, t_start, t_end)
         S = S[keep]
         T = T[keep]

@@ -69,6 +69,7 @@ from circle_collision_ros.core.narrow_exact import exact_first_contact
 from circle_collision_ros.core.narrow_fast import _fast_rel, count_straight, fast_rows, straight_rows
 from circle_collision_ros.core.narrow_robust import _robust_pair2, _robust_pair3
 from circle_collision_ros.core.narrow_straight import _straight_rel
+from circle_collision_ros.core.parallel_policy import threads_pay
 
 __all__ = ["time_to_collision", "_ttc_scalar", "_ttc_kernel", "_ttc_kernel_h"]
 
@@ -393,12 +394,14 @@ def _ttc_kernel_h(pa, va, aa, ra, pb, vb, ab, rb, H, out):
     _run(False, *_contiguous(pa, va, aa, ra, pb, vb, ab, rb), float(H), out)
 
 
-# Rows from which the threaded kernels are used.  On an idle 2-core VM with a
-# warm thread pool 2 threads already win from ~64 rows (1.4x) and reach ~1.9x
-# from ~1000; but when other processes keep a core busy a parallel launch
-# waits for a time slice: measured 8x *slower* than serial at 1024 rows and
-# ~1x at 200k rows, while 4096 rows still won 1.9x.  The robot shares its
-# cores with other nodes, so the threshold stays conservative.
+# Rows from which the threaded kernels may be used.  On an idle 2-core VM with
+# a warm thread pool 2 threads already win from ~64 rows (1.4x) and reach
+# ~1.9x from ~1000; but when other processes keep a core busy a parallel
+# launch waits for a time slice: measured 8x *slower* than serial at 1024 rows
+# and ~1x at 200k rows, while 4096 rows still won 1.9x.  So threads are used
+# only when a core is free at the call (parallel_policy.threads_pay), and the
+# threshold stays conservative because a core taken right after that check
+# still costs the wait.
 PARALLEL_MIN_ROWS = 4096
 
 _ND = np.ndarray
@@ -532,7 +535,7 @@ def time_to_collision(p_a, v_a, a_a, r_a, p_b, v_b, a_b, r_b, horizon=math.inf) 
             p_a, v_a, a_a, r_a, p_b, v_b, a_b, r_b):
         n = r_a.shape[0]
         out = np.empty(n)
-        _run(n >= PARALLEL_MIN_ROWS, p_a, v_a, a_a, r_a, p_b, v_b, a_b, r_b, float(horizon), out)
+        _run(threads_pay(n, PARALLEL_MIN_ROWS), p_a, v_a, a_a, r_a, p_b, v_b, a_b, r_b, float(horizon), out)
         return out
     vecs = [_floats(x, nm) for x, nm in zip((p_a, v_a, a_a, p_b, v_b, a_b), _VEC_NAMES)]
     D = vecs[0].shape[-1] if vecs[0].ndim else 0
@@ -558,5 +561,5 @@ def time_to_collision(p_a, v_a, a_a, r_a, p_b, v_b, a_b, r_b, horizon=math.inf) 
         hz = float(sc[2])
     else:
         hz = _as_rows(sc[2], batch, n, 0)
-    _run(n >= PARALLEL_MIN_ROWS, pa, va, aa, ra, pb, vb, ab, rb, hz, out)
+    _run(threads_pay(n, PARALLEL_MIN_ROWS), pa, va, aa, ra, pb, vb, ab, rb, hz, out)
     return out.reshape(batch) if batch else out[0]  # batch shape (): a numpy.float64

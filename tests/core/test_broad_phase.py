@@ -202,3 +202,43 @@ def test_relative_test_threaded_is_serial():
     RI, RJ = (np.array(x, dtype=np.int64) for x in zip(*sorted(ref)))
     keep = bp.relative_filter(p, v, a, r, tref, RI, RJ, 0.0, 3.0)
     assert set(zip(I.tolist(), J.tolist())) == set(zip(RI[keep].tolist(), RJ[keep].tolist()))
+
+
+@pytest.mark.parametrize("dim", [2, 3])
+@pytest.mark.parametrize("layout", ["uniform", "line", "column", "points", "tall", "far", "cluster"])
+def test_threaded_sweep_is_the_serial_sweep(dim, layout):
+    """The sweep on numba's threads (from PARALLEL_MIN_BODIES bodies) returns the
+    serial sweep's pairs in the serial sweep's order, whatever the layout --
+    including a cluster whose pairs overflow a group's slice (every bound
+    overlaps every other), where it hands over to the serial sweep."""
+    rng = np.random.default_rng(10 * dim + len(layout))
+    n = 600
+    if layout == "cluster":
+        lo, hi = _scene_bounds(rng, n, dim, "uniform")
+        lo[:150], hi[:150] = 99.0, 101.0  # 150 bodies on one spot: 149 overlaps each
+    else:
+        lo, hi = _scene_bounds(rng, n, dim, layout)
+    ax, ay = bp._sweep_axes(lo, hi)
+    order = np.argsort(lo[:, ax])
+    first, last = bp._strips(lo, hi, ay)
+    start, body = bp._strip_entries(order, first, last)
+    S0, T0 = bp._sweep_strips(lo, hi, ax, first, start, body)
+    S1, T1 = bp._sweep_strips_par(lo, hi, ax, first, start, body)
+    assert np.array_equal(S0, S1) and np.array_equal(T0, T1)
+    if layout == "cluster":  # more pairs than all slices hold: some group overflowed
+        assert S0.size > bp._PAIRS_PER_ENTRY * body.size + 16 * bp._SWEEP_GROUPS
+    ref = _brute_overlap(lo, hi)
+    assert set(zip(body[S1].tolist(), body[T1].tolist())) == ref
+
+
+def test_threaded_sweep_through_candidate_pairs():
+    """A scene above PARALLEL_MIN_BODIES takes the threaded sweep and still returns
+    exactly the brute-force pairs."""
+    rng = np.random.default_rng(5)
+    n = bp.PARALLEL_MIN_BODIES + 500
+    c = rng.uniform(0, 400, (n, 2))
+    ext = rng.uniform(0.5, 3.0, (n, 2))
+    lo, hi = c - ext, c + ext
+    I, J, n_box = bp.candidate_pairs(lo, hi)
+    ref = _brute_overlap(lo, hi)
+    assert n_box == len(ref) and set(zip(I.tolist(), J.tolist())) == ref

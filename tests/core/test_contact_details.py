@@ -91,3 +91,19 @@ def test_broadcast_shapes_bitwise():
     for pa, va, aa, ra, pb, vb, ab, t in cases:
         assert_same(contact_details(pa, va, aa, ra, pb, vb, ab, 0.5, t),
                     numpy_details(pa, va, aa, ra, pb, vb, ab, t))
+
+
+@pytest.mark.parametrize("D", [2, 3])
+def test_threaded_index_kernel_is_the_serial_kernel(D):
+    """details_on_index_pairs runs on numba's threads from PARALLEL_MIN_CONTACTS
+    rows: the same bits as the serial kernel, row for row (test_rows_bitwise's
+    5,000 rows also go through it, against the numpy statement)."""
+    from circle_collision_ros.core import contact as c
+    pa, va, aa, ra, pb, vb, ab, t = rows(np.random.default_rng([33, D]), 3 * c.PARALLEL_MIN_CONTACTS, D)
+    n = pa.shape[0]
+    P, V, A, R = (np.concatenate(x) for x in ((pa, pb), (va, vb), (aa, ab), (ra, ra)))
+    I, J = np.arange(n), np.arange(n, 2 * n)
+    out = [(np.empty((n, D)), np.empty((n, D)), np.empty(n)) for _ in range(2)]
+    c._index_kernel(P, V, A, R, I, J, t, *out[0])
+    c._index_kernel_par(P, V, A, R, I, J, t, *out[1])
+    assert_same(out[1], out[0])

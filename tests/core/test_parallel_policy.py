@@ -1,0 +1,44 @@
+"""parallel_policy: threads only with enough work and a free core.
+
+Guarantee proved here: while as many busy processes run as this process has
+cores, ``cores_free()`` is 0 and ``threads_pay`` says serial, whatever the
+work; below the work threshold it says serial on any machine.  (Every threaded
+kernel is compared bit for bit with its serial twin in the kernels' own tests,
+so the choice can only change timing.)
+"""
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+import time
+
+import pytest
+
+from circle_collision_ros.core import parallel_policy as pp
+
+
+def test_below_the_threshold_is_serial():
+    assert not pp.threads_pay(4095, 4096)
+    assert not pp.threads_pay(0, 1)
+
+
+def test_cores_free_is_within_the_affinity_set():
+    assert 0 <= pp.cores_free() <= len(os.sched_getaffinity(0))
+
+
+@pytest.mark.skipif(not os.path.exists("/proc/loadavg"), reason="Linux /proc only")
+def test_busy_cores_make_kernels_serial():
+    """One spinning process per core: no core is free, so no kernel goes threaded."""
+    n = len(os.sched_getaffinity(0))
+    spin = "import time\nt = time.time() + 20\nwhile time.time() < t: pass\n"
+    procs = [subprocess.Popen([sys.executable, "-c", spin]) for _ in range(n)]
+    try:
+        time.sleep(0.5)  # the spinners are running
+        seen = [pp.cores_free() for _ in range(20)]
+        assert max(seen) == 0, seen
+        assert not pp.threads_pay(10**9, 1)
+    finally:
+        for p in procs:
+            p.kill()
+            p.wait()
