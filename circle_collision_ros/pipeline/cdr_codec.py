@@ -139,6 +139,54 @@ def _decode_states(buf, f64, pos, count, times, strings, numbers, remove, be, wi
     return pos
 
 
+@njit(cache=True)
+def _joined(buf, strings, col):
+    """The strings at (strings[k, col], strings[k, col + 1]) of buf, each followed
+    by a NUL, in one byte array; and whether all of them are the same bytes."""
+    count = strings.shape[0]
+    total = 0
+    for k in range(count):
+        total += strings[k, col + 1] + 1
+    out = np.empty(total, dtype=np.uint8)
+    o0, n0 = strings[0, col], strings[0, col + 1]
+    same = True
+    q = 0
+    for k in range(count):
+        o, n = strings[k, col], strings[k, col + 1]
+        if n != n0:
+            same = False
+        for j in range(n):
+            c = buf[o + j]
+            out[q + j] = c
+            if same and c != buf[o0 + j]:  # same: n == n0, so j < n0
+                same = False
+        out[q + n] = 0
+        q += n + 1
+    return out, same
+
+
+def _decoded(data: bytes, buf: np.ndarray, strings: np.ndarray, col: int) -> list[str]:
+    """The strings of column `col` of `strings` as str (UnicodeDecodeError if one is not UTF-8).
+
+    One decode of all of them joined by NUL and one split, instead of a slice and
+    a decode per string (~5x less time at 5,000 states): NUL ends no UTF-8
+    sequence and starts none, so the joined bytes are valid exactly when each
+    string is, and the split returns them unchanged -- unless a string holds a
+    NUL itself, which the count of the parts shows; then each is decoded alone.
+    All strings equal (the frames of an array, mostly): one decode, shared."""
+    count = strings.shape[0]
+    if count == 0:
+        return []
+    joined, same = _joined(buf, strings, col)
+    if same:
+        return [data[strings[0, col]:strings[0, col] + strings[0, col + 1]].decode()] * count
+    parts = joined.tobytes().decode().split("\0")
+    if len(parts) == count + 1:
+        del parts[-1]
+        return parts
+    return [data[o:o + n].decode() for o, n in zip(strings[:, col].tolist(), strings[:, col + 1].tolist())]
+
+
 def _batch(data: bytes, buf: np.ndarray, count: int, start: int, array_frame: str,
            be: bool, uncertainty: bool) -> StateBatch:
     times = np.empty((count, 2), dtype=np.int64)
@@ -154,11 +202,12 @@ def _batch(data: bytes, buf: np.ndarray, count: int, start: int, array_frame: st
         raise CdrError("truncated or malformed CircleState data")
     given = bool(cov_size.any())
     try:
-        ids = [data[o:o + n].decode() for o, n in zip(strings[:, 2].tolist(), strings[:, 3].tolist())]
-        frames = [data[o:o + n].decode() or array_frame
-                  for o, n in zip(strings[:, 0].tolist(), strings[:, 1].tolist())]
+        ids = _decoded(data, buf, strings, 2)
+        frames = _decoded(data, buf, strings, 0)
     except UnicodeDecodeError as exc:
         raise CdrError(f"a string is not UTF-8 ({exc.reason})") from exc
+    if "" in frames:  # a state without a frame has the array's
+        frames = [f or array_frame for f in frames]
     return StateBatch(ids=ids, frames=frames, stamp_ns=times[:, 0] * 1_000_000_000 + times[:, 1],
                       radius=numbers[:, 0], position=numbers[:, 1:4], velocity=numbers[:, 4:7],
                       acceleration=numbers[:, 7:10], remove=remove,

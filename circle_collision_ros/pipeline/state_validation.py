@@ -219,9 +219,18 @@ def check_batch(batch: StateBatch, *, frame_id: str, now_ns: int | None,
         clean = _clean_single_state(batch, frame_id, now_ns)
         if clean is not None:
             return clean
-    counts = Counter(batch.ids)
-    dup = np.fromiter((counts[i] > 1 for i in batch.ids), dtype=bool, count=n)
-    empty = np.fromiter((not i for i in batch.ids), dtype=bool, count=n)
+    # Per-id Python loops only where a set (C speed) shows they can find something:
+    # an array of distinct, non-empty ids (the usual tracker frame) skips them.
+    distinct = set(batch.ids)
+    if len(distinct) == n:
+        dup = np.zeros(n, dtype=bool)
+    else:
+        counts = Counter(batch.ids)
+        dup = np.fromiter((counts[i] > 1 for i in batch.ids), dtype=bool, count=n)
+    if "" in distinct:
+        empty = np.fromiter((not i for i in batch.ids), dtype=bool, count=n)
+    else:
+        empty = np.zeros(n, dtype=bool)
     limit = ValueLimits.MAX_MAGNITUDE  # also false for NaN and +-inf
     finite = (np.abs(batch.radius) <= limit) & (np.abs(batch.position) <= limit).all(axis=1) \
         & (np.abs(batch.velocity) <= limit).all(axis=1) \
@@ -236,7 +245,7 @@ def check_batch(batch: StateBatch, *, frame_id: str, now_ns: int | None,
         candidates = np.flatnonzero(~bad & ~batch.remove)
         if candidates.size:
             frame_id = batch.frames[int(candidates[0])]
-    if frame_id:
+    if frame_id and batch.frames.count(frame_id) != n:  # some state in another frame
         bad |= ~batch.remove & np.fromiter((f != frame_id for f in batch.frames), dtype=bool, count=n)
     rejections = [Rejection(int(k), batch.ids[k], _reasons(batch, int(k), frame_id, now_ns, bool(dup[k]),
                                                            dimensions))

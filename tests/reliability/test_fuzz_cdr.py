@@ -211,3 +211,25 @@ def test_our_encoder_matches_rclpy() -> None:
     got = deserialize_message(data, CircleStateArray)
     assert got == msg
     assert not math.isnan(got.circles[0].radius)
+
+
+def test_strings_decode_one_by_one_semantics() -> None:
+    """The ids and frames of an array are decoded in one pass (joined by NUL, one
+    decode, one split): the same strings as decoding each alone -- multi-byte
+    UTF-8, empty ids, an empty frame taking the array's, all frames equal or
+    not, an id holding a NUL (the one-by-one fallback) -- and an invalid UTF-8 id
+    is a CdrError naming UTF-8."""
+    cases = [
+        [Body("a"), Body("β-7"), Body(""), Body("日本語", frame="odom"), Body("x", frame="")],
+        [Body(f"b{k}") for k in range(50)],
+        [Body("n\x00ul"), Body("plain")],
+        [Body("solo", frame="")],
+    ]
+    for bodies in cases:
+        data = encode_array(bodies, 10**9, "arrayframe")
+        batch = decode_states(data, CircleStateArray)
+        assert batch.ids == [b.id for b in bodies]
+        assert batch.frames == [b.frame or "arrayframe" for b in bodies]
+    bad = encode_array([Body("ok"), Body("", id_bytes=b"\xff\xfe")], 10**9, "map")
+    with pytest.raises(CdrError, match="UTF-8"):
+        decode_states(bad, CircleStateArray)
