@@ -81,7 +81,8 @@ def methods() -> list[dict]:
         dict(key="lecture", name="seed lecture (absolute coeffs, 1e-6 tol)", fn=ttc_lecture, loop=False,
              marker="X"),
         dict(key="ours_serial", name="ours (numba, serial kernel)", fn=_ours_serial, loop=False, marker="o"),
-        dict(key="ours_threaded", name=f"ours (time_to_collision, {nt} threads >= {PARALLEL_MIN_ROWS} rows)",
+        dict(key="ours_threaded",
+             name=f"ours (time_to_collision, {nt} threads >= {PARALLEL_MIN_ROWS} rows if a core is free)",
              fn=_ours_threaded, loop=False, marker="*"),
     ]
 

@@ -157,7 +157,7 @@ def _reading(res: dict) -> str:
         same = all(a["results"][f].get("_serial_equals_threaded", True) for f in a["families"])
         per = sorted((a["results"][f]["ours_threaded"]["ns_per_pair"] / a["results"][f]["ours_serial"]["ns_per_pair"], f)
                      for f in a["families"])
-        s.append(f"The threaded path (time_to_collision at >= 4096 rows) took {thr:.2f}x the serial "
+        s.append(f"The threaded path (time_to_collision at >= 4096 rows, when a core is free) took {thr:.2f}x the serial "
                  f"kernel's time per pair on average ({'bitwise-identical answers' if same else 'ANSWERS DIFFER'}); "
                  f"per family from {per[0][0]:.2f}x ({per[0][1]}) to {per[-1][0]:.2f}x ({per[-1][1]})"
                  + (": with the cores shared with other work, extra threads bought little in this run."

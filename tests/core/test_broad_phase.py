@@ -197,7 +197,7 @@ def test_relative_test_threaded_is_serial():
     assert np.array_equal(bp._rel_mask_par(*args), bp._rel_mask(*args))
     lo, hi = bp.swept_bounds(p, v, a, r, 0.0, 3.0)
     I, J, n_box = bp.candidate_pairs(lo, hi, p=p, v=v, a=a, r=r, tref=tref, t_start=0.0, t_end=3.0)
-    assert n_box >= bp.PARALLEL_MIN_PAIRS  # the threaded branch ran
+    assert n_box >= bp.PARALLEL_MIN_PAIRS  # the threaded branch, when a core is free
     ref = _brute_overlap(lo, hi)
     RI, RJ = (np.array(x, dtype=np.int64) for x in zip(*sorted(ref)))
     keep = bp.relative_filter(p, v, a, r, tref, RI, RJ, 0.0, 3.0)

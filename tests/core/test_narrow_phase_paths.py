@@ -58,11 +58,18 @@ def test_planar_chain_equals_3d_with_zero_z():
 
 
 def test_threaded_threshold_and_small_batches_agree():
+    """Big batches (threaded when a core is free: parallel_policy), the threaded and
+    the serial kernel called directly, and small batches give the same bits."""
     args = _pairs(2 * npz.PARALLEL_MIN_ROWS + 7)
     big = time_to_collision(*args, horizon=10.0)
     small = np.concatenate([time_to_collision(*(x[i:i + 10] for x in args), horizon=10.0)
                             for i in range(0, big.shape[0], 10)])
     assert _same(big, small)
+    rows = npz._contiguous(*args)
+    for threaded in (True, False):
+        out = np.empty(big.shape[0])
+        npz._run(threaded, *rows, 10.0, out)
+        assert _same(out, big)
 
 
 def test_fast_path_validation_and_nan():
