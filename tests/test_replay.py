@@ -186,11 +186,13 @@ def test_sigterm_closes_the_bag_and_replay_publish_drives_a_live_node(tmp_path: 
     bag = tmp_path / "live"
     node = _start_node(f"record_path:={bag}")
     try:
-        time.sleep(2.0)  # node up and subscribed
-        pub = subprocess.run(REPLAY + [str(DATA / "plain_2d"), "--publish", "--rate", "4"],
-                             capture_output=True, text=True, timeout=120)
+        # replay --publish waits for the node's subscription (no fixed sleep: a loaded
+        # machine can take longer than any guess to start the node)
+        pub = subprocess.run(REPLAY + [str(DATA / "plain_2d"), "--publish", "--rate", "4",
+                                       "--wait-for-subscribers", "60"],
+                             capture_output=True, text=True, timeout=180)
         assert pub.returncode == 0, pub.stderr
-        assert "published" in pub.stdout
+        assert "published" in pub.stdout and "no subscriber" not in pub.stderr
         time.sleep(1.0)
     finally:
         node.send_signal(signal.SIGTERM)
@@ -205,3 +207,17 @@ def test_sigterm_closes_the_bag_and_replay_publish_drives_a_live_node(tmp_path: 
     report = replay_offline(_records(bag))
     assert report.ok and report.predictions > 20
     shutil.rmtree(bag)
+
+
+def test_publish_without_a_subscriber_says_so_and_still_publishes() -> None:
+    """replay --publish waits for a subscriber only up to --wait-for-subscribers, then
+    names the topics nobody listens to and publishes anyway; a bad wait is refused."""
+    pub = subprocess.run(REPLAY + [str(DATA / "plain_2d"), "--publish", "--rate", "50",
+                                   "--wait-for-subscribers", "0.5"],
+                         capture_output=True, text=True, timeout=120)
+    assert pub.returncode == 0, pub.stderr
+    assert "no subscriber on" in pub.stderr and "after 0.5 s; publishing anyway" in pub.stderr
+    assert "published" in pub.stdout
+    bad = subprocess.run(REPLAY + [str(DATA / "plain_2d"), "--publish", "--wait-for-subscribers", "-1"],
+                         capture_output=True, text=True, timeout=60)
+    assert bad.returncode == 2 and "--wait-for-subscribers" in bad.stderr

@@ -278,8 +278,27 @@ def current_layout_bytes(record: BagRecord) -> bytes:
     return encode_state_array(batch, sec * 1_000_000_000 + nanosec, "")
 
 
-def republish(records: list[BagRecord], rate: float) -> int:
-    """Publish recorded inputs on their topics at recorded pace / rate; returns count."""
+def _wait_for_subscribers(node, publishers: dict, timeout_s: float) -> list[str]:
+    """Wait until every publisher has a matched subscription or `timeout_s` passes;
+    returns the topics still without one."""
+    deadline = time.monotonic() + timeout_s
+    while True:
+        missing = [t for t, pub in publishers.items() if pub.get_subscription_count() == 0]
+        if not missing or time.monotonic() >= deadline:
+            return missing
+        time.sleep(0.05)
+
+
+#: After the publisher sees a match, the subscriber's side of a best-effort match
+#: may still be settling (the first sample can be lost): a short grace period.
+MATCH_GRACE_S = 0.3
+
+
+def republish(records: list[BagRecord], rate: float, wait_s: float = 10.0) -> int:
+    """Publish recorded inputs on their topics at recorded pace / rate; returns count.
+
+    Publishing starts once every input topic has a subscriber (the node), or after
+    `wait_s` seconds with a note on stderr naming the topics nobody listens to."""
     import rclpy
     from rclpy.qos import QoSProfile, ReliabilityPolicy
 
@@ -296,7 +315,11 @@ def republish(records: list[BagRecord], rate: float) -> int:
         for r in inputs:
             if r.topic not in publishers:
                 publishers[r.topic] = node.create_publisher(RecordedTypes.INPUTS[r.type_name], r.topic, qos)
-        time.sleep(1.0)  # let discovery match subscribers before the first message
+        missing = _wait_for_subscribers(node, publishers, wait_s)
+        if missing:
+            print(f"replay: no subscriber on {', '.join(missing)} after {wait_s:g} s; publishing anyway",
+                  file=sys.stderr)
+        time.sleep(MATCH_GRACE_S)
         start_wall = time.monotonic()
         start_log = inputs[0].log_time_ns if inputs else 0
         for r in inputs:
@@ -328,12 +351,17 @@ def main(args: list[str] | None = None) -> int:
                         help="republish the recorded inputs on their topics instead of comparing")
     parser.add_argument("--rate", type=float, default=1.0,
                         help="pace factor for --publish (2 = twice as fast; default 1)")
+    parser.add_argument("--wait-for-subscribers", type=float, default=10.0, metavar="SECONDS",
+                        help="with --publish: wait up to this long for a subscriber on every input "
+                             "topic before the first message (default 10)")
     parser.add_argument("--tolerant", action="store_true",
                         help="read a truncated bag (e.g. after a hard kill) up to its last chunk")
     corpus.add_arguments(parser)
     opts = parser.parse_args(sys.argv[1:] if args is None else args)
     if not (opts.rate > 0 and math.isfinite(opts.rate)):
         parser.error("--rate must be a positive number")
+    if not (opts.wait_for_subscribers >= 0 and math.isfinite(opts.wait_for_subscribers)):
+        parser.error("--wait-for-subscribers must be a number of seconds >= 0")
     if corpus.is_corpus_run(opts):
         if opts.publish:
             parser.error("--publish takes one bag")
@@ -346,7 +374,7 @@ def main(args: list[str] | None = None) -> int:
         if opts.publish:
             if truncated_note:
                 print(truncated_note, file=sys.stderr)
-            print(f"replay: published {republish(records, opts.rate)} input messages")
+            print(f"replay: published {republish(records, opts.rate, opts.wait_for_subscribers)} input messages")
             return 0
         report = replay_offline(records)
         if truncated_note:  # only now: an error above must stay a single line
