@@ -913,16 +913,17 @@ class Scene:
         if self._cache is not None and self._cache[0] == self._version:
             return self._cache[1]
         self._flush()
-        rows = self._ordered_rows()
+        rows, id_rows = self._ordered_rows()
         self._new_rows = []
         if self._rdead > max(1024, self._rn // 2):
             self._compact()
-        res = self._publish(rows)
+        res = self._publish(rows, id_rows)
         self._cache = (self._version, res)
         return res
 
     def _ordered_rows(self):
-        """Reportable rows ``(A, B, ttc, contact_ns, overlapping, pt, nm, cs)`` at R, sorted.
+        """Reportable rows ``(A, B, ttc, contact_ns, overlapping, pt, nm, cs)`` at R, sorted, and
+        their ids' places in the UTF-8 blob ``(start_a, len_a, start_b, len_b)`` (None: no rows).
 
         Between two queries of one epoch and horizon, R only grows, so a record
         that was past stays past, and a record's ttc = tau - (R - t_p) falls by
@@ -938,7 +939,7 @@ class Scene:
             self._fut, self._fut_ttc, self._past = _EMPTY_I, np.empty(0), _EMPTY_I
             e = np.empty(0)
             return (_EMPTY_I, _EMPTY_I, e, _EMPTY_I, np.empty(0, dtype=bool),
-                    np.empty((0, D)), np.empty((0, D)), e)
+                    np.empty((0, D)), np.empty((0, D)), e), None
         live, tp_all, tau_all = self._rlive, self._rtp, self._rtau
         if self._fut is None:  # after a rebuild: every live record is new
             prev, prev_past = _EMPTY_I, _EMPTY_I
@@ -947,20 +948,13 @@ class Scene:
             prev, prev_past = self._fut, self._past
             new = np.concatenate(self._new_rows) if self._new_rows else _EMPTY_I
         self._ensure_rank()
-        rank, cap = self._rank, np.int64(self._R.shape[0])
-        fut, ttc, past, ordered = _sk.split_and_order(prev, new, prev_past, live, self._ra, self._rb,
-                                                      tp_all, tau_all, R, rank, cap, 1024)
-        if not ordered:
-            key = _sk.pair_keys(fut, self._ra, self._rb, rank, cap)
-            o = np.lexsort((key, ttc))  # rows in some order: sort afresh
-            fut, ttc = fut[o], ttc[o]
+        fut, ttc, past, rows, evaluated, id_rows = _sk.ordered_query(
+            prev, new, prev_past, live, self._ra, self._rb, tp_all, tau_all, self._rov, self._rpt, self._rnm,
+            self._rcs, self._P, self._V, self._A, self._R, self._T, R, self._h, self._rank,
+            np.int64(self._R.shape[0]), 1024, self._id_start, self._id_len)
         self._fut, self._fut_ttc, self._past = fut, ttc, past
-        # reported: the future rows with ttc <= H, and the past pairs' first contact from R
-        rows, evaluated = _sk.reported_rows(fut, ttc, past, self._ra, self._rb, tp_all, tau_all, self._rov,
-                                            self._rpt, self._rnm, self._rcs, self._P, self._V, self._A,
-                                            self._R, self._T, R, self._h, rank, cap)
         self.evaluated_pairs += evaluated
-        return rows
+        return rows, id_rows
 
     def _resolve(self, A, B, tp, tau, pt, nm, cs, compiled: bool | None = None):
         """Records -> reportable rows ``(A, B, ttc, contact_ns, overlapping, pt, nm, cs)`` at R
@@ -1014,13 +1008,17 @@ class Scene:
         o = o[np.argsort(ttc[o], kind="stable")]
         return tuple(x[o] for x in rows)
 
-    def _publish(self, rows) -> SceneContacts:
+    def _publish(self, rows, id_rows=None) -> SceneContacts:
+        """id_rows: the rows' ``(start_a, len_a, start_b, len_b)`` in the id blob when already
+        gathered (the query kernel does it on its way)."""
         A, B, ttc, cns, over, pt, nm, cs = rows
         for x in rows:
             x.flags.writeable = False  # SceneContacts' arrays are read-only
         utf8 = None
         if self._utf8_ok:
-            utf8 = (self._utf8, self._id_start[A], self._id_len[A], self._id_start[B], self._id_len[B])
+            if id_rows is None:
+                id_rows = (self._id_start[A], self._id_len[A], self._id_start[B], self._id_len[B])
+            utf8 = (self._utf8,) + tuple(id_rows)
         return SceneContacts(self.reference_ns or 0, self._ids[A], self._ids[B], ttc, cns, over,
                              pt, nm, cs, utf8)
 

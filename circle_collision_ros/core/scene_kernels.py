@@ -28,7 +28,7 @@ from circle_collision_ros.core.narrow_phase import _ttc_scalar
 
 __all__ = ["evaluate_rows", "order_rows", "split_past", "pair_keys", "assemble", "swept_bound_rows",
            "link_records", "kill_records", "bounded_pairs", "split_and_order", "reported_rows",
-           "incremental_pairs", "evaluate_and_store"]
+           "incremental_pairs", "evaluate_and_store", "ordered_query"]
 
 #: Overlap decided without the narrow phase: only for values well inside the
 #: narrow phase's input range, so no rounding bound below can fail.
@@ -500,3 +500,39 @@ def evaluate_and_store(ia, ib, E, P, V, A, Rad, T, horizon, ra, rb, rtp, rtau, r
             r += 1
     link_records(ra, rb, rnext, rhead, n, r)
     return r, evaluated
+
+
+@njit(cache=True, error_model="numpy")
+def ordered_query(prev, new, prev_past, live, ra, rb, rtp, rtau, rov, rpt, rnm, rcs, P, V, A, Rad, T, R, H,
+                  rank, cap, max_moves, id_start, id_len):
+    """Scene._ordered_rows in one pass: split_and_order (sorting afresh, by (ttc, pair key),
+    when the kept order needed more than the budget of moves), then reported_rows.
+
+    Returns (fut, ttc, past, rows, evaluated, ids): the new kept order and past records,
+    reported_rows' rows and count, and the rows' id positions in the UTF-8 blob
+    ``(start_a, len_a, start_b, len_b)`` (SceneContacts.id_utf8).
+    """
+    fut, ttc, past, ordered = split_and_order(prev, new, prev_past, live, ra, rb, rtp, rtau, R, rank, cap,
+                                              max_moves)
+    if not ordered:
+        # keys are unique and ttc is never NaN (records are hits): the order of np.lexsort((key, ttc))
+        key = pair_keys(fut, ra, rb, rank, cap)
+        o = np.argsort(key, kind="mergesort")
+        o = o[np.argsort(ttc[o], kind="mergesort")]
+        fut = fut[o]
+        ttc = ttc[o]
+    rows, evaluated = reported_rows(fut, ttc, past, ra, rb, rtp, rtau, rov, rpt, rnm, rcs, P, V, A, Rad, T,
+                                    R, H, rank, cap)
+    Ar = rows[0]
+    Br = rows[1]
+    k = Ar.shape[0]
+    start_a = np.empty(k, dtype=np.int64)
+    len_a = np.empty(k, dtype=np.int64)
+    start_b = np.empty(k, dtype=np.int64)
+    len_b = np.empty(k, dtype=np.int64)
+    for x in range(k):
+        start_a[x] = id_start[Ar[x]]
+        len_a[x] = id_len[Ar[x]]
+        start_b[x] = id_start[Br[x]]
+        len_b[x] = id_len[Br[x]]
+    return fut, ttc, past, rows, evaluated, (start_a, len_a, start_b, len_b)
