@@ -27,7 +27,7 @@ from circle_collision_ros.core.contact import contact_row
 from circle_collision_ros.core.narrow_phase import _ttc_scalar
 
 __all__ = ["evaluate_rows", "order_rows", "split_past", "pair_keys", "assemble", "swept_bound_rows",
-           "link_records", "kill_records", "bounded_pairs", "split_and_order", "reported_rows",
+           "link_records", "kill_records", "split_and_order", "reported_rows",
            "incremental_pairs", "evaluate_and_store", "ordered_query"]
 
 #: Overlap decided without the narrow phase: only for values well inside the
@@ -273,44 +273,6 @@ def kill_records(slots, ra, rnext, rhead, rlive):
 
 
 @njit(cache=True)
-def bounded_pairs(X, Y, lo, hi, rank, cap):
-    """The distinct slot pairs {X[k], Y[k]} (X[k] != Y[k]) whose bounds overlap on every axis,
-    in the order of min * cap + max, each oriented so that the first body's rank is smaller:
-    Scene._update_incremental's bound test, np.unique and _orient in one pass."""
-    D = lo.shape[1]
-    key = np.empty(X.shape[0], dtype=np.int64)
-    m = 0
-    for k in range(X.shape[0]):
-        x = X[k]
-        y = Y[k]
-        if x == y:
-            continue
-        ok = True
-        for d in range(D):
-            if not (lo[y, d] <= hi[x, d] and hi[y, d] >= lo[x, d]):
-                ok = False
-                break
-        if ok:
-            key[m] = min(x, y) * cap + max(x, y)
-            m += 1
-    key = np.sort(key[:m])
-    A = np.empty(m, dtype=np.int64)
-    B = np.empty(m, dtype=np.int64)
-    u = 0
-    for k in range(m):
-        if k > 0 and key[k] == key[k - 1]:
-            continue
-        x = key[k] // cap
-        y = key[k] % cap
-        if rank[x] > rank[y]:
-            x, y = y, x
-        A[u] = x
-        B[u] = y
-        u += 1
-    return A[:u], B[:u]
-
-
-@njit(cache=True)
 def split_and_order(prev, new, prev_past, live, ra, rb, rtp, rtau, R, rank, cap, max_moves):
     """Scene._ordered_rows' first half: the live records of the kept order `prev`, the new
     records and the past ones, split at R into future rows (ttc at R) and past ones, and the
@@ -372,7 +334,7 @@ def reported_rows(fut, ttc, past, ra, rb, rtp, rtau, rov, rpt, rnm, rcs, P, V, A
 @njit(cache=True, inline="always")
 def _push_pair(keys, m, s, x, lo, hi, cap):
     """Append the pair {s, x} to keys[m] (as min * cap + max) if x != s and their bounds overlap
-    on every axis (bounded_pairs' test); returns (keys, m), keys grown when full."""
+    on every axis (closed intervals); returns (keys, m), keys grown when full."""
     if x == s:
         return keys, m
     for d in range(lo.shape[1]):
@@ -397,8 +359,8 @@ def incremental_pairs(dirty, alive, P, V, A, Rad, T, Tf, lo, hi, E, slack_ns, H,
     broad_phase.swept_bound_row); collects each live dirty slot's candidates -- static grid
     entries in its hashed cells (broad_phase.cell_keys) that are not stale, the static big
     bodies, every live moved slot; every live slot for a body too big for cells -- keeps
-    those whose bounds overlap (bounded_pairs' test), one copy per pair in the order of
-    min * cap + max, oriented by rank, and applies broad_phase's relative test over
+    those whose bounds overlap, one copy per pair in the order of min * cap + max, oriented
+    so that the first body's rank is smaller, and applies broad_phase's relative test over
     [0, t_end] (broad_phase.relative_filter).  Returns (A, B, n_moved).
 
     The pairs are those of the grid with an overlay (bounds overlapping means sharing a
