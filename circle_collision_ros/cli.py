@@ -112,7 +112,11 @@ def spin_node(make_node: Callable[[], Node], argv: list[str], name: str) -> int:
     shut down. rclpy's own signal handlers would shut the context down first,
     inside the signal (so a marker publication at exit failed with "publisher's
     context is invalid"); they are not installed, and Ctrl-C/SIGTERM raise
-    KeyboardInterrupt in the spinning thread instead.
+    KeyboardInterrupt in the spinning thread instead. The SIGINT handler is set
+    explicitly, as rclpy's would be: Python keeps SIGINT ignored when the
+    process inherited it ignored (started in the background by a
+    non-interactive shell, e.g. `nohup ... &` or a test loop run with `&`),
+    and a node stopped with SIGINT (Ctrl-C, `ros2 launch`) then ran on.
 
     Start-up errors (invalid parameters, bad topic names, unusable paths) print
     one line naming the problem and return exit code 2, without a traceback.
@@ -120,6 +124,7 @@ def spin_node(make_node: Callable[[], Node], argv: list[str], name: str) -> int:
     apply_ros_environment_defaults()
     rclpy.init(args=argv, signal_handler_options=SignalHandlerOptions.NO)
     previous_term = signal.signal(signal.SIGTERM, _raise_keyboard_interrupt)
+    previous_int = signal.signal(signal.SIGINT, _raise_keyboard_interrupt)
     node = None
     try:
         node = make_node()
@@ -138,4 +143,5 @@ def spin_node(make_node: Callable[[], Node], argv: list[str], name: str) -> int:
             node.destroy_node()
         rclpy.try_shutdown()
         signal.signal(signal.SIGTERM, previous_term)
+        signal.signal(signal.SIGINT, previous_int)
     return 0

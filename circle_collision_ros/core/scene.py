@@ -601,9 +601,15 @@ class Scene:
             head[:old] = self._rhead
             self._rhead = head
             if self._grid_built:
-                stale = np.ones(new, dtype=bool)
+                stale = np.ones(new, dtype=bool)  # new slots are in no static cell
                 stale[:old] = self._gstale
                 self._gstale = stale
+                inmoved = np.zeros(new, dtype=bool)
+                inmoved[:old] = self._inmoved
+                self._inmoved = inmoved
+                moved = np.empty(new, dtype=np.int64)
+                moved[:old] = self._moved
+                self._moved = moved
             self._free = list(range(new - 1, old - 1, -1))
         return self._free.pop()
 
@@ -760,10 +766,7 @@ class Scene:
     def _store(self, A, B, res) -> None:
         hit, tp, tau, pt, nm, cs, ov = res
         k = tp.shape[0]
-        n = self._rn
-        if n + k > self._rlive.shape[0]:
-            self._compact(max(256, 2 * (int(np.count_nonzero(self._rlive[:n])) + k)))
-            n = self._rn
+        n = self._reserve_records(k)
         sl = slice(n, n + k)
         if hit.all():
             self._ra[sl] = A
@@ -781,6 +784,13 @@ class Scene:
         _sk.link_records(self._ra, self._rb, self._rnext, self._rhead, n, n + k)
         self._rn = n + k
         self._new_rows.append(np.arange(n, n + k))
+
+    def _reserve_records(self, k: int) -> int:
+        """Room for k more records (compacting or growing the buffers); the first free row."""
+        n = self._rn
+        if n + k > self._rlive.shape[0]:
+            self._compact(max(256, 2 * (int(np.count_nonzero(self._rlive[:n])) + k)))
+        return self._rn
 
     def _compact(self, cap: int | None = None) -> None:
         """Drop dead records (row numbers change: the kept order is renumbered)."""
@@ -818,9 +828,13 @@ class Scene:
         self._dirty.clear()
         self._need_full = False
 
-    # Grid for per-body neighbour queries: a static part (sorted hashed cell
-    # keys -> slots, built vectorised) plus a small dict overlay for bodies
-    # updated since; static entries of updated/removed slots are masked stale.
+    # Grid for per-body neighbour queries: a static part (sorted hashed cell keys -> slots,
+    # built vectorised) whose entries of updated/removed slots are masked stale, plus the
+    # slots changed since the build ("moved"), which every query tests directly: fewer than
+    # _MOVED_FRACTION of the bodies, so a compiled scan of their bounds costs microseconds
+    # where a hashed overlay cost a Python dict walk per update.
+    _MOVED_FRACTION = 8  # rebuild the static grid when more than n / this have moved
+
     def _build_grid(self) -> None:
         slots = np.flatnonzero(self._alive)
         if slots.size:
@@ -830,80 +844,43 @@ class Scene:
         o = np.argsort(keys, kind="stable")
         self._gkeys = keys[o]
         self._gslot = slots[owner[o]]
-        self._gstale = np.zeros(self._R.shape[0], dtype=bool)
-        self._big = set(slots[big].tolist())
-        self._overlay: dict = {}
-        self._ocells: dict = {}
+        cap = self._R.shape[0]
+        self._gstale = np.zeros(cap, dtype=bool)
+        self._gbig = slots[big]
+        self._moved = np.empty(cap, dtype=np.int64)
+        self._inmoved = np.zeros(cap, dtype=bool)
+        self._n_moved = 0
         self._grid_built = True
 
-    def _grid_remove(self, s: int) -> None:
-        self._gstale[s] = True
-        self._big.discard(s)
-        for k in self._ocells.pop(s, ()):
-            b = self._overlay[k]
-            b.discard(s)
-            if not b:
-                del self._overlay[k]
-
-    def _grid_insert_query(self, s: int) -> np.ndarray:
-        """Insert slot s (bounds already set) into the overlay; return its candidate slots."""
-        keys, _, big = _bp.cell_keys(self._lo[s:s + 1], self._hi[s:s + 1], self._cell,
-                                     _bp._MAX_CELLS_PER_BODY)
-        if big[0]:
-            self._big.add(s)
-            return np.flatnonzero(self._alive)
-        kl = keys.tolist()
-        ov = self._overlay
-        m = set(self._big)
-        for k in kl:
-            b = ov.get(k)
-            if b is None:
-                ov[k] = {s}
-            else:
-                m.update(b)
-                b.add(s)
-        self._ocells[s] = kl
-        lo = np.searchsorted(self._gkeys, keys, side="left")
-        hi = np.searchsorted(self._gkeys, keys, side="right")
-        parts = [self._gslot[x:y] for x, y in zip(lo.tolist(), hi.tolist()) if y > x]
-        if parts:
-            c = np.concatenate(parts)
-            parts = [c[~self._gstale[c]]]
-        if m:
-            parts.append(np.fromiter(m, dtype=np.int64, count=len(m)))
-        return np.concatenate(parts) if parts else _EMPTY_I
-
     def _update_incremental(self) -> None:
-        dirty = np.array(sorted(self._dirty), dtype=np.int64)
-        self._kill_rows(dirty)
-        if not self._grid_built or len(self._ocells) > max(64, len(self._slot) // 4):
-            # (re)build the static part from the current bounds; dirty slots
-            # are re-inserted below through the overlay
-            self._build_grid()
-        for s in dirty.tolist():
-            self._grid_remove(s)
-        live = dirty[self._alive[dirty]]
-        if live.size:
-            self._Tf[live] = (self._T[live] - self._epoch).astype(np.float64) * 1e-9
-            self._set_bounds(live)
-        X, Y = [], []
-        for s in live.tolist():
-            cand = self._grid_insert_query(s)
-            X.append(np.full(cand.shape[0], s, dtype=np.int64))
-            Y.append(cand)
+        dirty = np.fromiter(self._dirty, dtype=np.int64, count=len(self._dirty))
+        dirty.sort()
         self._dirty.clear()
-        if not X:
-            return
-        X = np.concatenate(X) if len(X) > 1 else X[0]
-        Y = np.concatenate(Y) if len(Y) > 1 else Y[0]
-        # the bound test; a pair of two updated bodies (or a body listed in two cells)
-        # appears more than once: keep one copy, oriented by id
+        self._kill_rows(dirty)
+        if not self._grid_built or self._n_moved + dirty.size > max(64, len(self._slot) // self._MOVED_FRACTION):
+            # (re)build the static part from the current bounds; dirty slots
+            # are marked stale and searched as moved below
+            self._build_grid()
         self._ensure_rank()
-        A, B = _sk.bounded_pairs(X, Y, self._lo, self._hi, self._rank, np.int64(self._R.shape[0]))
-        keep = _bp.relative_filter(self._P, self._V, self._A, self._R, self._Tf, A, B,
-                                   0.0, self._slack_ns * 1e-9 + self._h)
-        A, B = A[keep], B[keep]
-        self._store(A, B, self._evaluate_at_tp(A, B))
+        A, B, self._n_moved = _sk.incremental_pairs(
+            dirty, self._alive, self._P, self._V, self._A, self._R, self._T, self._Tf, self._lo, self._hi,
+            self._epoch, self._slack_ns, self._h, self._slack_ns * 1e-9 + self._h, self._cell,
+            _bp._MAX_CELLS_PER_BODY, self._gkeys, self._gslot, self._gstale, self._gbig, self._moved,
+            self._n_moved, self._inmoved, self._rank, np.int64(self._R.shape[0]))
+        if A.size == 0:
+            return
+        if A.size >= self._COMPILED_ROWS:
+            self._store(A, B, self._evaluate_at_tp(A, B))
+            return
+        n = self._reserve_records(A.size)
+        end, evaluated = _sk.evaluate_and_store(
+            A, B, self._epoch, self._P, self._V, self._A, self._R, self._T, self._h_eval, self._ra,
+            self._rb, self._rtp, self._rtau, self._rpt, self._rnm, self._rcs, self._rov, self._rlive,
+            self._rnext, self._rhead, n)
+        self.evaluated_pairs += evaluated
+        if end > n:
+            self._rn = end
+            self._new_rows.append(np.arange(n, end))
 
     def _flush(self) -> None:
         """Bring pair records up to date (all of them, or only the changed bodies' pairs)."""
@@ -936,16 +913,17 @@ class Scene:
         if self._cache is not None and self._cache[0] == self._version:
             return self._cache[1]
         self._flush()
-        rows = self._ordered_rows()
+        rows, id_rows = self._ordered_rows()
         self._new_rows = []
         if self._rdead > max(1024, self._rn // 2):
             self._compact()
-        res = self._publish(rows)
+        res = self._publish(rows, id_rows)
         self._cache = (self._version, res)
         return res
 
     def _ordered_rows(self):
-        """Reportable rows ``(A, B, ttc, contact_ns, overlapping, pt, nm, cs)`` at R, sorted.
+        """Reportable rows ``(A, B, ttc, contact_ns, overlapping, pt, nm, cs)`` at R, sorted, and
+        their ids' places in the UTF-8 blob ``(start_a, len_a, start_b, len_b)`` (None: no rows).
 
         Between two queries of one epoch and horizon, R only grows, so a record
         that was past stays past, and a record's ttc = tau - (R - t_p) falls by
@@ -961,7 +939,7 @@ class Scene:
             self._fut, self._fut_ttc, self._past = _EMPTY_I, np.empty(0), _EMPTY_I
             e = np.empty(0)
             return (_EMPTY_I, _EMPTY_I, e, _EMPTY_I, np.empty(0, dtype=bool),
-                    np.empty((0, D)), np.empty((0, D)), e)
+                    np.empty((0, D)), np.empty((0, D)), e), None
         live, tp_all, tau_all = self._rlive, self._rtp, self._rtau
         if self._fut is None:  # after a rebuild: every live record is new
             prev, prev_past = _EMPTY_I, _EMPTY_I
@@ -970,20 +948,13 @@ class Scene:
             prev, prev_past = self._fut, self._past
             new = np.concatenate(self._new_rows) if self._new_rows else _EMPTY_I
         self._ensure_rank()
-        rank, cap = self._rank, np.int64(self._R.shape[0])
-        fut, ttc, past, ordered = _sk.split_and_order(prev, new, prev_past, live, self._ra, self._rb,
-                                                      tp_all, tau_all, R, rank, cap, 1024)
-        if not ordered:
-            key = _sk.pair_keys(fut, self._ra, self._rb, rank, cap)
-            o = np.lexsort((key, ttc))  # rows in some order: sort afresh
-            fut, ttc = fut[o], ttc[o]
+        fut, ttc, past, rows, evaluated, id_rows = _sk.ordered_query(
+            prev, new, prev_past, live, self._ra, self._rb, tp_all, tau_all, self._rov, self._rpt, self._rnm,
+            self._rcs, self._P, self._V, self._A, self._R, self._T, R, self._h, self._rank,
+            np.int64(self._R.shape[0]), 1024, self._id_start, self._id_len)
         self._fut, self._fut_ttc, self._past = fut, ttc, past
-        # reported: the future rows with ttc <= H, and the past pairs' first contact from R
-        rows, evaluated = _sk.reported_rows(fut, ttc, past, self._ra, self._rb, tp_all, tau_all, self._rov,
-                                            self._rpt, self._rnm, self._rcs, self._P, self._V, self._A,
-                                            self._R, self._T, R, self._h, rank, cap)
         self.evaluated_pairs += evaluated
-        return rows
+        return rows, id_rows
 
     def _resolve(self, A, B, tp, tau, pt, nm, cs, compiled: bool | None = None):
         """Records -> reportable rows ``(A, B, ttc, contact_ns, overlapping, pt, nm, cs)`` at R
@@ -1037,13 +1008,17 @@ class Scene:
         o = o[np.argsort(ttc[o], kind="stable")]
         return tuple(x[o] for x in rows)
 
-    def _publish(self, rows) -> SceneContacts:
+    def _publish(self, rows, id_rows=None) -> SceneContacts:
+        """id_rows: the rows' ``(start_a, len_a, start_b, len_b)`` in the id blob when already
+        gathered (the query kernel does it on its way)."""
         A, B, ttc, cns, over, pt, nm, cs = rows
         for x in rows:
             x.flags.writeable = False  # SceneContacts' arrays are read-only
         utf8 = None
         if self._utf8_ok:
-            utf8 = (self._utf8, self._id_start[A], self._id_len[A], self._id_start[B], self._id_len[B])
+            if id_rows is None:
+                id_rows = (self._id_start[A], self._id_len[A], self._id_start[B], self._id_len[B])
+            utf8 = (self._utf8,) + tuple(id_rows)
         return SceneContacts(self.reference_ns or 0, self._ids[A], self._ids[B], ttc, cns, over,
                              pt, nm, cs, utf8)
 

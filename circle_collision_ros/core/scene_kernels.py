@@ -22,12 +22,13 @@ import math
 import numpy as np
 from numba import njit
 
-from circle_collision_ros.core.broad_phase import swept_bound_row
+from circle_collision_ros.core.broad_phase import _rel_keep, cell_keys, swept_bound_row
 from circle_collision_ros.core.contact import contact_row
 from circle_collision_ros.core.narrow_phase import _ttc_scalar
 
 __all__ = ["evaluate_rows", "order_rows", "split_past", "pair_keys", "assemble", "swept_bound_rows",
-           "link_records", "kill_records", "bounded_pairs", "split_and_order", "reported_rows"]
+           "link_records", "kill_records", "split_and_order", "reported_rows",
+           "incremental_pairs", "evaluate_and_store", "ordered_query"]
 
 #: Overlap decided without the narrow phase: only for values well inside the
 #: narrow phase's input range, so no rounding bound below can fail.
@@ -272,44 +273,6 @@ def kill_records(slots, ra, rnext, rhead, rlive):
 
 
 @njit(cache=True)
-def bounded_pairs(X, Y, lo, hi, rank, cap):
-    """The distinct slot pairs {X[k], Y[k]} (X[k] != Y[k]) whose bounds overlap on every axis,
-    in the order of min * cap + max, each oriented so that the first body's rank is smaller:
-    Scene._update_incremental's bound test, np.unique and _orient in one pass."""
-    D = lo.shape[1]
-    key = np.empty(X.shape[0], dtype=np.int64)
-    m = 0
-    for k in range(X.shape[0]):
-        x = X[k]
-        y = Y[k]
-        if x == y:
-            continue
-        ok = True
-        for d in range(D):
-            if not (lo[y, d] <= hi[x, d] and hi[y, d] >= lo[x, d]):
-                ok = False
-                break
-        if ok:
-            key[m] = min(x, y) * cap + max(x, y)
-            m += 1
-    key = np.sort(key[:m])
-    A = np.empty(m, dtype=np.int64)
-    B = np.empty(m, dtype=np.int64)
-    u = 0
-    for k in range(m):
-        if k > 0 and key[k] == key[k - 1]:
-            continue
-        x = key[k] // cap
-        y = key[k] % cap
-        if rank[x] > rank[y]:
-            x, y = y, x
-        A[u] = x
-        B[u] = y
-        u += 1
-    return A[:u], B[:u]
-
-
-@njit(cache=True)
 def split_and_order(prev, new, prev_past, live, ra, rb, rtp, rtau, R, rank, cap, max_moves):
     """Scene._ordered_rows' first half: the live records of the kept order `prev`, the new
     records and the past ones, split at R into future rows (ttc at R) and past ones, and the
@@ -366,3 +329,172 @@ def reported_rows(fut, ttc, past, ra, rb, rtp, rtau, rov, rpt, rnm, rcs, P, V, A
     rows = assemble(fut[:kf], ttc[:kf], ra, rb, rtp, rtau, rov, rpt, rnm, rcs, Ap[:h], Bp[:h],
                     tau[:h], ov[:h], pt[:h], nm[:h], cs[:h], R, rank, cap)
     return rows, evaluated
+
+
+@njit(cache=True, inline="always")
+def _push_pair(keys, m, s, x, lo, hi, cap):
+    """Append the pair {s, x} to keys[m] (as min * cap + max) if x != s and their bounds overlap
+    on every axis (closed intervals); returns (keys, m), keys grown when full."""
+    if x == s:
+        return keys, m
+    for d in range(lo.shape[1]):
+        if not (lo[x, d] <= hi[s, d] and hi[x, d] >= lo[s, d]):
+            return keys, m
+    if m == keys.shape[0]:
+        grown = np.empty(2 * m, dtype=np.int64)
+        grown[:m] = keys
+        keys = grown
+    keys[m] = min(s, x) * cap + max(s, x)
+    return keys, m + 1
+
+
+@njit(cache=True, error_model="numpy")
+def incremental_pairs(dirty, alive, P, V, A, Rad, T, Tf, lo, hi, E, slack_ns, H, t_end, cell, max_cells,
+                      gkeys, gslot, gstale, gbig, moved, n_moved, inmoved, rank, cap):
+    """Scene._update_incremental's search for the pairs of the changed slots `dirty`, in one pass.
+
+    Marks each dirty slot stale in the static grid and lists it once in `moved` (the
+    slots changed since the grid was built, searched exhaustively: their bounds are new);
+    sets Tf and the swept bounds of the live dirty slots (Scene._bounds' window, by
+    broad_phase.swept_bound_row); collects each live dirty slot's candidates -- static grid
+    entries in its hashed cells (broad_phase.cell_keys) that are not stale, the static big
+    bodies, every live moved slot; every live slot for a body too big for cells -- keeps
+    those whose bounds overlap, one copy per pair in the order of min * cap + max, oriented
+    so that the first body's rank is smaller, and applies broad_phase's relative test over
+    [0, t_end] (broad_phase.relative_filter).  Returns (A, B, n_moved).
+
+    The pairs are those of the grid with an overlay (bounds overlapping means sharing a
+    cell unless one is big), so the same (A, B) in the same order.
+    """
+    D = P.shape[1]
+    for x in range(dirty.shape[0]):
+        s = dirty[x]
+        gstale[s] = True
+        if not inmoved[s]:
+            inmoved[s] = True
+            moved[n_moved] = s
+            n_moved += 1
+        if alive[s]:
+            Tf[s] = np.float64(T[s] - E) * 1e-9
+            ta = np.float64(max(E, T[s]) - T[s]) * 1e-9
+            tb = np.float64(E + slack_ns - T[s]) * 1e-9 + H
+            swept_bound_row(P, V, A, Rad, s, ta, tb, lo, hi, s)
+    keys = np.empty(64, dtype=np.int64)
+    m = 0
+    for x in range(dirty.shape[0]):
+        s = dirty[x]
+        if not alive[s]:
+            continue
+        ck, _, big = cell_keys(lo[s:s + 1], hi[s:s + 1], cell, max_cells)
+        if big[0]:
+            for y in range(alive.shape[0]):
+                if alive[y]:
+                    keys, m = _push_pair(keys, m, s, y, lo, hi, cap)
+            continue
+        for e in range(ck.shape[0]):
+            first = np.searchsorted(gkeys, ck[e], side="left")
+            end = np.searchsorted(gkeys, ck[e], side="right")
+            for q in range(first, end):
+                y = gslot[q]
+                if not gstale[y]:
+                    keys, m = _push_pair(keys, m, s, y, lo, hi, cap)
+        for q in range(gbig.shape[0]):
+            y = gbig[q]
+            if not gstale[y]:
+                keys, m = _push_pair(keys, m, s, y, lo, hi, cap)
+        for q in range(n_moved):
+            y = moved[q]
+            if alive[y]:
+                keys, m = _push_pair(keys, m, s, y, lo, hi, cap)
+    keys = np.sort(keys[:m])
+    Ao = np.empty(m, dtype=np.int64)
+    Bo = np.empty(m, dtype=np.int64)
+    u = 0
+    for k in range(m):
+        if k > 0 and keys[k] == keys[k - 1]:
+            continue
+        a = keys[k] // cap
+        b = keys[k] % cap
+        if rank[a] > rank[b]:
+            a, b = b, a
+        if D == 2:
+            keep = _rel_keep(P, V, A, Rad, Tf, a, b, 0.0, t_end, 2)
+        else:
+            keep = _rel_keep(P, V, A, Rad, Tf, a, b, 0.0, t_end, 3)
+        if keep:
+            Ao[u] = a
+            Bo[u] = b
+            u += 1
+    return Ao[:u], Bo[:u], n_moved
+
+
+@njit(cache=True, error_model="numpy")
+def evaluate_and_store(ia, ib, E, P, V, A, Rad, T, horizon, ra, rb, rtp, rtau, rpt, rnm, rcs, rov, rlive,
+                       rnext, rhead, n):
+    """Scene._evaluate_at_tp + Scene._store for a few pairs: each pair evaluated at its pair
+    time max(E, T_a, T_b) (evaluate_rows), the hits (tau <= horizon) written as records from
+    row n, in order, and linked (link_records).  The record buffers must hold n + len(ia)
+    rows.  Returns (end row, narrow-phase rows evaluated)."""
+    k = ia.shape[0]
+    D = P.shape[1]
+    t_eval = np.empty(k, dtype=np.int64)
+    for x in range(k):
+        t_eval[x] = max(E, max(T[ia[x]], T[ib[x]]))
+    tau = np.empty(k)
+    pt = np.empty((k, D))
+    nm = np.empty((k, D))
+    cs = np.empty(k)
+    ov = np.empty(k, dtype=np.bool_)
+    evaluated = evaluate_rows(P, V, A, Rad, T, ia, ib, t_eval, horizon, tau, pt, nm, cs, ov)
+    r = n
+    for x in range(k):
+        if tau[x] <= horizon:
+            ra[r] = ia[x]
+            rb[r] = ib[x]
+            rtp[r] = t_eval[x]
+            rtau[r] = tau[x]
+            for d in range(D):
+                rpt[r, d] = pt[x, d]
+                rnm[r, d] = nm[x, d]
+            rcs[r] = cs[x]
+            rov[r] = ov[x]
+            rlive[r] = True
+            r += 1
+    link_records(ra, rb, rnext, rhead, n, r)
+    return r, evaluated
+
+
+@njit(cache=True, error_model="numpy")
+def ordered_query(prev, new, prev_past, live, ra, rb, rtp, rtau, rov, rpt, rnm, rcs, P, V, A, Rad, T, R, H,
+                  rank, cap, max_moves, id_start, id_len):
+    """Scene._ordered_rows in one pass: split_and_order (sorting afresh, by (ttc, pair key),
+    when the kept order needed more than the budget of moves), then reported_rows.
+
+    Returns (fut, ttc, past, rows, evaluated, ids): the new kept order and past records,
+    reported_rows' rows and count, and the rows' id positions in the UTF-8 blob
+    ``(start_a, len_a, start_b, len_b)`` (SceneContacts.id_utf8).
+    """
+    fut, ttc, past, ordered = split_and_order(prev, new, prev_past, live, ra, rb, rtp, rtau, R, rank, cap,
+                                              max_moves)
+    if not ordered:
+        # keys are unique and ttc is never NaN (records are hits): the order of np.lexsort((key, ttc))
+        key = pair_keys(fut, ra, rb, rank, cap)
+        o = np.argsort(key, kind="mergesort")
+        o = o[np.argsort(ttc[o], kind="mergesort")]
+        fut = fut[o]
+        ttc = ttc[o]
+    rows, evaluated = reported_rows(fut, ttc, past, ra, rb, rtp, rtau, rov, rpt, rnm, rcs, P, V, A, Rad, T,
+                                    R, H, rank, cap)
+    Ar = rows[0]
+    Br = rows[1]
+    k = Ar.shape[0]
+    start_a = np.empty(k, dtype=np.int64)
+    len_a = np.empty(k, dtype=np.int64)
+    start_b = np.empty(k, dtype=np.int64)
+    len_b = np.empty(k, dtype=np.int64)
+    for x in range(k):
+        start_a[x] = id_start[Ar[x]]
+        len_a[x] = id_len[Ar[x]]
+        start_b[x] = id_start[Br[x]]
+        len_b[x] = id_len[Br[x]]
+    return fut, ttc, past, rows, evaluated, (start_a, len_a, start_b, len_b)

@@ -23,7 +23,9 @@ every pair, in ``tests/scene_rule.py``).  Guarantees proved here:
   floors drops exactly the bodies and removals received before the limit, also
   with receive times out of order -- test_expiry_with_receive_times_out_of_order;
   each body's record list survives compaction, growth and slot reuse
-  -- test_record_lists_survive_compaction_and_growth;
+  -- test_record_lists_survive_compaction_and_growth; a one-body update finds its
+  pairs through the static grid, the bodies moved since it was built and the big
+  bodies, across grid rebuilds -- test_one_body_updates_between_grid_rebuilds_equal_full;
 * a capture (what a published prediction keeps) stays bitwise the states of its
   time through updates, removals, slot reuse, growth, expiry and clear(), also
   read on another thread during updates -- test_capture_*.
@@ -290,6 +292,38 @@ def test_expiry_with_receive_times_out_of_order() -> None:
             removals = {b: t for b, t in removals.items() if t >= limit}
             assert sc.ids() == sorted(recv) and sc.remembered_removals == len(removals), step
         assert same(sc.predictions(), sc.full_recomputation()), step
+
+
+def test_one_body_updates_between_grid_rebuilds_equal_full() -> None:
+    """A 600-body scene under one-body updates (newer stamps, one epoch): each update's
+    pairs come from the static grid (entries of moved bodies masked), the bodies moved
+    since it was built (scanned directly) and the big ones; the grid is rebuilt once more
+    than n / 8 have moved. After every update, incremental == full recomputation."""
+    rng = np.random.default_rng(5)
+    n, dim = 600, 2
+    sc = Scene(4.0, dim, slack=2.0, method="grid")
+    side = 120.0
+    P = rng.uniform(0, side, (n, dim))
+    V = rng.uniform(-4, 4, (n, dim))
+    A = rng.uniform(-1, 1, (n, dim))
+    Rad = rng.uniform(0.2, 1.5, n)
+    Rad[:3] = 40.0  # bodies too big for the grid's cells
+    ids = [f"b{k:04d}" for k in range(n)]
+    stamp = T0 - T0 % sc._slack_ns + MS
+    sc.upsert_many(ids, P, V, A, Rad, stamp, stamp)
+    sc.predictions()
+    rebuilds = 0
+    for step in range(300):
+        stamp += MS
+        k = int(rng.integers(n)) if step % 50 else int(rng.integers(3))  # now and then a big one
+        p, v, a, r = rand_body(rng, dim, side)
+        before = sc._n_moved if sc._grid_built else None
+        sc.upsert(ids[k], p, v, a, Rad[k] if k < 3 else r, stamp, stamp)
+        res = sc.predictions()
+        rebuilds += before is not None and sc._n_moved < before
+        assert same(res, sc.full_recomputation()), step
+    assert sc.epoch_ns == T0 - T0 % sc._slack_ns  # no epoch rebuild in between
+    assert rebuilds >= 2 and len(res) > 20
 
 
 def test_record_lists_survive_compaction_and_growth() -> None:

@@ -159,6 +159,26 @@ def test_shutdown_releases_markers_before_the_context(ros_node, sig) -> None:
         [[m.action for m in a.markers][:3] for a in harness.markers[drawn:]]
 
 
+def test_sigint_stops_a_node_started_with_sigint_ignored(ros_node) -> None:
+    """A process started in the background by a non-interactive shell (`nohup ... &`, a test
+    loop run with `&`) inherits SIGINT ignored, and Python keeps it so; the node still stops
+    on SIGINT (Ctrl-C, `ros2 launch`), as with rclpy's own handlers. (It used to spin on and
+    fail the shutdown tests of such runs with a timeout.)"""
+    exe = os.path.join(sys.prefix, "lib", "circle_collision_ros", "collision_node")
+    proc = subprocess.Popen([exe, "--ros-args", "-p", "horizon:=5.0"], stdout=subprocess.PIPE,
+                            stderr=subprocess.STDOUT, text=True,
+                            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_IGN))
+    try:
+        Harness(ros_node).wait_matched()
+        proc.send_signal(signal.SIGINT)
+        output = proc.communicate(timeout=20)[0]
+    except (AssertionError, subprocess.TimeoutExpired) as exc:
+        proc.kill()
+        pytest.fail(f"{exc!r}\ncollision_node output:\n{proc.communicate(timeout=20)[0]}")
+    assert proc.returncode == 0, output
+    assert "Traceback" not in output, output
+
+
 def test_in_process_merges_topics_by_id(in_process, ros_node) -> None:
     node, harness = in_process
     states = _stamped_now([state("a", (0, 0), (1, 0, 0)), state("b", (10, 0))], ros_node)
