@@ -281,6 +281,7 @@ class Scene:
         self._uncertain_serial = 0     # uncertain_pairs evaluations so far (the budget's clock)
         self._uncertain_waiting = {}   # (id_a, id_b) -> serial since which the pair waits (deferred)
         self._uncertain_memo = {}      # core.uncertainty.uncertain_pairs(memo=...): last full evaluations
+        self._uncertain_memo_ref = None  # the reference time of those evaluations
 
     # Pair records: one row per pair with a contact within H + S of its t_p, in
     # growable buffers; rows of updated bodies are marked dead (compacted when
@@ -1124,9 +1125,12 @@ class Scene:
         keep = u[I] | u[J]
         I, J = I[keep], J[keep]
         if contacts is not None and len(contacts):
-            local = {self._ids[s]: k for k, s in enumerate(slots.tolist())}
-            ca = np.fromiter(map(local.__getitem__, contacts.id_a.tolist()), np.int64, len(contacts))
-            cb = np.fromiter(map(local.__getitem__, contacts.id_b.tolist()), np.int64, len(contacts))
+            # slot -> local index through an array (no dict of every body per call)
+            local = np.empty(self._ids.shape[0], dtype=np.int64)
+            local[slots] = np.arange(slots.size)
+            slot = self._slot.__getitem__
+            ca = local[np.fromiter(map(slot, contacts.id_a.tolist()), np.int64, len(contacts))]
+            cb = local[np.fromiter(map(slot, contacts.id_b.tolist()), np.int64, len(contacts))]
             m = u[ca] | u[cb]
             I, J = np.concatenate([I, ca[m]]), np.concatenate([J, cb[m]])
         # local order is id order: (min, max) puts the id that sorts first in front
@@ -1147,6 +1151,12 @@ class Scene:
             asked.append((rows, keys))
             return np.fromiter((waiting.get(k, serial) for k in keys), np.int64, len(keys))
 
+        if self._uncertain_memo_ref != R:
+            # a new reference time moves the pairs' inputs (states and covariances are
+            # propagated to R; only bodies at rest with a position-only covariance keep
+            # theirs): skip the look-ups, which can only forgo a reuse, never give a wrong one
+            self._uncertain_memo.clear()
+            self._uncertain_memo_ref = R
         res = unc.uncertain_pairs(P[I], V[I], A[I], Rad[I], C[I], P[J], V[J], A[J], Rad[J], C[J],
                                   self._h, threshold, screen=True, max_evaluated=max_evaluated,
                                   priority=waited_since, memo=self._uncertain_memo)

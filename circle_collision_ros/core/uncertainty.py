@@ -35,7 +35,8 @@ from circle_collision_ros.core.uncertainty_kernels import (
     TUBE_TAIL,
     max_sigma_rows,
     pair_probability,
-    screen_rows,
+    row_classes,
+    screen_rows_at,
     screen_sigmas,
 )
 
@@ -159,7 +160,9 @@ def uncertain_pairs(pa, va, aa, ra, cov_a, pb, vb, ab, rb, cov_b,
     bound = np.zeros(n)
     tpl = np.full(n, np.inf)
     sigma = cov_a + cov_b
-    exact = ~np.any(sigma.reshape(n, -1) != 0.0, axis=1)
+    exact = np.empty(n, dtype=np.bool_)
+    finite = np.empty(n, dtype=np.bool_)
+    row_classes(pa, va, aa, ra, pb, vb, ab, rb, sigma, exact, finite)
     if exact.any():
         ix = np.flatnonzero(exact)
         t = time_to_collision(pa[ix], va[ix], aa[ix], ra[ix], pb[ix], vb[ix], ab[ix], rb[ix], H)
@@ -170,9 +173,6 @@ def uncertain_pairs(pa, va, aa, ra, cov_a, pb, vb, ab, rb, cov_b,
         tpl[ix] = np.where(hit | nan, t, np.inf)
     # rows with a non-finite value or a negative radius: NaN in all three
     # outputs (as time_to_collision), never a hang or an exception
-    finite = (np.isfinite(pa).all(1) & np.isfinite(va).all(1) & np.isfinite(aa).all(1)
-              & np.isfinite(pb).all(1) & np.isfinite(vb).all(1) & np.isfinite(ab).all(1)
-              & np.isfinite(sigma.reshape(n, -1)).all(1) & (ra >= 0) & (rb >= 0))
     bad = ~finite & ~exact
     prob[bad] = bound[bad] = tpl[bad] = np.nan
     todo = np.flatnonzero(~exact & finite)
@@ -185,8 +185,7 @@ def uncertain_pairs(pa, va, aa, ra, cov_a, pb, vb, ab, rb, cov_b,
         clear = np.zeros(todo.size, dtype=np.bool_)
         t_first = np.empty(todo.size)
         # relative state as below (the tube test is exactly symmetric under X -> -X)
-        screen_rows(pa[todo] - pb[todo], va[todo] - vb[todo], aa[todo] - ab[todo],
-                    ra[todo] + rb[todo], np.ascontiguousarray(sigma[todo]), H, k, clear, t_first)
+        screen_rows_at(pa, va, aa, ra, pb, vb, ab, rb, sigma, todo, H, k, clear, t_first)
         if tail > 0.0:
             done = todo[clear]
             prob[done], bound[done], tpl[done] = 0.0, tail, np.inf
@@ -207,20 +206,19 @@ def uncertain_pairs(pa, va, aa, ra, cov_a, pb, vb, ab, rb, cov_b,
     flip = nz.any(axis=1) & (flat[np.arange(todo.size), first] < 0.0)
     dp[flip], dv[flip], da[flip] = -dp[flip], -dv[flip], -da[flip]
     sig = np.ascontiguousarray(sigma[todo])
-    keys = None
     fresh = {}
-    if memo is not None and todo.size:
-        head = np.array([H, thr])
-        rows_in = np.concatenate((dp, dv, da, rad[:, None], sig.reshape(todo.size, -1),
-                                  np.broadcast_to(head, (todo.size, 2))), axis=1)
-        keys = [r.tobytes() for r in rows_in]
+
+    def key(j):  # everything a row's answer depends on (pair_probability's arguments)
+        return np.concatenate((dp[j], dv[j], da[j], rad[j:j + 1], sig[j].ravel(), (H, thr))).tobytes()
+
+    if memo and todo.size:  # (an empty memo, e.g. after a new reference time: no look-ups)
+        keys = [key(j) for j in range(todo.size)]
         hit = np.fromiter((k in memo for k in keys), dtype=np.bool_, count=todo.size)
         for j in np.flatnonzero(hit).tolist():
             prob[todo[j]], bound[todo[j]], tpl[todo[j]] = fresh[keys[j]] = memo[keys[j]]
         if hit.any():
             keep = ~hit
             todo, dp, dv, da, rad, sig = todo[keep], dp[keep], dv[keep], da[keep], rad[keep], sig[keep]
-            keys = [k for k, h in zip(keys, hit.tolist()) if not h]
             todo_first = todo_first[keep]
     if max_evaluated is not None and todo.size > max_evaluated:
         m = max(int(max_evaluated), 0)
@@ -232,13 +230,11 @@ def uncertain_pairs(pa, va, aa, ra, cov_a, pb, vb, ab, rb, cov_b,
         prob[rows], bound[rows], tpl[rows] = DEFERRED_PROBABILITY, DEFERRED_BOUND, todo_first[later]
         now = np.sort(order[:m])
         todo, dp, dv, da, rad, sig = todo[now], dp[now], dv[now], da[now], rad[now], sig[now]
-        if keys is not None:
-            keys = [keys[j] for j in now.tolist()]
     for j, i in enumerate(todo.tolist()):
         prob[i], bound[i], tpl[i] = r = pair_probability(dp[j], dv[j], da[j], float(rad[j]),
                                                          np.ascontiguousarray(sig[j]), H, thr)
-        if keys is not None:
-            fresh[keys[j]] = r
+        if memo is not None:
+            fresh[key(j)] = r
     if memo is not None:
         memo.clear()
         memo.update(fresh)
