@@ -176,30 +176,31 @@ def _surface_integrand(n0, n1, n2, R, g, gd, A, norm, K, Vc, cap):
 
 
 # ---- 2-D: the arc integral at one t ---------------------------------------------
-# prm = (R, phig, g, gd, A, norm, K, Vc, cap)
+# prm: a flat tuple of floats (no arrays: the 2-D path allocates nothing per
+# evaluation, see _state2):
+_P_R, _P_PHIG, _P_G0, _P_G1, _P_GD0, _P_GD1 = 0, 1, 2, 3, 4, 5
+_P_A00, _P_A01, _P_A11, _P_NORM = 6, 7, 8, 9  # _P_A01: A[0, 1] + A[1, 0]
+_P_K00, _P_K01, _P_K10, _P_K11 = 10, 11, 12, 13
+_P_V00, _P_V01, _P_V11, _P_CAP = 14, 15, 16, 17  # _P_V01: Vc[0, 1] + Vc[1, 0]
 
 
 @njit(cache=True, error_model="numpy")
 def _arc_integrand(psi, prm):
     """R f_t(x) E[(-n.Xdot)^+ | x] at x = R (cos, sin)(phig + psi): scalar
     code (no temporaries: this is the innermost loop)."""
-    R = prm[0]
-    phi = prm[1] + psi
+    R = prm[_P_R]
+    phi = prm[_P_PHIG] + psi
     n0 = math.cos(phi)
     n1 = math.sin(phi)
-    g = prm[2]
-    gd = prm[3]
-    A = prm[4]
-    K = prm[6]
-    Vc = prm[7]
-    d0 = R * n0 - g[0]
-    d1 = R * n1 - g[1]
-    q = A[0, 0] * d0 * d0 + (A[0, 1] + A[1, 0]) * d0 * d1 + A[1, 1] * d1 * d1
+    d0 = R * n0 - prm[_P_G0]
+    d1 = R * n1 - prm[_P_G1]
+    q = prm[_P_A00] * d0 * d0 + prm[_P_A01] * d0 * d1 + prm[_P_A11] * d1 * d1
     if not (q < 1400.0):
         return 0.0
-    m = n0 * (gd[0] + K[0, 0] * d0 + K[0, 1] * d1) + n1 * (gd[1] + K[1, 0] * d0 + K[1, 1] * d1)
-    s2 = Vc[0, 0] * n0 * n0 + (Vc[0, 1] + Vc[1, 0]) * n0 * n1 + Vc[1, 1] * n1 * n1
-    return R * prm[5] * math.exp(-0.5 * q) * _rate(m, math.sqrt(max(s2, 0.0)), prm[8])
+    m = (n0 * (prm[_P_GD0] + prm[_P_K00] * d0 + prm[_P_K01] * d1)
+         + n1 * (prm[_P_GD1] + prm[_P_K10] * d0 + prm[_P_K11] * d1))
+    s2 = prm[_P_V00] * n0 * n0 + prm[_P_V01] * n0 * n1 + prm[_P_V11] * n1 * n1
+    return R * prm[_P_NORM] * math.exp(-0.5 * q) * _rate(m, math.sqrt(max(s2, 0.0)), prm[_P_CAP])
 
 
 _arc_adaptive = make_adaptive(_arc_integrand)
@@ -220,18 +221,57 @@ def _arc_half_angle(R, gn, rho2):
 
 
 @njit(cache=True, error_model="numpy")
+def _q_at(R, phi, g0, g1, a00, a01, a11):
+    """Mahalanobis q(x) of the circle point x = R (cos, sin)(phi)."""
+    d0 = R * math.cos(phi) - g0
+    d1 = R * math.sin(phi) - g1
+    return a00 * d0 * d0 + a01 * d0 * d1 + a11 * d1 * d1
+
+
+@njit(cache=True, error_model="numpy")
 def nu_plus_2d(dp, dv, da, R, Sigma, t, tol, acc, cap):
     """nu+(t) in 2-D over the tube's arc; acc[0] = max inner error estimate
-    seen, acc[1] = 1 when S(t) is degenerate."""
-    g, gd, A, norm, K, Vc, rho2, degenerate = _state(dp, dv, da, Sigma, t)
-    if degenerate:
+    seen, acc[1] = 1 when S(t) is degenerate.  The state at t as in _state,
+    in scalars (this runs at every t node of every pair)."""
+    g0 = dp[0] + t * (dv[0] + 0.5 * t * da[0])
+    g1 = dp[1] + t * (dv[1] + 0.5 * t * da[1])
+    gd0 = dv[0] + t * da[0]
+    gd1 = dv[1] + t * da[1]
+    s00 = Sigma[0, 0] + t * (Sigma[0, 2] + Sigma[2, 0]) + t * t * Sigma[2, 2]
+    s01 = Sigma[0, 1] + t * (Sigma[0, 3] + Sigma[2, 1]) + t * t * Sigma[2, 3]
+    s10 = Sigma[1, 0] + t * (Sigma[1, 2] + Sigma[3, 0]) + t * t * Sigma[3, 2]
+    s11 = Sigma[1, 1] + t * (Sigma[1, 3] + Sigma[3, 1]) + t * t * Sigma[3, 3]
+    tr = s00 + s11
+    det = s00 * s11 - s01 * s10
+    # det / (tr/D)^D ~ (product of eigenvalue ratios): tiny means (near) singular
+    if not (det > DEGENERATE_RATIO * (0.5 * tr) ** 2) or not (tr > 0.0):
         acc[1] = 1.0
         return 0.0
-    gn = math.sqrt(g[0] * g[0] + g[1] * g[1])
+    a00 = s11 / det
+    a01 = -s01 / det
+    a10 = -s10 / det
+    a11 = s00 / det
+    norm = 1.0 / (2.0 * math.pi * math.sqrt(abs(det)))
+    # C = Spv + t Svv; K = C^T A; Vc = Svv - K C
+    c00 = Sigma[0, 2] + t * Sigma[2, 2]
+    c01 = Sigma[0, 3] + t * Sigma[2, 3]
+    c10 = Sigma[1, 2] + t * Sigma[3, 2]
+    c11 = Sigma[1, 3] + t * Sigma[3, 3]
+    k00 = c00 * a00 + c10 * a10
+    k01 = c00 * a01 + c10 * a11
+    k10 = c01 * a00 + c11 * a10
+    k11 = c01 * a01 + c11 * a11
+    v00 = Sigma[2, 2] - (k00 * c00 + k01 * c10)
+    v01 = Sigma[2, 3] - (k00 * c01 + k01 * c11)
+    v10 = Sigma[3, 2] - (k10 * c00 + k11 * c10)
+    v11 = Sigma[3, 3] - (k10 * c01 + k11 * c11)
+    rho2 = BROAD_K2 * tr
+    gn = math.sqrt(g0 * g0 + g1 * g1)
     alpha = _arc_half_angle(R, gn, rho2)
     if alpha < 0.0:
         return 0.0
-    phig = math.atan2(g[1], g[0]) if gn > 0.0 else 0.0
+    phig = math.atan2(g1, g0) if gn > 0.0 else 0.0
+    a01s = a01 + a10
     # Only arc points with Mahalanobis distance q(x) <= k^2 matter: a path
     # through x at time t has |z| >= sqrt(q(x)) (the whitened (dp, dv)
     # projects onto X(t) - g(t) without growing), so entries at q > k^2 belong
@@ -241,10 +281,7 @@ def nu_plus_2d(dp, dv, da, R, Sigma, t, tol, acc, cap):
     qs = np.empty(_SCAN + 1)
     jmin = 0
     for j in range(_SCAN + 1):
-        psi = -alpha + 2.0 * alpha * j / _SCAN
-        d0 = R * math.cos(phig + psi) - g[0]
-        d1 = R * math.sin(phig + psi) - g[1]
-        qs[j] = A[0, 0] * d0 * d0 + (A[0, 1] + A[1, 0]) * d0 * d1 + A[1, 1] * d1 * d1
+        qs[j] = _q_at(R, phig + (-alpha + 2.0 * alpha * j / _SCAN), g0, g1, a00, a01s, a11)
         if qs[j] < qs[jmin]:
             jmin = j
     j0 = _SCAN
@@ -258,23 +295,23 @@ def nu_plus_2d(dp, dv, da, R, Sigma, t, tol, acc, cap):
         j1 = jmin
     j0 = max(j0 - 1, 0)
     j1 = min(j1 + 1, _SCAN)
-    ends = np.empty(_SCAN + 3)
-    ne = 0
-    ends[ne] = -alpha + 2.0 * alpha * j0 / _SCAN
-    ne += 1
+    npieces = 1
     for j in range(j0 + 1, j1):
         if qs[j] <= qs[j - 1] and qs[j] < qs[j + 1]:
-            ends[ne] = -alpha + 2.0 * alpha * j / _SCAN
-            ne += 1
-    ends[ne] = -alpha + 2.0 * alpha * j1 / _SCAN
-    ne += 1
-    prm = (R, phig, g, gd, A, norm, K, Vc, cap)
+            npieces += 1
+    prm = (R, phig, g0, g1, gd0, gd1, a00, a01s, a11, norm, k00, k01, k10, k11,
+           v00, v01 + v10, v11, cap)
+    ptol = tol / npieces
     total = 0.0
     err = 0.0
-    for j in range(ne - 1):
-        v, e = _arc_adaptive(prm, ends[j], ends[j + 1], tol / (ne - 1))
-        total += v
-        err += e
+    start = -alpha + 2.0 * alpha * j0 / _SCAN
+    for j in range(j0 + 1, j1 + 1):
+        if j == j1 or (qs[j] <= qs[j - 1] and qs[j] < qs[j + 1]):
+            end = -alpha + 2.0 * alpha * j / _SCAN
+            v, e = _arc_adaptive(prm, start, end, ptol)
+            total += v
+            err += e
+            start = end
     acc[0] = max(acc[0], err)
     return total
 

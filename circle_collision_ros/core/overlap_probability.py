@@ -40,7 +40,7 @@ from numba import njit
 
 from circle_collision_ros.core.quadrature import make_adaptive
 
-__all__ = ["overlap_probability", "interval_mass", "disc_probability", "ball_probability",
+__all__ = ["overlap_probability", "overlap_probability_2d", "interval_mass", "disc_probability", "ball_probability",
            "WINDOW_SIGMAS"]
 
 WINDOW_SIGMAS = 9.0  # integration window [-9, 9] sigma of each integrated component
@@ -263,17 +263,41 @@ def eig_sym(S):
 
 
 @njit(cache=True, error_model="numpy")
+def overlap_probability_2d(g0, g1, s00, s01, s11, R):
+    """P(|X| <= R) for X ~ N((g0, g1), [[s00, s01], [s01, s11]]) (PSD): overlap_probability
+    in scalars (no temporaries: the plausible-time search calls it per step).  The
+    eigenbasis is eig_sym's single Jacobi rotation (Rutishauser's form: the
+    eigenvalues s00 - t s01, s11 + t s01 lose no digits to cancellation)."""
+    if s01 == 0.0:
+        c = 1.0
+        sn = 0.0
+        l0 = s00
+        l1 = s11
+    else:
+        theta = (s11 - s00) / (2.0 * s01)
+        t = (1.0 if theta >= 0.0 else -1.0) / (abs(theta) + math.sqrt(theta * theta + 1.0))
+        c = 1.0 / math.sqrt(t * t + 1.0)
+        sn = t * c
+        l0 = s00 - t * s01
+        l1 = s11 + t * s01
+    # eigenvectors (c, -sn) for l0 and (sn, c) for l1; clamp rounding below 0
+    m0 = c * g0 - sn * g1
+    m1 = sn * g0 + c * g1
+    return disc_probability(R, m0, math.sqrt(max(l0, 0.0)), m1, math.sqrt(max(l1, 0.0)))
+
+
+@njit(cache=True, error_model="numpy")
 def overlap_probability(mean, S, R):
     """P(|X| <= R) for X ~ N(mean, S) in 2-D or 3-D (mean (D,), S (D, D) PSD).
 
     1e-9 absolute (tests/core/test_uncertainty_overlap.py)."""
-    lam, Q = eig_sym(S)
     D = mean.shape[0]
+    if D == 2:
+        return overlap_probability_2d(mean[0], mean[1], S[0, 0], 0.5 * (S[0, 1] + S[1, 0]), S[1, 1], R)
+    lam, Q = eig_sym(S)
     mu = np.zeros(D)
     for j in range(D):
         for k in range(D):
             mu[j] += Q[k, j] * mean[k]
-    if D == 2:
-        return disc_probability(R, mu[0], math.sqrt(lam[0]), mu[1], math.sqrt(lam[1]))
     return ball_probability(R, mu[0], math.sqrt(lam[0]), mu[1], math.sqrt(lam[1]),
                             mu[2], math.sqrt(lam[2]))

@@ -278,6 +278,10 @@ class Scene:
         self.evaluated_pairs = 0  # narrow-phase pair evaluations of the last predictions() call
         self._captures = weakref.WeakSet()  # live captures sharing the state arrays
         self._uncertain_cache = None
+        self._uncertain_serial = 0     # uncertain_pairs evaluations so far (the budget's clock)
+        self._uncertain_waiting = {}   # (id_a, id_b) -> serial since which the pair waits (deferred)
+        self._uncertain_memo = {}      # core.uncertainty.uncertain_pairs(memo=...): last full evaluations
+        self._uncertain_memo_ref = None  # the reference time of those evaluations
 
     # Pair records: one row per pair with a contact within H + S of its t_p, in
     # growable buffers; rows of updated bodies are marked dead (compacted when
@@ -1051,6 +1055,18 @@ class Scene:
         uncertain pairs should the inflated broad phase not list them.  Pairs certified below
         threshold / 2 skip the full evaluation (``core.uncertainty.uncertain_pairs(screen=True)``);
         `max_evaluated` caps the full evaluations (the rest are deferred, see there).
+
+        Which pairs the budget evaluates: first come, first served.  A pair that is deferred
+        waits from the first evaluation (call that follows a change) that defers it until one
+        evaluates it; each evaluation takes the `max_evaluated` pairs that have waited longest
+        (never deferred before counts as waiting from now), then the earliest possible contact,
+        then id order.  A pair deferred at evaluation s is therefore evaluated within
+        ceil(n_s / max_evaluated) evaluations, n_s = the pairs waiting at s (itself included),
+        as long as it stays listed and unscreened (a pair that leaves the list stops waiting).
+        A pair whose relative inputs are bit for bit those of a pair fully evaluated by the
+        previous evaluation takes that answer without counting against the budget.  The order
+        depends only on the sequence of scene inputs and calls (no clock): replay, which makes
+        the node's calls in the node's order, reproduces it bit for bit.
         See SceneUncertainty.
         """
         key = (self._version, float(threshold), max_evaluated)
@@ -1065,6 +1081,7 @@ class Scene:
         R = self.reference_ns
         e = np.empty(0)
         if R is None or not (self._alive & self._U).any():
+            self._uncertain_waiting = {}  # no pair listed: none waits
             return SceneUncertainty(R or 0, np.empty(0, dtype=object), np.empty(0, dtype=object), e, e, e)
         from circle_collision_ros.core import uncertainty as unc  # heavy kernels: loaded on first use
         slots = self._sorted_slots()
@@ -1083,9 +1100,12 @@ class Scene:
         keep = u[I] | u[J]
         I, J = I[keep], J[keep]
         if contacts is not None and len(contacts):
-            local = {self._ids[s]: k for k, s in enumerate(slots.tolist())}
-            ca = np.fromiter(map(local.__getitem__, contacts.id_a.tolist()), np.int64, len(contacts))
-            cb = np.fromiter(map(local.__getitem__, contacts.id_b.tolist()), np.int64, len(contacts))
+            # slot -> local index through an array (no dict of every body per call)
+            local = np.empty(self._ids.shape[0], dtype=np.int64)
+            local[slots] = np.arange(slots.size)
+            slot = self._slot.__getitem__
+            ca = local[np.fromiter(map(slot, contacts.id_a.tolist()), np.int64, len(contacts))]
+            cb = local[np.fromiter(map(slot, contacts.id_b.tolist()), np.int64, len(contacts))]
             m = u[ca] | u[cb]
             I, J = np.concatenate([I, ca[m]]), np.concatenate([J, cb[m]])
         # local order is id order: (min, max) puts the id that sorts first in front
@@ -1093,11 +1113,37 @@ class Scene:
         key = np.unique(np.minimum(I, J) * n + np.maximum(I, J))
         I, J = key // n, key % n
         if I.size == 0:
+            self._uncertain_waiting = {}
             return SceneUncertainty(R, np.empty(0, dtype=object), np.empty(0, dtype=object), e, e, e)
-        res = unc.uncertain_pairs(P[I], V[I], A[I], Rad[I], C[I], P[J], V[J], A[J], Rad[J], C[J],
-                                  self._h, threshold, screen=True, max_evaluated=max_evaluated)
         ids = self._ids[slots]
-        return SceneUncertainty(R, ids[I], ids[J], res.collision_probability,
+        ida, idb = ids[I], ids[J]
+        serial = self._uncertain_serial
+        waiting = self._uncertain_waiting
+        asked = []
+
+        def waited_since(rows):  # the rows competing for the budget (called only when over it)
+            keys = list(zip(ida[rows].tolist(), idb[rows].tolist()))
+            asked.append((rows, keys))
+            return np.fromiter((waiting.get(k, serial) for k in keys), np.int64, len(keys))
+
+        if self._uncertain_memo_ref != R:
+            # a new reference time moves the pairs' inputs (states and covariances are
+            # propagated to R; only bodies at rest with a position-only covariance keep
+            # theirs): skip the look-ups, which can only forgo a reuse, never give a wrong one
+            self._uncertain_memo.clear()
+            self._uncertain_memo_ref = R
+        res = unc.uncertain_pairs(P[I], V[I], A[I], Rad[I], C[I], P[J], V[J], A[J], Rad[J], C[J],
+                                  self._h, threshold, screen=True, max_evaluated=max_evaluated,
+                                  priority=waited_since, memo=self._uncertain_memo)
+        still = {}
+        for rows, keys in asked:
+            deferred = res.collision_probability_bound[rows] == unc.DEFERRED_BOUND
+            for k, d in zip(keys, deferred.tolist()):
+                if d:
+                    still[k] = waiting.get(k, serial)
+        self._uncertain_waiting = still
+        self._uncertain_serial = serial + 1
+        return SceneUncertainty(R, ida, idb, res.collision_probability,
                                 res.collision_probability_bound, res.plausible_time,
                                 unc.deferred_count(res) if max_evaluated is not None else 0)
 

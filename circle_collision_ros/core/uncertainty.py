@@ -24,6 +24,7 @@ row (deterministic; sampling, where used, is seeded).
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from typing import NamedTuple
 
 import numpy as np
@@ -34,7 +35,8 @@ from circle_collision_ros.core.uncertainty_kernels import (
     TUBE_TAIL,
     max_sigma_rows,
     pair_probability,
-    screen_rows,
+    row_classes,
+    screen_rows_at,
     screen_sigmas,
 )
 
@@ -92,7 +94,9 @@ def _rows(x, n, D, name):
 
 def uncertain_pairs(pa, va, aa, ra, cov_a, pb, vb, ab, rb, cov_b,
                     horizon: float, threshold: float, *, screen: bool = False,
-                    max_evaluated: int | None = None) -> UncertainPairs:
+                    max_evaluated: int | None = None,
+                    priority: Callable[[np.ndarray], np.ndarray] | None = None,
+                    memo: dict | None = None) -> UncertainPairs:
     """Collision probability, its bound and the earliest plausible contact of n pairs.
 
     pa, va, aa, pb, vb, ab: (n, D) float64, D in {2, 3} [m, m/s, m/s^2];
@@ -118,6 +122,19 @@ def uncertain_pairs(pa, va, aa, ra, cov_a, pb, vb, ab, rb, cov_b,
     the bound 1.0 holds for any probability, and t_first (where the screening
     tube first may reach the ball) is never later than the true plausible time.
     ``deferred_count(result)`` counts them.
+
+    priority (with max_evaluated): called once, only when more than
+    max_evaluated rows need the full evaluation, with those rows' indices
+    (ascending); returns an integer per row, smaller first (then t_first, then
+    row order).  The scene passes how long each pair has waited (FIFO, see
+    ``Scene.uncertain_pairs``).
+
+    memo: a dict the caller keeps between calls.  A row whose relative inputs
+    (dp, dv, da, R, Sigma after the sign canonicalisation, with H and the
+    threshold) equal those of a row fully evaluated by the previous call takes
+    that row's answer bit for bit (the answer is a function of exactly these
+    inputs), without counting against max_evaluated; on return the memo holds
+    exactly this call's fully evaluated and reused rows.
     """
     pa = np.asarray(pa, dtype=np.float64)
     if pa.ndim != 2 or pa.shape[1] not in (2, 3):
@@ -143,7 +160,9 @@ def uncertain_pairs(pa, va, aa, ra, cov_a, pb, vb, ab, rb, cov_b,
     bound = np.zeros(n)
     tpl = np.full(n, np.inf)
     sigma = cov_a + cov_b
-    exact = ~np.any(sigma.reshape(n, -1) != 0.0, axis=1)
+    exact = np.empty(n, dtype=np.bool_)
+    finite = np.empty(n, dtype=np.bool_)
+    row_classes(pa, va, aa, ra, pb, vb, ab, rb, sigma, exact, finite)
     if exact.any():
         ix = np.flatnonzero(exact)
         t = time_to_collision(pa[ix], va[ix], aa[ix], ra[ix], pb[ix], vb[ix], ab[ix], rb[ix], H)
@@ -154,9 +173,6 @@ def uncertain_pairs(pa, va, aa, ra, cov_a, pb, vb, ab, rb, cov_b,
         tpl[ix] = np.where(hit | nan, t, np.inf)
     # rows with a non-finite value or a negative radius: NaN in all three
     # outputs (as time_to_collision), never a hang or an exception
-    finite = (np.isfinite(pa).all(1) & np.isfinite(va).all(1) & np.isfinite(aa).all(1)
-              & np.isfinite(pb).all(1) & np.isfinite(vb).all(1) & np.isfinite(ab).all(1)
-              & np.isfinite(sigma.reshape(n, -1)).all(1) & (ra >= 0) & (rb >= 0))
     bad = ~finite & ~exact
     prob[bad] = bound[bad] = tpl[bad] = np.nan
     todo = np.flatnonzero(~exact & finite)
@@ -169,31 +185,59 @@ def uncertain_pairs(pa, va, aa, ra, cov_a, pb, vb, ab, rb, cov_b,
         clear = np.zeros(todo.size, dtype=np.bool_)
         t_first = np.empty(todo.size)
         # relative state as below (the tube test is exactly symmetric under X -> -X)
-        screen_rows(pa[todo] - pb[todo], va[todo] - vb[todo], aa[todo] - ab[todo],
-                    ra[todo] + rb[todo], np.ascontiguousarray(sigma[todo]), H, k, clear, t_first)
+        screen_rows_at(pa, va, aa, ra, pb, vb, ab, rb, sigma, todo, H, k, clear, t_first)
         if tail > 0.0:
             done = todo[clear]
             prob[done], bound[done], tpl[done] = 0.0, tail, np.inf
             todo, t_first = todo[~clear], t_first[~clear]
-        if max_evaluated is not None and todo.size > max_evaluated:
-            order = np.lexsort((todo, t_first))  # earliest possible contact first, then row order
-            later = np.sort(order[max(int(max_evaluated), 0):])
-            rows = todo[later]
-            prob[rows], bound[rows], tpl[rows] = DEFERRED_PROBABILITY, DEFERRED_BOUND, t_first[later]
-            todo = todo[np.sort(order[:max(int(max_evaluated), 0)])]
-    for i in todo:
-        # relative state from relative quantities (map offsets cancel first)
-        dp = pa[i] - pb[i]
-        dv = va[i] - vb[i]
-        da = aa[i] - ab[i]
-        R = ra[i] + rb[i]
-        # X -> -X leaves the problem unchanged (the ball and S are symmetric):
-        # one sign per pair, so swapping a and b gives bitwise the same result
-        nz = np.flatnonzero(np.concatenate((dp, dv, da)))
-        if nz.size and np.concatenate((dp, dv, da))[nz[0]] < 0.0:
-            dp, dv, da = -dp, -dv, -da
-        prob[i], bound[i], tpl[i] = pair_probability(dp, dv, da, R, np.ascontiguousarray(sigma[i]),
-                                                     H, thr)
+        todo_first = t_first  # where each remaining row's screening tube may first reach the ball
+    else:
+        todo_first = np.full(todo.size, np.inf)
+    # relative state from relative quantities (map offsets cancel first);
+    # X -> -X leaves the problem unchanged (the ball and S are symmetric): one
+    # sign per pair, so swapping a and b gives bitwise the same result
+    dp = pa[todo] - pb[todo]
+    dv = va[todo] - vb[todo]
+    da = aa[todo] - ab[todo]
+    rad = ra[todo] + rb[todo]
+    flat = np.concatenate((dp, dv, da), axis=1)
+    nz = flat != 0.0
+    first = np.argmax(nz, axis=1)
+    flip = nz.any(axis=1) & (flat[np.arange(todo.size), first] < 0.0)
+    dp[flip], dv[flip], da[flip] = -dp[flip], -dv[flip], -da[flip]
+    sig = np.ascontiguousarray(sigma[todo])
+    fresh = {}
+
+    def key(j):  # everything a row's answer depends on (pair_probability's arguments)
+        return np.concatenate((dp[j], dv[j], da[j], rad[j:j + 1], sig[j].ravel(), (H, thr))).tobytes()
+
+    if memo and todo.size:  # (an empty memo, e.g. after a new reference time: no look-ups)
+        keys = [key(j) for j in range(todo.size)]
+        hit = np.fromiter((k in memo for k in keys), dtype=np.bool_, count=todo.size)
+        for j in np.flatnonzero(hit).tolist():
+            prob[todo[j]], bound[todo[j]], tpl[todo[j]] = fresh[keys[j]] = memo[keys[j]]
+        if hit.any():
+            keep = ~hit
+            todo, dp, dv, da, rad, sig = todo[keep], dp[keep], dv[keep], da[keep], rad[keep], sig[keep]
+            todo_first = todo_first[keep]
+    if max_evaluated is not None and todo.size > max_evaluated:
+        m = max(int(max_evaluated), 0)
+        rank = (np.zeros(todo.size, dtype=np.int64) if priority is None
+                else np.asarray(priority(todo), dtype=np.int64))
+        order = np.lexsort((todo, todo_first, rank))  # waited longest, earliest possible contact, row
+        later = np.sort(order[m:])
+        rows = todo[later]
+        prob[rows], bound[rows], tpl[rows] = DEFERRED_PROBABILITY, DEFERRED_BOUND, todo_first[later]
+        now = np.sort(order[:m])
+        todo, dp, dv, da, rad, sig = todo[now], dp[now], dv[now], da[now], rad[now], sig[now]
+    for j, i in enumerate(todo.tolist()):
+        prob[i], bound[i], tpl[i] = r = pair_probability(dp[j], dv[j], da[j], float(rad[j]),
+                                                         np.ascontiguousarray(sig[j]), H, thr)
+        if memo is not None:
+            fresh[key(j)] = r
+    if memo is not None:
+        memo.clear()
+        memo.update(fresh)
     return UncertainPairs(prob, bound, tpl)
 
 

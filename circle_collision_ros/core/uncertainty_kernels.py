@@ -14,7 +14,7 @@ from numba import njit
 
 from circle_collision_ros.core.entry_rate import BROAD_K2, entry_rate_gauss3, entry_rate_integral
 from circle_collision_ros.core.narrow_phase import _ttc_kernel_h
-from circle_collision_ros.core.overlap_probability import eig_sym, overlap_probability
+from circle_collision_ros.core.overlap_probability import eig_sym, overlap_probability, overlap_probability_2d
 from circle_collision_ros.core.quadrature import push_halves
 from circle_collision_ros.core.sobol import scrambled_directions, sobol_points
 
@@ -222,6 +222,52 @@ def screen_rows(dp, dv, da, R, Sigma, H, k, clear, t_first):
         clear[i] = not (t_first[i] <= H)
 
 
+@njit(cache=True, error_model="numpy")
+def screen_rows_at(pa, va, aa, ra, pb, vb, ab, rb, sigma, rows, H, k, clear, t_first):
+    """screen_rows on the rows ``rows`` of the per-body arrays (relative state formed
+    here as a - b, Sigma = sigma[row]): the same tube test without gathering the rows
+    into new arrays first (a scene screens ~1,000 rows per prediction)."""
+    D = pa.shape[1]
+    dp = np.empty(D)
+    dv = np.empty(D)
+    da = np.empty(D)
+    unused = np.empty((0, 2))
+    for j in range(rows.shape[0]):
+        i = rows[j]
+        for c in range(D):
+            dp[c] = pa[i, c] - pb[i, c]
+            dv[c] = va[i, c] - vb[i, c]
+            da[c] = aa[i, c] - ab[i, c]
+        _, t_first[j] = _tube_walk(dp, dv, da, ra[i] + rb[i], sigma[i], H, unused, k, True)
+        clear[j] = not (t_first[j] <= H)
+
+
+@njit(cache=True, error_model="numpy")
+def row_classes(pa, va, aa, ra, pb, vb, ab, rb, sigma, exact, finite):
+    """Per row: exact[i] = Sigma all zero (a NaN is not zero); finite[i] = every
+    position, velocity, acceleration and Sigma entry finite and both radii >= 0
+    (one pass instead of a dozen array reductions)."""
+    n = pa.shape[0]
+    D = pa.shape[1]
+    m = sigma.shape[1]
+    for i in range(n):
+        ex = True
+        fin = ra[i] >= 0.0 and rb[i] >= 0.0
+        for r in range(m):
+            for c in range(m):
+                x = sigma[i, r, c]
+                if x != 0.0:
+                    ex = False
+                if not math.isfinite(x):
+                    fin = False
+        for c in range(D):
+            if not (math.isfinite(pa[i, c]) and math.isfinite(va[i, c]) and math.isfinite(aa[i, c])
+                    and math.isfinite(pb[i, c]) and math.isfinite(vb[i, c]) and math.isfinite(ab[i, c])):
+                fin = False
+        exact[i] = ex
+        finite[i] = fin
+
+
 def screen_sigmas(threshold: float, dof: int) -> tuple[float, float]:
     """(k, U): the smallest k (to 1e-12) with U = P(chi^2_dof > k^2) <= threshold / 2,
     dof even; (inf, 0.0) when no k <= 40 qualifies (a threshold below ~1e-300)."""
@@ -278,6 +324,14 @@ def qmc_probability(dp, dv, da, R, Sigma, H, Z):
 def instant_probability(dp, dv, da, R, Sigma, t):
     """P(|X(t)| <= R) (1e-9 absolute, see overlap_probability)."""
     D = dp.shape[0]
+    if D == 2:  # scalars, as S_at
+        s00 = Sigma[0, 0] + t * (Sigma[0, 2] + Sigma[2, 0]) + t * t * Sigma[2, 2]
+        s01 = Sigma[0, 1] + t * (Sigma[0, 3] + Sigma[2, 1]) + t * t * Sigma[2, 3]
+        s10 = Sigma[1, 0] + t * (Sigma[1, 2] + Sigma[3, 0]) + t * t * Sigma[3, 2]
+        s11 = Sigma[1, 1] + t * (Sigma[1, 3] + Sigma[3, 1]) + t * t * Sigma[3, 3]
+        return overlap_probability_2d(dp[0] + t * (dv[0] + 0.5 * t * da[0]),
+                                      dp[1] + t * (dv[1] + 0.5 * t * da[1]),
+                                      s00, 0.5 * (s01 + s10), s11, R)
     g = np.empty(D)
     for k in range(D):
         g[k] = dp[k] + t * (dv[k] + 0.5 * t * da[k])
@@ -287,71 +341,75 @@ def instant_probability(dp, dv, da, R, Sigma, t):
 # Ambiguous tube intervals are cut into _PANELS panels for the entry-rate
 # integral; the plausible-time search certifies panel by panel.
 _PANELS = 2
-_RICE_TOL = 1e-4  # quadrature tolerance of the entry-rate integral per panel
+_RICE_TOL = 1e-3  # quadrature tolerance of the entry-rate integral per panel
 _P0_ERR = 1e-9  # error of one instantaneous probability (overlap_probability)
 PLAUSIBLE_RTOL = 1e-6  # the plausible time's bracket width, relative to H
 BRACKET_MAX = 0.01  # with da != 0: widest [lower, upper] reported from the bounds alone
 
 
-def _panels(leaves, cnt, t_end):
-    """Panel ends (list of (a, b)) of the ambiguous intervals before t_end."""
-    out = []
+@njit(cache=True, error_model="numpy")
+def _panels(leaves, cnt, t_end, pa, pb):
+    """Panel ends of the ambiguous intervals before t_end into pa, pb (each
+    interval cut into _PANELS equal panels); returns the count."""
+    m = 0
     for j in range(cnt):
-        a, b = float(leaves[j, 0]), min(float(leaves[j, 1]), t_end)
+        a = leaves[j, 0]
+        b = min(leaves[j, 1], t_end)
         if not a < b:
             continue
         for q in range(_PANELS):
-            pa = a + (b - a) * q / _PANELS
-            pb = b if q == _PANELS - 1 else a + (b - a) * (q + 1) / _PANELS
-            out.append((pa, pb))
-    return out
+            pa[m] = a + (b - a) * q / _PANELS
+            pb[m] = b if q == _PANELS - 1 else a + (b - a) * (q + 1) / _PANELS
+            m += 1
+    return m
 
 
-class _Pair:
-    """One uncertain pair's state for the orchestration (relative state)."""
+# Per-pair scratch of the compiled orchestration (float64 array st):
+_ST_PMAX = 0  # largest instantaneous probability computed (a lower bound of P(contact))
+_ST_DEGENERATE = 1  # 1.0 once S(t) was degenerate at a quadrature node: the Rice values are unusable
 
-    def __init__(self, dp, dv, da, R, Sigma):
-        self.dp, self.dv, self.da, self.R, self.Sigma = dp, dv, da, R, Sigma
-        self.acc = np.zeros(2)
-        self.pmax = 0.0
-        self.degenerate = False
-        self.cache = {}  # (a, b) -> entry-rate integral and its error
 
-    def prob_at(self, t):
-        p = instant_probability(self.dp, self.dv, self.da, self.R, self.Sigma, t)
-        self.pmax = max(self.pmax, p)
-        return p
+@njit(cache=True, error_model="numpy")
+def _prob_at(dp, dv, da, R, Sigma, t, st):
+    p = instant_probability(dp, dv, da, R, Sigma, t)
+    if p > st[_ST_PMAX]:
+        st[_ST_PMAX] = p
+    return p
 
-    def rice_short(self, a, b):
-        """Entry-rate integral over a short interval (3-point Gauss)."""
-        self.acc[1] = 0.0
-        v, e = entry_rate_gauss3(self.dp, self.dv, self.da, self.R, self.Sigma, a, b,
-                                 _RICE_TOL, self.acc)
-        if self.acc[1] != 0.0:
-            self.degenerate = True
-        return v, e
 
-    def rice(self, a, b):
-        key = (a, b)
-        if key in self.cache:
-            return self.cache[key]
-        self.acc[1] = 0.0
-        # slow_H passed explicitly: a call that omits a defaulted argument misses numba's
-        # fast dispatch and costs ~3 ms of type resolution every time
-        v, e = entry_rate_integral(self.dp, self.dv, self.da, self.R, self.Sigma, a, b,
-                                   _RICE_TOL, self.acc, -1.0)
-        if self.acc[1] != 0.0:
-            self.degenerate = True
-        self.cache[key] = (v, e)
-        return v, e
+@njit(cache=True, error_model="numpy")
+def _rice_short(dp, dv, da, R, Sigma, a, b, acc, st):
+    """Entry-rate integral over a short interval (3-point Gauss) and its error estimate."""
+    acc[1] = 0.0
+    v, e = entry_rate_gauss3(dp, dv, da, R, Sigma, a, b, _RICE_TOL, acc)
+    if acc[1] != 0.0:
+        st[_ST_DEGENERATE] = 1.0
+    return v, e
+
+
+@njit(cache=True, error_model="numpy")
+def _rice_panel(dp, dv, da, R, Sigma, pa, pb, j, cache, acc, st):
+    """Entry-rate integral over panel j and its error estimate, computed once
+    per pair (cache[j] = (done, value, error))."""
+    if cache[j, 0] == 0.0:
+        acc[1] = 0.0
+        v, e = entry_rate_integral(dp, dv, da, R, Sigma, pa[j], pb[j], _RICE_TOL, acc, -1.0)
+        if acc[1] != 0.0:
+            st[_ST_DEGENERATE] = 1.0
+        cache[j, 0] = 1.0
+        cache[j, 1] = v
+        cache[j, 2] = e
+    return cache[j, 1], cache[j, 2]
 
 
 _SEARCH_STEPS = 64  # certified steps per panel before the conservative exit
 
 
-def _first_crossing(pair, a, pa, b, thr, dt):
-    """First t in [a, b] with P(|X(t)| <= R) >= thr given P(a) = pa < thr,
-    or None when certified absent.
+@njit(cache=True, error_model="numpy")
+def _first_crossing(dp, dv, da, R, Sigma, pa, pb, j, p_start, thr, dt, cache, acc, st):
+    """First t in panel j = [a, b] with P(|X(t)| <= R) >= thr given P(a) = p_start < thr,
+    or +inf when certified absent (also +inf when S(t) turned out degenerate:
+    the caller checks st[_ST_DEGENERATE]).
 
     Invariant: P < thr on [a, lo] is certified (each step by
     sup_[lo, c] P <= P(lo) + int_lo^c nu+ + errors < thr).  Until a point
@@ -363,8 +421,12 @@ def _first_crossing(pair, a, pa, b, thr, dt):
     first crossing, never a later one): lo when the step shrinks below dt,
     or after _SEARCH_STEPS steps (P within the certificate's resolution of
     the threshold over a long stretch)."""
-    lo, plo = a, pa
-    hi, phi = math.inf, -1.0
+    a = pa[j]
+    b = pb[j]
+    lo = a
+    plo = p_start
+    hi = math.inf
+    phi = -1.0
     step = b - a
     c = b
     stall = 0
@@ -374,25 +436,27 @@ def _first_crossing(pair, a, pa, b, thr, dt):
         if c - lo <= dt:
             return lo
         if lo == a and c == b:
-            v, e = pair.rice(a, b)  # the panel's own integral (cached)
+            v, e = _rice_panel(dp, dv, da, R, Sigma, pa, pb, j, cache, acc, st)  # the panel's own
         else:
-            v, e = pair.rice_short(lo, c)
-        if pair.degenerate:
-            return None
+            v, e = _rice_short(dp, dv, da, R, Sigma, lo, c, acc, st)
+        if st[_ST_DEGENERATE] != 0.0:
+            return math.inf
         # entry-rate model of the step that the certificate would still pass
         rate = (v + e) / (c - lo)
         if plo + v + e + _P0_ERR < thr:  # certified: no crossing in [lo, c]
             if c == b:
-                return None
-            lo, plo = c, pair.prob_at(c)
+                return math.inf
+            lo = c
+            plo = _prob_at(dp, dv, da, R, Sigma, c, st)
             step = 2.0 * step
             if rate > 0.0:
                 step = min(step, 0.9 * (thr - plo - _P0_ERR) / rate)
             stall = stall + 1 if stall >= 0 else 1
         else:
-            pc = pair.prob_at(c)
+            pc = _prob_at(dp, dv, da, R, Sigma, c, st)
             if pc >= thr:
-                hi, phi = c, pc
+                hi = c
+                phi = pc
                 stall = stall - 1 if stall <= 0 else -1
             else:  # neither certified nor above: a shorter step
                 step = 0.5 * (c - lo)
@@ -414,81 +478,129 @@ def _first_crossing(pair, a, pa, b, thr, dt):
     return lo
 
 
-def pair_probability(dp, dv, da, R, Sigma, H, thr):
-    """(probability, bound, plausible time) of one uncertain pair (relative state).
+# _pair_kernel's out: probability, bound, plausible time, then for the RQMC
+# fallback (needs_qmc = 1.0) the bracket [lo, hi] the RQMC mean is clipped to
+_OUT_P, _OUT_BOUND, _OUT_TPL, _OUT_QMC, _OUT_LO, _OUT_HI = 0, 1, 2, 3, 4, 5
 
-    See docs/uncertainty.md for the method and why each bound holds."""
-    D = dp.shape[0]
-    pair = _Pair(dp, dv, da, R, Sigma)
+
+@njit(cache=True, error_model="numpy")
+def _pair_kernel(dp, dv, da, R, Sigma, H, thr, out):
+    """Everything of pair_probability but the RQMC fallback (compiled: the
+    orchestration makes hundreds of kernel calls per pair, whose dispatch from
+    Python cost as much as the quadrature itself)."""
+    out[_OUT_QMC] = 0.0
     leaves = np.empty((1 << _TUBE_DEPTH, 2))
     cnt, t_inside = tube_intervals(dp, dv, da, R, Sigma, H, leaves, BROAD_PHASE_SIGMAS)
     if cnt == 0 and thr > TUBE_TAIL and thr <= 1.0 - TUBE_TAIL:
         # the tube alone decides (far pairs, tiny sigma): P <= TUBE_TAIL < thr
         # wherever it is outside, >= 1 - TUBE_TAIL >= thr from t_inside on
+        out[_OUT_BOUND] = TUBE_TAIL
         if t_inside <= H:
-            return 1.0, TUBE_TAIL, t_inside
-        return 0.0, TUBE_TAIL, math.inf
-    p0 = pair.prob_at(0.0)
+            out[_OUT_P] = 1.0
+            out[_OUT_TPL] = t_inside
+        else:
+            out[_OUT_P] = 0.0
+            out[_OUT_TPL] = math.inf
+        return
+    st = np.zeros(2)
+    acc = np.zeros(2)
+    p0 = _prob_at(dp, dv, da, R, Sigma, 0.0, st)
     dt = PLAUSIBLE_RTOL * H
+    pa = np.empty(_PANELS * cnt + 1)
+    pb = np.empty(_PANELS * cnt + 1)
+    # the walk's panels end at t_inside; the Rice integral below runs only
+    # when t_inside is +inf, where they are the full panels (cache shared)
+    npan = _panels(leaves, cnt, t_inside, pa, pb)
+    cache = np.zeros((npan + 1, 3))
 
     # plausible time: certified walk over the ambiguous panels before t_inside
     tpl = math.inf
     if p0 >= thr:
         tpl = 0.0
     else:
-        for a, b in _panels(leaves, cnt, t_inside):
-            pa = p0 if a == 0.0 else pair.prob_at(a)
-            if pa >= thr:
-                tpl = a
+        found = False
+        for j in range(npan):
+            p_start = p0 if pa[j] == 0.0 else _prob_at(dp, dv, da, R, Sigma, pa[j], st)
+            if p_start >= thr:
+                tpl = pa[j]
+                found = True
                 break
-            r = _first_crossing(pair, a, pa, b, thr, dt)
-            if pair.degenerate:
+            r = _first_crossing(dp, dv, da, R, Sigma, pa, pb, j, p_start, thr, dt, cache, acc, st)
+            if st[_ST_DEGENERATE] != 0.0:
+                found = True
                 break
-            if r is not None:
+            if r != math.inf:
                 tpl = r
+                found = True
                 break
-        else:
+        if not found:
             tpl = t_inside  # +inf when the tube never lies inside
-    if pair.degenerate:
-        tpl, _ = plausible_time_grid(dp, dv, da, R, Sigma, H, thr)
+    degenerate = st[_ST_DEGENERATE] != 0.0
+    if degenerate:
+        tpl, pm = plausible_time_grid(dp, dv, da, R, Sigma, H, thr)
+    out[_OUT_TPL] = tpl
 
     if t_inside <= H:
-        return 1.0, TUBE_TAIL, tpl
+        out[_OUT_P] = 1.0
+        out[_OUT_BOUND] = TUBE_TAIL
+        return
     if cnt == 0:
-        return 0.0, TUBE_TAIL, tpl
+        out[_OUT_P] = 0.0
+        out[_OUT_BOUND] = TUBE_TAIL
+        return
     total = 0.0
     err = 0.0
-    if not pair.degenerate:
-        for a, b in _panels(leaves, cnt, math.inf):
-            v, e = pair.rice(a, b)
+    if not degenerate:
+        for j in range(npan):
+            v, e = _rice_panel(dp, dv, da, R, Sigma, pa, pb, j, cache, acc, st)
             total += v
             err += e
-            if pair.degenerate:
+            if st[_ST_DEGENERATE] != 0.0:
+                degenerate = True
                 break
     upper = p0 + total
-    straight = not np.any(da != 0.0)
-    if not pair.degenerate:
+    straight = True
+    for k in range(da.shape[0]):
+        if da[k] != 0.0:
+            straight = False
+    if not degenerate:
         if straight:
-            return min(1.0, max(0.0, upper)), err + _P0_ERR + TUBE_TAIL, tpl
+            out[_OUT_P] = min(1.0, max(0.0, upper))
+            out[_OUT_BOUND] = err + _P0_ERR + TUBE_TAIL
+            return
         # da != 0: a path enters at most twice, so upper over-counts exactly
         # the re-entries, each preceded by its own slow exit
         # (entry_rate_integral): lower = upper - E[slow exits]
         slow = 0.0
-        for a, b in _panels(leaves, cnt, math.inf):
-            pair.acc[1] = 0.0
-            v, e = entry_rate_integral(dp, dv, da, R, Sigma, a, b, _RICE_TOL, pair.acc, H)
+        for j in range(npan):
+            acc[1] = 0.0
+            v, e = entry_rate_integral(dp, dv, da, R, Sigma, pa[j], pb[j], _RICE_TOL, acc, H)
             slow += v
             err += e
-        lower = max(pair.pmax, upper - slow)
+        lower = max(st[_ST_PMAX], upper - slow)
         if upper - lower <= BRACKET_MAX:
             mid = 0.5 * (upper + lower)
-            return min(1.0, max(0.0, mid)), 0.5 * (upper - lower) + err + _P0_ERR + 2 * TUBE_TAIL, tpl
+            out[_OUT_P] = min(1.0, max(0.0, mid))
+            out[_OUT_BOUND] = 0.5 * (upper - lower) + err + _P0_ERR + 2 * TUBE_TAIL
+            return
+    out[_OUT_QMC] = 1.0
+    out[_OUT_LO] = st[_ST_PMAX] - _P0_ERR
+    out[_OUT_HI] = 1.0 if degenerate else upper + err + _P0_ERR + 2 * TUBE_TAIL
+
+
+def pair_probability(dp, dv, da, R, Sigma, H, thr):
+    """(probability, bound, plausible time) of one uncertain pair (relative state).
+
+    See docs/uncertainty.md for the method and why each bound holds."""
+    out = np.empty(6)
+    _pair_kernel(dp, dv, da, float(R), Sigma, float(H), float(thr), out)
+    if out[_OUT_QMC] == 0.0:
+        return float(out[_OUT_P]), float(out[_OUT_BOUND]), float(out[_OUT_TPL])
+    D = dp.shape[0]
     mean, se = qmc_probability(dp, dv, da, R, Sigma, H, normal_table(2 * D))
     n = QMC_REPLICATES * QMC_POINTS
-    lo = pair.pmax - _P0_ERR
-    hi = 1.0 if pair.degenerate else upper + err + _P0_ERR + 2 * TUBE_TAIL
-    p = min(1.0, max(0.0, min(max(mean, lo), hi)))
-    return p, max(QMC_T * se, 3.0 / n) + TUBE_TAIL, tpl
+    p = min(1.0, max(0.0, min(max(mean, float(out[_OUT_LO])), float(out[_OUT_HI]))))
+    return p, max(QMC_T * se, 3.0 / n) + TUBE_TAIL, float(out[_OUT_TPL])
 
 
 _GRID = 64

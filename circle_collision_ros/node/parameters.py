@@ -87,8 +87,8 @@ PARAMS: tuple[ParamSpec, ...] = (
               "its probability of contact within the horizon reaches this; plausible_time_to_collision "
               "is the first time the overlap probability does.", float_range=(0.0, 1.0)),
     ParamSpec("uncertain_pair_budget", Parameter.Type.INTEGER, 4,
-              "Uncertain pairs given the full probability evaluation per prediction, earliest possible "
-              "contact first (0: all); the others are reported with probability 1.0, bound 1.0 "
+              "Uncertain pairs given the full probability evaluation per prediction, longest-waiting "
+              "first, then earliest possible contact (0: all); the others are reported with probability 1.0, bound 1.0 "
               "(deferred, counted in /diagnostics). A count, so replay is bit-identical.",
               read_only=True, int_range=(0, 1_000_000)),
     ParamSpec("report_all_pairs", Parameter.Type.BOOL, False,
