@@ -77,11 +77,28 @@ def start_cost(cache_dir: str | None) -> float:
     return float(out.stdout.strip().splitlines()[-1])
 
 
+def _explicit(fn, args, **kw):
+    """A call of fn with args written out (as user code calls it: no
+    argument unpacking, which would add its own cost to the figure)."""
+    a, b, c, d, e, f, g, h = args
+    if kw:
+        H = kw["horizon"]
+        return lambda: fn(a, b, c, d, e, f, g, h, horizon=H)
+    return lambda: fn(a, b, c, d, e, f, g, h)
+
+
 def one_pair_costs(P, H: float, reps: int, rounds: int = 7):
     """Seconds per call of one pair from Python (issue 17: <= 0.8 us) in each
     input form, and of the same-run baselines: a trivial jitted call, and
     numba's dispatcher called directly with the pair's 15 floats (the core of
-    the previous numba one-pair entry, which took 3.4-3.8 us per call).
+    a numba one-pair entry, which took 3.4-3.8 us per call).  Each call is
+    written out with ``horizon=H`` as a keyword, as users call it.
+
+    Forms: 1-D arrays, lists, tuples (2-D and 3-D), (1, D) arrays with (1,)
+    radii (a batch of one: result shape (1,)) and with float radii; all of
+    these are answered by the C builtin.  "general path": the same 1-D
+    arrays with a 0-d array horizon, which the builtin hands to the Python
+    general path (conversion, broadcasting, the batch kernel).
 
     Interleaved rounds (every case once per round, best round each): on a
     shared machine the load changes within seconds; interleaving exposes
@@ -94,12 +111,15 @@ def one_pair_costs(P, H: float, reps: int, rounds: int = 7):
     one_tuple = tuple(tuple(x) if isinstance(x, list) else x for x in one_list)
     flat = tuple(v for x in one_list for v in (x if isinstance(x, list) else [x])) + (H,)
     one3 = tuple(x + [0.25] if isinstance(x, list) else x for x in one_list)
-    cases = {"1-D arrays": lambda: time_to_collision(*one, horizon=H),
-             "lists": lambda: time_to_collision(*one_list, horizon=H),
-             "tuples": lambda: time_to_collision(*one_tuple, horizon=H),
-             "lists 3-D": lambda: time_to_collision(*one3, horizon=H),
-             "(1, D) arrays": lambda: time_to_collision(*(x[:1] for x in P), horizon=H),
-             "1-D arrays, general path": lambda: time_to_collision(*one, horizon=np.array(H)),
+    rows1 = tuple(x[:1] for x in P)
+    rows1_f = tuple(x if x.ndim == 2 else float(x[0]) for x in rows1)
+    cases = {"1-D arrays": _explicit(time_to_collision, one, horizon=H),
+             "lists": _explicit(time_to_collision, one_list, horizon=H),
+             "tuples": _explicit(time_to_collision, one_tuple, horizon=H),
+             "lists 3-D": _explicit(time_to_collision, one3, horizon=H),
+             "(1, D) arrays": _explicit(time_to_collision, rows1, horizon=H),
+             "(1, D) arrays, float radii": _explicit(time_to_collision, rows1_f, horizon=H),
+             "1-D arrays, general path": _explicit(time_to_collision, one, horizon=np.array(H)),
              "numba dispatcher, 15 floats": lambda: _ttc_scalar2(*flat),
              "trivial jitted call": lambda: _trivial_jit(1.0)}
     t_one = {k: math.inf for k in cases}

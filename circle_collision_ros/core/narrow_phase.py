@@ -441,21 +441,6 @@ def _rows_ok(p_a, v_a, a_a, r_a, p_b, v_b, a_b, r_b) -> bool:
             and a_b.flags.c_contiguous and r_b.flags.c_contiguous)
 
 
-def _one_pair_first(p_a, v_a, a_a, r_a, p_b, v_b, a_b, r_b, horizon):
-    """The first call of the one-pair entry: loads it (narrow_one_pair: the C
-    extension and its compiled kernels, ~0.1 s from the cache) and puts it in
-    place of this function."""
-    global _one_pair
-    from circle_collision_ros.core.narrow_one_pair import load_one_pair
-
-    _one_pair = load_one_pair()
-    return _one_pair(p_a, v_a, a_a, r_a, p_b, v_b, a_b, r_b, horizon)
-
-
-# one pair as 1-D vectors -> numpy.float64, or None (then the general path)
-_one_pair = _one_pair_first
-
-
 _VEC_NAMES = ("p_a", "v_a", "a_a", "p_b", "v_b", "a_b")
 
 
@@ -516,18 +501,12 @@ def time_to_collision(p_a, v_a, a_a, r_a, p_b, v_b, a_b, r_b, horizon=math.inf) 
     TypeError
         If an argument is None.
 
-    One pair given as 1-D vectors (lists, tuples or 1-D float64 arrays) and
-    numbers takes a C entry (``narrow_one_pair``; issue 17's target is
+    One pair given as 1-D vectors (lists, tuples or 1-D float64 arrays) or
+    (1, D) arrays, and numbers or (1,) arrays, is answered in C (this name is
+    bound to the builtin of ``narrow_one_pair``; issue 17's target is
     <= 0.8 us per call, ``bench/bench_core.py --one-pair`` prints it) with
     the same answers, bit for bit, as the batch.
     """
-    # One pair as 1-D vectors (lists, tuples or 1-D float64 arrays, D = 2 or
-    # 3) and numbers: the C entry (narrow_one_pair), which runs the batch's
-    # certified kernels on the row, bitwise the batch answer; None where it
-    # does not apply (other types, shapes, a row for the exact path).
-    t = _one_pair(p_a, v_a, a_a, r_a, p_b, v_b, a_b, r_b, horizon)
-    if t is not None:
-        return t
     # Fast path (Scene / node hot path): inputs already in kernel layout and
     # a scalar horizon -- no conversions, no temporaries besides the output.
     th = type(horizon)
@@ -563,3 +542,12 @@ def time_to_collision(p_a, v_a, a_a, r_a, p_b, v_b, a_b, r_b, horizon=math.inf) 
         hz = _as_rows(sc[2], batch, n, 0)
     _run(threads_pay(n, PARALLEL_MIN_ROWS), pa, va, aa, ra, pb, vb, ab, rb, hz, out)
     return out.reshape(batch) if batch else out[0]  # batch shape (): a numpy.float64
+
+
+# The public name: a C builtin (narrow_one_pair) that answers one pair itself
+# and calls the function above for everything else.  Imported here, after
+# _certified_pair2/3, which narrow_one_pair compiles as its kernels.
+from circle_collision_ros.core.narrow_one_pair import public_entry  # noqa: E402
+
+_general_path = time_to_collision  # tests and the bench compare the two
+time_to_collision = public_entry(_general_path)

@@ -1,4 +1,6 @@
-"""The one-pair entry of ``time_to_collision`` (C, ``core/narrow_one_pair``).
+"""The public ``time_to_collision`` is a C builtin (``core/_one_pair.c``,
+``core/narrow_one_pair``) answering one pair itself, in front of the Python
+general path.
 
 Guarantees proved here:
 
@@ -9,10 +11,17 @@ Guarantees proved here:
   finite, infinite and zero horizons:
   over a random mix with the hard rows of issue 17 (classes A-D, rows for the
   exact path, constant velocity, span rows) and a hypothesis search.
+* A batch of one -- (1, D) arrays and/or (1,) radii or horizon -- gets the
+  batch answer as a float64 array of shape (1,), as the general path returns.
+* The horizon positional, as the keyword ``horizon`` or left out (inf);
+  other keywords and argument counts are the general path's (same answers,
+  same errors).
 * Bad input: wrong or mismatched vector lengths, non-numeric values and None
   raise an error that names the argument; NaN / inf values, negative radii
   and negative or NaN horizons give NaN, as in a batch.
-* The C entry really serves these calls (not the general path behind it).
+* The C path really serves these calls (not the general path behind it),
+  ``help()`` and ``inspect.signature`` describe the public function, and
+  without the built extension the general path answers, with a warning.
 """
 from __future__ import annotations
 
@@ -115,18 +124,111 @@ def test_batch_shape_scalar_is_a_numpy_float64_on_every_path():
 
 
 def test_c_entry_serves_one_pair_calls():
-    """The calls above are answered by the C entry, not by the general path."""
-    row = ([-10.0, 0.0], [1.0, 0.0], [0.0, 0.0], 1.0, [0.0, 0.0], [0.0, 0.0], [0.0, 0.0], 1.0)
-    assert time_to_collision(*row) == 8.0  # loads the entry
+    """The calls above are answered by the C path, not by the general path."""
     from circle_collision_ros.core import _one_pair  # built by setup.py (bootstrap, colcon)
-    assert narrow_phase._one_pair is _one_pair.ttc
+
+    row = ([-10.0, 0.0], [1.0, 0.0], [0.0, 0.0], 1.0, [0.0, 0.0], [0.0, 0.0], [0.0, 0.0], 1.0)
+    assert time_to_collision(*row) == 8.0
+    assert type(time_to_collision).__name__ == "builtin_function_or_method"
+    assert narrow_phase.time_to_collision is time_to_collision
     for form in _forms(tuple(tuple(x) if isinstance(x, list) else x for x in row), np.random.default_rng(0)):
-        t = _one_pair.ttc(*form, math.inf)
-        assert t is not None and t == 8.0
+        t = _one_pair.c_path(*form, math.inf)
+        assert type(t) is np.float64 and t == 8.0
+        assert _one_pair.c_path(*form) == 8.0  # horizon left out: inf
+    one = [np.array([x]) for x in row]
+    t = _one_pair.c_path(*one, 5.0)
+    assert type(t) is np.ndarray and t.shape == (1,) and t[0] == math.inf
     # not for this path: the general path decides (None)
-    assert _one_pair.ttc([[-10.0, 0.0]], *row[1:], math.inf) is None  # a batch
-    assert _one_pair.ttc(*row[:3], np.array(1.0), *row[4:], math.inf) is None  # 0-d radius
-    assert _one_pair.ttc(*row[:3], True, *row[4:], math.inf) is None  # bool
+    assert _one_pair.c_path([[-10.0, 0.0]], *row[1:], math.inf) is None  # a list of rows
+    assert _one_pair.c_path(np.zeros((2, 2)), *row[1:], math.inf) is None  # a batch of 2
+    assert _one_pair.c_path(*row[:3], np.array(1.0), *row[4:], math.inf) is None  # 0-d radius
+    assert _one_pair.c_path(*row[:3], True, *row[4:], math.inf) is None  # bool
+    assert _one_pair.c_path(*row[:3], 1.0, *row[4:], np.array(2.0)) is None  # 0-d horizon
+    f4 = np.array([-10.0, 0.0], dtype=np.float32)
+    assert _one_pair.c_path(f4, *row[1:], math.inf) is None  # float32
+    touch = ((3.0, 4.0), (-4.0, 3.0), (1.0, -7.0), 5.0, (0.0, 0.0), (0.0, 0.0), (0.0, 0.0), 0.0)
+    assert _one_pair.c_path(*touch) is None  # left undecided by the kernels: the exact path
+
+
+@pytest.mark.parametrize("D", [2, 3])
+def test_batch_of_one_is_a_shape_1_array_bitwise_the_batch(D):
+    """(1, D) vectors and/or (1,) radii / horizon: the general path's result
+    shape (1,), bitwise its value, whichever arguments have the batch axis."""
+    rng = np.random.default_rng([17, 1, D])
+    rows = _hard_rows(D, rng)[::3]
+    Hs = rng.choice([math.inf, 10.0, 2.0, 0.0], len(rows))
+    want = _batch(rows, Hs)
+    for row, H, w in zip(rows, Hs, want):
+        full = [np.array([x], dtype=float) for x in row] + [np.array([H])]
+        mixed = [np.array([x], dtype=float) if rng.random() < 0.5 else
+                 (np.array(x) if isinstance(x, tuple) else x) for x in row] + [float(H)]
+        if not any(isinstance(x, np.ndarray) and x.ndim == (2 if isinstance(r, tuple) else 1)
+                   for x, r in zip(mixed, row)):
+            mixed[0] = np.array([row[0]], dtype=float)
+        for args in (full, full[:8] + [float(H)], mixed):
+            got = time_to_collision(*args)
+            assert type(got) is np.ndarray and got.shape == (1,) and got.dtype == np.float64
+            assert got.tobytes() == np.array([w]).tobytes(), (row, H, got, w)
+
+
+def test_horizon_keyword_positional_default_and_other_calls():
+    row = ([-10.0, 0.0], [1.0, 0.0], [0.0, 0.0], 1.0, [0.0, 0.0], [0.0, 0.0], [0.0, 0.0], 1.0)
+    assert time_to_collision(*row) == 8.0
+    assert time_to_collision(*row, 5.0) == math.inf
+    assert time_to_collision(*row, horizon=5.0) == math.inf
+    assert time_to_collision(*row, horizon=8.0) == 8.0
+    # other keywords: the general path, same answers
+    names = ("p_a", "v_a", "a_a", "r_a", "p_b", "v_b", "a_b", "r_b")
+    kw = dict(zip(names, row))
+    t = time_to_collision(**kw, horizon=5.0)
+    assert type(t) is np.float64 and t == math.inf
+    assert time_to_collision(*row[:4], **dict(zip(names[4:], row[4:]))) == 8.0
+    with pytest.raises(TypeError):
+        time_to_collision(*row[:7])  # too few: the general path's TypeError
+    with pytest.raises(TypeError):
+        time_to_collision(*row, 5.0, 6.0)  # too many
+    with pytest.raises(TypeError):
+        time_to_collision(*row, horizont=5.0)  # misspelt keyword
+    with pytest.raises(TypeError):
+        time_to_collision(*row, 5.0, horizon=5.0)  # horizon twice
+
+
+def test_help_and_signature_describe_the_public_function():
+    import inspect
+    import pydoc
+
+    sig = inspect.signature(time_to_collision)
+    assert list(sig.parameters) == ["p_a", "v_a", "a_a", "r_a", "p_b", "v_b", "a_b", "r_b", "horizon"]
+    assert sig.parameters["horizon"].default == math.inf
+    assert time_to_collision.__doc__ == inspect.getdoc(narrow_phase._general_path)
+    assert time_to_collision.__doc__.startswith("Earliest time at which two")
+    assert time_to_collision.__name__ == "time_to_collision"
+    assert time_to_collision.__module__ == "circle_collision_ros.core.narrow_phase"
+    text = pydoc.render_doc(time_to_collision, renderer=pydoc.plaintext)
+    assert "time_to_collision(p_a, v_a, a_a, r_a, p_b, v_b, a_b, r_b, horizon=inf)" in text
+    assert "Earliest time at which two" in text
+
+
+def test_without_the_extension_the_general_path_answers_with_a_warning():
+    """A source tree whose extension was not built: importing the core warns,
+    and time_to_collision is the Python general path with the same answers."""
+    import subprocess
+    import sys
+
+    code = (
+        "import sys, warnings\n"
+        "sys.modules['circle_collision_ros.core._one_pair'] = None  # import fails as if not built\n"
+        "with warnings.catch_warnings(record=True) as w:\n"
+        "    warnings.simplefilter('always')\n"
+        "    from circle_collision_ros.core import time_to_collision as T\n"
+        "assert any('_one_pair is not built' in str(x.message) for x in w), [str(x.message) for x in w]\n"
+        "assert type(T).__name__ == 'function'\n"
+        "t = T([-10.0, 0.0], [1.0, 0.0], [0.0, 0.0], 1.0, [0.0, 0.0], [0.0, 0.0], [0.0, 0.0], 1.0)\n"
+        "print(type(t).__name__, float(t))\n"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=240)
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.split() == ["float64", "8.0"]
 
 
 Z2 = (0.0, 0.0)

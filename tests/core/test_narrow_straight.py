@@ -17,6 +17,12 @@ Guarantees proved here:
   its answer alone, whichever loop ran on it -- test_mixed_blocks.
 * Invalid rows (non-finite value, negative radius or horizon) are never
   decided by it: NaN from the robust solver -- test_invalid_rows.
+* Tiny bodies or points far apart (R down to 0 and up to ~1e-42 |dp|),
+  head-on or grazing within an ulp of R, with a relative state that needs
+  double-double (so the cross product of the miss test has its absolute
+  error ~u^2 |dp|): the straight loop never calls such a contact a miss, and
+  the public API gets every row exactly -- test_tiny_bodies_far_apart (the
+  miss test's bound is derived next to it in narrow_straight).
 """
 from __future__ import annotations
 
@@ -201,3 +207,58 @@ def test_invalid_rows(D):
     got = _straight_loop(tuple(args), H)
     assert np.all(got[:6] == UNDECIDED)
     assert np.isnan(time_to_collision(*args, H)[:6]).all()
+
+
+def tiny_rows(n, D, seed):
+    """da = 0 rows with tiny bodies far apart: body a at p_a (|p_a| ~ 0.1-8,
+    short mantissas) moving at v_a = -k p_a (k with few bits: exact), body b
+    at p_b, |p_b| ~ 2^-e |p_a| with e in [55, 140] (short mantissas too; so
+    dp = p_a - p_b needs a double-double), either moving at v_b = -k p_b exactly (dv = -k dp: a
+    head-on course, miss distance d = 0, R = 0 or 2^-j) or at a random tiny
+    v_b (d ~ 2^-e |dp|; R the float just above or just below the exact d).
+    The closest approach is at t = 1/k > 0, so the exact answer is a contact
+    iff R >= d (a tangent graze if equal).  a_a == a_b, nonzero."""
+    rng = np.random.default_rng(seed)
+    rows = []
+    for i in range(n):
+        L = 2.0 ** int(rng.integers(-3, 4))
+        pa = rng.integers(1, 2 ** 40, D) * 2.0 ** -40 * L * rng.choice([-1, 1], D)
+        k = float(rng.choice([3.0, 5.0, 0.75, 1.5, 7.0, 0.3125]))
+        va = -k * pa
+        pb = rng.integers(1, 2 ** 40, D) * 2.0 ** -(40 + int(rng.integers(55, 140))) * L * rng.choice([-1, 1], D)
+        head_on = i % 4 == 0
+        vb = -k * pb if head_on else rng.normal(size=D) * np.linalg.norm(pb)
+        dp = [Fraction(x) - Fraction(y) for x, y in zip(pa, pb)]
+        dv = [Fraction(x) - Fraction(y) for x, y in zip(va, vb)]
+        assert not head_on or all(v == -Fraction(k) * p for p, v in zip(dp, dv))
+        cross = [dp[1] * dv[2] - dp[2] * dv[1], dp[2] * dv[0] - dp[0] * dv[2]] if D == 3 else []
+        cross.append(dp[0] * dv[1] - dp[1] * dv[0])
+        d2 = sum(c * c for c in cross) / sum(v * v for v in dv)  # exact miss distance^2
+        if d2 == 0:
+            R = float(rng.choice([0.0, 2.0 ** -int(rng.integers(60, 160))]))
+        else:
+            R = math.sqrt(float(d2))
+            while Fraction(R) ** 2 < d2:  # the float just above d
+                R = math.nextafter(R, math.inf)
+            if i % 2:  # the float just below d: a miss by less than an ulp of R
+                R = math.nextafter(R, 0.0)
+        ab = rng.normal(size=D)
+        rows.append((pa, va, ab.copy(), R, pb, vb, ab, 0.0))
+    return tuple(np.array([r[j] for r in rows], dtype=float) for j in range(8))
+
+
+@pytest.mark.parametrize("D", [2, 3])
+@pytest.mark.parametrize("H", [10.0, math.inf])
+def test_tiny_bodies_far_apart(D, H):
+    args = tiny_rows(80, D, seed=[17, 3, D])
+    got = _straight_loop(args, H)
+    api = time_to_collision(*args, H)
+    bad = []
+    for i in range(len(api)):
+        row = tuple(x[i] for x in args)
+        ref = exact_reference(*row, H)
+        loop_ok = got[i] == UNDECIDED or _agrees_straight(float(got[i]), row, ref, H)
+        if not (loop_ok and _agrees_straight(float(api[i]), row, ref, H)):
+            bad.append((i, got[i], api[i], ref.t))
+    assert not bad, f"{len(bad)} wrong, first {bad[:3]}"
+
