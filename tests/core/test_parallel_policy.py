@@ -2,7 +2,7 @@
 
 Guarantee proved here: while as many busy processes run as this process has
 cores, ``cores_free()`` is 0 and ``threads_pay`` says serial, whatever the
-work; below the work threshold it says serial on any machine.  (Every threaded
+work, also right after a threaded kernel; below the work threshold it says serial on any machine.  (Every threaded
 kernel is compared bit for bit with its serial twin in the kernels' own tests,
 so the choice can only change timing.)
 """
@@ -37,6 +37,10 @@ def test_busy_cores_make_kernels_serial():
         time.sleep(0.5)  # the spinners are running
         seen = [pp.cores_free() for _ in range(20)]
         assert max(seen) == 0, seen
+        assert not pp.threads_pay(10**9, 1)
+        # right after a threaded kernel our pool's workers are not counted as others'
+        # work, but the spinners still are: serial
+        pp._last_yes = time.monotonic()
         assert not pp.threads_pay(10**9, 1)
     finally:
         for p in procs:
