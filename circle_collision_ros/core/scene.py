@@ -1017,7 +1017,11 @@ class Scene:
         gathered (the query kernel does it on its way)."""
         A, B, ttc, cns, over, pt, nm, cs = rows
         for x in rows:
-            x.flags.writeable = False  # SceneContacts' arrays are read-only
+            # SceneContacts' arrays are read-only; an empty one holds nothing to protect and may
+            # be a shared constant (_EMPTY_I) that the kernels also take: freezing it would give
+            # every later kernel call a new read-only specialisation to compile (~15 s, once)
+            if x.size:
+                x.flags.writeable = False
         utf8 = None
         if self._utf8_ok:
             if id_rows is None:

@@ -136,6 +136,16 @@ class CollisionPredictor:
         crowd.upsert_many([f"w{i:03d}" for i in range(k)], rows, np.zeros((k, d)), np.zeros((k, d)),
                           np.ones(k), 1)
         crowd.predictions()
+        # ... and the one-body path (a stream of single states, bodies arriving one by one): its
+        # compiled query passes, including the specialisations for the read-only arrays a
+        # published prediction leaves behind -- compiled on a first stream they stalled a node
+        # for ~15 s on a fresh install (bench/bench_node.py --targets, 300 streams)
+        stream = Scene(self.config.horizon, d, method="grid")
+        for k in range(12):
+            p = np.zeros((1, d))
+            p[0, 0] = 0.5 * (k % 6)
+            stream.merge([f"s{k % 6}"], [10 + k], p, np.eye(1, d), np.zeros((1, d)), [1.0], [False], 0)
+            stream.predictions()
         # and the uncertain path's kernels (a first uncertain state would otherwise wait for them)
         scene.merge(["a"], [2], np.eye(1, d), np.zeros((1, d)), np.zeros((1, d)), [1.0], [False], 0,
                     covariances=np.eye(2 * d)[None] * 0.01)

@@ -438,3 +438,23 @@ def test_capture_read_on_another_thread_during_updates() -> None:
     done.set()
     thread.join(60)
     assert not failures
+
+
+def test_stream_after_an_empty_prediction_compiles_nothing_new():
+    """An empty prediction must not freeze the shared empty array the query kernels
+    also take: it did, and every later one-body update then needed read-only
+    specialisations of the compiled query (~15 s to compile, once, on a node's
+    first stream). After an empty scene's prediction and a stream of single
+    states, the query kernels have only writable signatures."""
+    from circle_collision_ros.core import scene as scene_module
+    from circle_collision_ros.core import scene_kernels as sk
+
+    sc = Scene(5.0, 2, method="grid")
+    sc.predictions()  # empty: R is None
+    assert scene_module._EMPTY_I.flags.writeable
+    for k in range(12):
+        p = np.array([[0.5 * (k % 6), 0.0]])
+        sc.merge([f"s{k % 6}"], [10 + k], p, np.array([[1.0, 0.0]]), np.zeros((1, 2)), [1.0], [False], 0)
+        sc.predictions()
+    for kernel in (sk.ordered_query, sk.evaluate_rows):
+        assert not any("readonly" in str(t) for sig in kernel.signatures for t in sig), kernel
