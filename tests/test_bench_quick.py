@@ -108,15 +108,17 @@ def test_accuracy_tables(quick_run):
     text = (quick_run / "accuracy_vs_time.md").read_text()
     header, rows = table_with(text, ["method", "ns/pair (mean of families)"])
     assert header == ["method", "ns/pair (mean of families)", "ns/pair (median family)", "x ours serial (mean)",
-                      "median err (ulp)",
+                      "x ours serial (median family)", "median err (ulp)",
                       "worst finite err (ulp)", "wrong t=0", "contacts > 4 ulp", "missed", "spurious"]
     names = [r[0] for r in rows]
     assert names[:5] == METHODS and len(names) == 6 and names[5].startswith("ours (time_to_collision")
     for r in rows:
-        assert number(r[1]) > 0 and number(r[2]) > 0 and number(r[3]) > 0
-        for c in r[4:6]:
+        assert number(r[1]) > 0 and number(r[2]) > 0 and number(r[3]) > 0 and number(r[4]) > 0
+        for c in r[5:7]:
             assert number(c) >= 0 or c == "n/a"
-        assert all(int(c) >= 0 for c in r[6:])
+        assert all(int(c) >= 0 for c in r[7:])
+    ours = rows[METHODS.index("ours (numba, serial kernel)")]
+    assert number(ours[3]) == 1.0 and number(ours[4]) == 1.0  # the ratios' base
 
     header, rows = table_with(text, ["family", "numpy.roots loop"])
     assert header[1:] == names
