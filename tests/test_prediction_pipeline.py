@@ -324,3 +324,55 @@ def test_warm_up_loads_the_large_scene_kernels(dimensions) -> None:
                          text=True, timeout=600)
     assert out.returncode == 0, out.stderr
     assert "loaded: []" in out.stdout, out.stdout
+
+
+_FIRST_MESSAGES = """
+import numpy as np
+import numba.core.dispatcher as dispatcher
+from dataclasses import replace
+from circle_collision_msgs.msg import CircleState, CircleStateArray
+from circle_collision_ros.pipeline.cdr_codec import decode_states, encode_state, encode_state_array
+from circle_collision_ros.pipeline.predictor import CollisionPredictor, PredictorConfig
+from circle_collision_ros.pipeline.state_batch import StateBatch
+CollisionPredictor(PredictorConfig(dimensions={d})).warm_up()
+loaded = []
+original = dispatcher.Dispatcher._compile_for_args
+def spy(self, *args, **kwargs):
+    loaded.append(self.py_func.__name__)
+    return original(self, *args, **kwargs)
+dispatcher.Dispatcher._compile_for_args = spy
+rng = np.random.default_rng(3)
+n, t = 40, 1_700_000_000 * 10**9
+cov = np.zeros((n, 36))
+cov[:, ::7] = rng.uniform(0.0, 0.05, (n, 6))
+for uncertain in (False, True):
+    for report_all in (False, True):
+        batch = StateBatch(ids=[f"robot_{{k}}" for k in range(n)], frames=["odom"] * n,
+                           stamp_ns=np.full(n, t, np.int64), radius=rng.uniform(0.2, 1.0, n),
+                           position=rng.uniform(-10, 10, (n, 3)), velocity=rng.normal(0, 1, (n, 3)),
+                           acceleration=rng.normal(0, 0.2, (n, 3)), remove=np.zeros(n, dtype=bool),
+                           covariance=cov if uncertain else None,
+                           covariance_size=np.full(n, 36, np.int64) if uncertain else None)
+        node = CollisionPredictor(PredictorConfig(dimensions={d}, frame_id="odom", report_all_pairs=report_all))
+        node.receive_batch(decode_states(encode_state_array(batch, t, "odom"), CircleStateArray), t)
+        node.predict().to_cdr()
+        for k in range(5):
+            one = replace(batch.select(np.array([k])), stamp_ns=np.array([t + k + 1], np.int64))
+            node.receive_batch(decode_states(encode_state(one), CircleState), t + k + 1)
+            node.predict().to_cdr()
+print("loaded:", loaded)
+"""
+
+
+@pytest.mark.parametrize("dimensions", [2, 3])
+def test_warm_up_loads_the_message_path_kernels(dimensions) -> None:
+    """After CollisionPredictor.warm_up the node's message path (decode of CircleStateArray and
+    CircleState, exact and with covariance; prediction; both output encoders) compiles and loads
+    nothing: left to the first messages, a fresh install's node answered 2 of 180 inputs of
+    bench/bench_node.py's first scenario. Fresh process: earlier tests must not have loaded them."""
+    import subprocess
+    import sys
+    out = subprocess.run([sys.executable, "-c", _FIRST_MESSAGES.format(d=dimensions)], capture_output=True,
+                         text=True, timeout=600)
+    assert out.returncode == 0, out.stderr
+    assert "loaded: []" in out.stdout, out.stdout

@@ -34,14 +34,17 @@ from circle_collision_ros.core.uncertainty_kernels import (
     BROAD_PHASE_SIGMAS,
     TUBE_TAIL,
     max_sigma_rows,
+    normal_table,
     pair_probability,
+    qmc_probability,
     row_classes,
     screen_rows_at,
     screen_sigmas,
 )
 
 __all__ = ["UncertainPairs", "uncertain_pairs", "deferred_count", "BROAD_PHASE_SIGMAS", "TUBE_TAIL",
-           "inflation_radius", "covariance_problem", "COV_SYMMETRY_RTOL", "COV_PSD_RTOL"]
+           "inflation_radius", "covariance_problem", "COV_SYMMETRY_RTOL", "COV_PSD_RTOL",
+           "load_fallback_kernels"]
 
 # Tolerances of covariance_problem (the node rejects what fails them):
 COV_SYMMETRY_RTOL = 1e-9  # |C - C^T| <= 1e-9 * max|C| (elementwise)
@@ -266,3 +269,12 @@ def inflation_radius(cov, horizon: float) -> np.ndarray:
     out = np.empty(cov.shape[0])
     max_sigma_rows(np.ascontiguousarray(cov), 0.0, H, out)
     return BROAD_PHASE_SIGMAS * out
+
+
+def load_fallback_kernels(dimensions: int) -> None:
+    """Compile (or load from numba's cache) the RQMC fallback's kernels for `dimensions`.
+
+    Only pairs whose bracket stays wide take the fallback, so a warm-up scene may not reach
+    it; called directly, a node's first such pair waits for no compile."""
+    z = np.zeros(dimensions)
+    qmc_probability(z + 1.5, z, z + 0.1, 1.0, np.eye(2 * dimensions) * 0.01, 1.0, normal_table(2 * dimensions))

@@ -409,6 +409,17 @@ def _encoded_names(names: list[str]) -> tuple[np.ndarray, np.ndarray, np.ndarray
     return np.frombuffer(joined.encode(), dtype=np.uint8), starts, lengths
 
 
+def _readonly(*arrays: np.ndarray) -> list[np.ndarray]:
+    """Read-only views (no copy). numba compiles one specialisation per writability of each
+    argument, and the encoders' inputs come writable or not depending on their source (bytes
+    from the wire, the scene's frozen records, fresh columns): viewed read-only, every call
+    takes the one specialisation CollisionPredictor.warm_up compiled."""
+    views = [np.asarray(a).view() for a in arrays]
+    for v in views:
+        v.flags.writeable = False
+    return views
+
+
 def encode_prediction_array(stamp: tuple[int, int], frame_id: str, horizon: float, columns,
                             utf8_ids: tuple | None = None, *, uncertainty: bool = True) -> bytes:
     """Serialized CollisionPredictionArray, written by one compiled loop.
@@ -443,11 +454,14 @@ def encode_prediction_array(stamp: tuple[int, int], frame_id: str, horizon: floa
     buf[:_ORIGIN] = np.frombuffer(CDR_LE + b"\x00\x00", dtype=np.uint8)
     body = buf[_ORIGIN:]
     contact_sec, contact_nanosec = np.divmod(columns.contact_ns, 1_000_000_000)
+    (frame, blob, starts, lengths, status, ttc, contact_sec, contact_nanosec, point, normal, closing,
+     probability, bound, plausible) = _readonly(
+        frame, blob, starts, lengths, columns.status, columns.ttc, contact_sec, contact_nanosec,
+        np.ascontiguousarray(columns.point), np.ascontiguousarray(columns.normal), columns.closing_speed,
+        columns.probability, columns.probability_bound, columns.plausible_ttc)
     _encode_predictions(buf, body.view(np.uint32), body.view(np.float64), int(stamp[0]), int(stamp[1]),
-                        frame, float(horizon), blob, starts, lengths, columns.status, columns.ttc,
-                        contact_sec, contact_nanosec, np.ascontiguousarray(columns.point),
-                        np.ascontiguousarray(columns.normal), columns.closing_speed, uncertainty,
-                        columns.probability, columns.probability_bound, columns.plausible_ttc)
+                        frame, float(horizon), blob, starts, lengths, status, ttc, contact_sec,
+                        contact_nanosec, point, normal, closing, uncertainty, probability, bound, plausible)
     return buf[:end].tobytes()
 
 
@@ -517,9 +531,9 @@ def encode_contact_rows(stamp: tuple[int, int], frame_id: str, horizon: float, c
     buf = np.zeros(_ORIGIN + 8 * -(-(end - _ORIGIN) // 8), dtype=np.uint8)
     buf[:_ORIGIN] = np.frombuffer(CDR_LE + b"\x00\x00", dtype=np.uint8)
     body = buf[_ORIGIN:]
+    rows = _readonly(frame, blob, start_a, len_a, start_b, len_b, contacts.ttc, contacts.contact_ns,
+                     contacts.overlapping, contacts.point, contacts.normal, contacts.closing_speed)
     if _encode_contacts(buf, body.view(np.uint32), body.view(np.float64), int(stamp[0]), int(stamp[1]),
-                        frame, float(horizon), blob, start_a, len_a, start_b, len_b, contacts.ttc,
-                        contacts.contact_ns, contacts.overlapping, contacts.point, contacts.normal,
-                        contacts.closing_speed, contact, overlapping) < 0:
+                        rows[0], float(horizon), *rows[1:], contact, overlapping) < 0:
         return None
     return buf[:end].tobytes()
