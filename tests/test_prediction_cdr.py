@@ -163,15 +163,20 @@ def test_exact_contacts_encoder_equals_the_columns_path(seed, n, dim, report_all
     assert fast is not None and fast == general == prediction.to_cdr()
 
 
-def test_non_finite_contact_row_takes_the_general_path() -> None:
+@pytest.mark.parametrize("field, value", [("closing_speed", np.nan), ("ttc", np.inf),
+                                          ("point", np.nan), ("normal", -np.inf), ("point", np.inf)])
+def test_non_finite_contact_row_takes_the_general_path(field, value) -> None:
     """A contact row with a non-finite value is left out (the "never publishes NaN" guarantee):
     the one-pass encoder refuses it and to_cdr falls back to the columns path, which drops it."""
     prediction = predictions(200, 200, 2, False, "map")
     c = prediction.contacts
     assert len(c) > 3
-    closing = c.closing_speed.copy()
-    closing[1] = np.nan
-    bad = dataclasses.replace(prediction, contacts=dataclasses.replace(c, closing_speed=closing))
+    column = getattr(c, field).copy()
+    if column.ndim == 2:
+        column[1, -1] = value  # one coordinate of a point or normal
+    else:
+        column[1] = value
+    bad = dataclasses.replace(prediction, contacts=dataclasses.replace(c, **{field: column}))
     assert encode_contact_rows(bad.stamp, bad.frame_id, bad.horizon, bad.contacts,
                                CollisionPrediction.CONTACT, CollisionPrediction.OVERLAPPING) is None
     rows = list(bad.rows())

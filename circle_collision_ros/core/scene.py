@@ -239,6 +239,7 @@ class Scene:
         self._R = np.zeros(cap)
         self._C = np.zeros((cap, 2 * D, 2 * D))      # covariance of (p, v) at the stamp
         self._U = np.zeros(cap, dtype=bool)           # covariance not all zero (an uncertain body)
+        self._n_uncertain = 0                         # alive slots with _U set (see _set_uncertain)
         self._T = np.zeros(cap, dtype=np.int64)      # stamp, ns
         self._Tf = np.zeros(cap)                      # (T - E) s, for the broad phase
         self._recv = np.zeros(cap, dtype=np.int64)   # receive clock, ns
@@ -462,10 +463,10 @@ class Scene:
             self._A[sl] = np.asarray(accelerations)[src, :D]
             self._R[sl] = np.asarray(radii)[src]
             if covariances is None:
-                self._U[sl] = False
+                self._set_uncertain(sl, False)
             else:
                 self._C[sl] = np.asarray(covariances)[src]
-                self._U[sl] = (self._C[sl] != 0.0).any(axis=(1, 2))
+                self._set_uncertain(sl, (self._C[sl] != 0.0).any(axis=(1, 2)))
             self._T[sl] = stamps[src]
             self._recv[sl] = received_ns
             self._recv_floor = min(self._recv_floor, received_ns)
@@ -483,16 +484,15 @@ class Scene:
                      received_ns: int) -> MergeResult:
         """merge of one exact state (a per-body stream's message) on scalars: the same rules
         and stored bits as the general path, without its array set-up."""
-        none = MergeResult(_EMPTY_I, _EMPTY_I, _EMPTY_I, _EMPTY_I, _EMPTY_I)
         s = self._slot.get(bid)
         if s is None:
             gone = self._removals.get(bid) if self._removals else None
             if gone is not None:
                 if stamp <= gone[0]:
-                    return none._replace(not_newer=_FIRST_ROW)  # a late state of a removed body
+                    return MergeResult(_EMPTY_I, _FIRST_ROW, _EMPTY_I, _EMPTY_I, _EMPTY_I)  # a late state of a removed body
                 del self._removals[bid]
             if self.max_bodies is not None and len(self._slot) >= self.max_bodies:
-                return none._replace(full=_FIRST_ROW)
+                return MergeResult(_EMPTY_I, _EMPTY_I, _FIRST_ROW, _EMPTY_I, _EMPTY_I)
             s = self._alloc()
             self._preserve((s,))
             self._slot[bid] = s
@@ -502,7 +502,7 @@ class Scene:
             self._rank_insert(s)
             self._add_utf8(np.array([s], dtype=np.int64))
         elif stamp <= self._T[s]:
-            return none._replace(not_newer=_FIRST_ROW)
+            return MergeResult(_EMPTY_I, _FIRST_ROW, _EMPTY_I, _EMPTY_I, _EMPTY_I)
         else:
             self._preserve((s,))
             self._n_new = 0
@@ -511,7 +511,8 @@ class Scene:
         self._V[s] = np.asarray(velocities)[0, :D]
         self._A[s] = np.asarray(accelerations)[0, :D]
         self._R[s] = np.asarray(radii)[0]
-        self._U[s] = False
+        if self._U[s]:
+            self._set_uncertain(s, False)
         self._T[s] = stamp
         self._recv[s] = received_ns
         self._recv_floor = min(self._recv_floor, received_ns)
@@ -519,7 +520,7 @@ class Scene:
         if self.reference_ns is None or stamp > self.reference_ns:
             self.reference_ns = stamp
         self._version += 1
-        return none._replace(accepted=_FIRST_ROW)
+        return MergeResult(_FIRST_ROW, _EMPTY_I, _EMPTY_I, _EMPTY_I, _EMPTY_I)
 
     def upsert_many(self, ids: Sequence[Hashable], positions, velocities, accelerations, radii,
                     stamps_ns, received_ns: int = 0) -> MergeResult:
@@ -570,7 +571,7 @@ class Scene:
         self._rank_remove(s)
         self._ids[s] = None
         self._alive[s] = False
-        self._U[s] = False
+        self._set_uncertain(s, False)
         self._dirty.add(s)
         self._free.append(s)
         self._version += 1
@@ -580,6 +581,13 @@ class Scene:
             # future (tests/reliability/test_faults_clock.py::test_stamps_jump_backwards).
             self.reference_ns = None
             self._need_full = True
+
+    def _set_uncertain(self, slots, flags) -> None:
+        """_U[slots] = flags, counting the uncertain bodies: an exact scene skips the
+        uncertain query in O(1) instead of a pass over every slot."""
+        before = int(np.count_nonzero(self._U[slots]))
+        self._U[slots] = flags
+        self._n_uncertain += int(np.count_nonzero(self._U[slots])) - before
 
     def _alloc(self) -> int:
         if not self._free:
@@ -1026,7 +1034,14 @@ class Scene:
         if self._utf8_ok:
             if id_rows is None:
                 id_rows = (self._id_start[A], self._id_len[A], self._id_start[B], self._id_len[B])
-            utf8 = (self._utf8,) + tuple(id_rows)
+            # read-only like the rows (the encoders compile for that one kind); the blob is
+            # appended to in place, but never where published ids lie
+            blob = self._utf8.view()
+            blob.flags.writeable = False
+            for x in id_rows:
+                if x.size:
+                    x.flags.writeable = False
+            utf8 = (blob,) + tuple(id_rows)
         return SceneContacts(self.reference_ns or 0, self._ids[A], self._ids[B], ttc, cns, over,
                              pt, nm, cs, utf8)
 
@@ -1084,7 +1099,7 @@ class Scene:
                          max_evaluated: int | None) -> SceneUncertainty:
         R = self.reference_ns
         e = np.empty(0)
-        if R is None or not (self._alive & self._U).any():
+        if R is None or self._n_uncertain == 0:
             self._uncertain_waiting = {}  # no pair listed: none waits
             return SceneUncertainty(R or 0, np.empty(0, dtype=object), np.empty(0, dtype=object), e, e, e)
         from circle_collision_ros.core import uncertainty as unc  # heavy kernels: loaded on first use

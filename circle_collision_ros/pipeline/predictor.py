@@ -205,23 +205,29 @@ class CollisionPredictor:
         """
         check = check_batch(batch, frame_id=self.frame_id, now_ns=now_ns, dimensions=self.config.dimensions)
         report = IntakeReport(rejected=check.rejections)
-        good = np.flatnonzero(check.good)
-        if good.size and not self.frame_id:
-            self.frame_id = check.frame_id  # adopt the first frame seen
-        if good.size == 0:
+        if len(batch) == 0:
             return report
-        ids = [batch.ids[k] for k in good.tolist()]
+        if check.rejections:  # the good rows only
+            good = np.flatnonzero(check.good)
+            if good.size == 0:
+                return report
+            batch = batch.select(good)
+            uncertain = check.uncertain[good] if check.uncertain is not None else None
+        else:  # every row (the usual message): no copies
+            good = None
+            uncertain = check.uncertain
+        if not self.frame_id:
+            self.frame_id = check.frame_id  # adopt the first frame seen
         covariances = None  # exact states: the scene's exact path alone
-        if check.uncertain is not None and check.uncertain[good].any():
-            covariances = covariance_block(batch.covariance[good], self.config.dimensions)
-        merged = self._scene.merge(ids, batch.stamp_ns[good], batch.position[good],
-                                   batch.velocity[good], batch.acceleration[good],
-                                   batch.radius[good], batch.remove[good],
+        if uncertain is not None and uncertain.any():
+            covariances = covariance_block(batch.covariance, self.config.dimensions)
+        merged = self._scene.merge(batch.ids, batch.stamp_ns, batch.position, batch.velocity,
+                                   batch.acceleration, batch.radius, batch.remove,
                                    now_ns if now_ns is not None else 0, covariances)
         report.accepted = int(merged.accepted.size)
         report.removed = int(merged.removed.size)
         report.ignored = int(merged.not_newer.size + merged.removal_ignored.size)
-        report.rejected += [Rejection(int(good[k]), ids[k],
+        report.rejected += [Rejection(int(good[k]) if good is not None else k, batch.ids[k],
                                       f"scene is full (max_bodies={self.config.max_bodies})")
                             for k in merged.full.tolist()]
         return report
