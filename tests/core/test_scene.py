@@ -458,3 +458,27 @@ def test_stream_after_an_empty_prediction_compiles_nothing_new():
         sc.predictions()
     for kernel in (sk.ordered_query, sk.evaluate_rows):
         assert not any("readonly" in str(t) for sig in kernel.signatures for t in sig), kernel
+
+
+def test_uncertain_body_count_follows_every_change() -> None:
+    """Scene keeps a count of its uncertain bodies, so an exact scene answers uncertain_pairs
+    in O(1); the count must equal the uncertain flags of the live bodies after any mix of
+    exact and uncertain states, removals, expiry and slot reuse (growth included)."""
+    rng = np.random.default_rng(5)
+    scene = Scene(2.0, 2)
+    stamp = 1_000
+    for step in range(400):
+        stamp += 1_000
+        k = int(rng.integers(1, 6))
+        ids = [f"b{int(x)}" for x in rng.choice(40, k, replace=False)]
+        cov = np.zeros((k, 4, 4))
+        uncertain = rng.random(k) < 0.5
+        cov[uncertain] = np.eye(4) * 0.01
+        kind = rng.random()
+        scene.merge(ids, np.full(k, stamp), rng.uniform(-5, 5, (k, 2)), rng.normal(0, 1, (k, 2)),
+                    np.zeros((k, 2)), np.ones(k), rng.random(k) < 0.15, stamp,
+                    covariances=cov if kind < 0.7 else None)
+        if step % 37 == 0:
+            scene.expire(stamp, 8_000)
+        assert scene._n_uncertain == int((scene._alive & scene._U).sum()), step
+        assert (scene.uncertain_pairs(0.01).id_a.size == 0) or scene._n_uncertain > 0
