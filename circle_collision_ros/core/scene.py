@@ -182,6 +182,11 @@ _EMPTY_I = np.empty(0, dtype=np.int64)
 _NEVER = 1 << 62  # later than any receive time, ns
 _FIRST_ROW = np.zeros(1, dtype=np.int64)
 _FIRST_ROW.flags.writeable = False
+# The empty columns of an exact scene's SceneUncertainty (published read-only, shared).
+_NO_IDS = np.empty(0, dtype=object)
+_NO_VALUES = np.empty(0)
+for _x in (_NO_IDS, _NO_VALUES):
+    _x.flags.writeable = False
 
 
 class Scene:
@@ -1098,10 +1103,9 @@ class Scene:
     def _uncertain_pairs(self, threshold: float, contacts: SceneContacts | None,
                          max_evaluated: int | None) -> SceneUncertainty:
         R = self.reference_ns
-        e = np.empty(0)
         if R is None or self._n_uncertain == 0:
             self._uncertain_waiting = {}  # no pair listed: none waits
-            return SceneUncertainty(R or 0, np.empty(0, dtype=object), np.empty(0, dtype=object), e, e, e)
+            return SceneUncertainty(R or 0, _NO_IDS, _NO_IDS, _NO_VALUES, _NO_VALUES, _NO_VALUES)
         from circle_collision_ros.core import uncertainty as unc  # heavy kernels: loaded on first use
         slots = self._sorted_slots()
         dtn = R - self._T[slots]
@@ -1133,7 +1137,7 @@ class Scene:
         I, J = key // n, key % n
         if I.size == 0:
             self._uncertain_waiting = {}
-            return SceneUncertainty(R, np.empty(0, dtype=object), np.empty(0, dtype=object), e, e, e)
+            return SceneUncertainty(R, _NO_IDS, _NO_IDS, _NO_VALUES, _NO_VALUES, _NO_VALUES)
         ids = self._ids[slots]
         ida, idb = ids[I], ids[J]
         serial = self._uncertain_serial
