@@ -97,8 +97,15 @@ def test_swept_bound_rows_bitwise(dim) -> None:
 
 def test_order_rows() -> None:
     rng = np.random.default_rng(3)
-    for n_sorted, n_new in ((0, 50), (200, 0), (200, 30), (1, 1)):
+    # new rows: few enough moves for the insertion pass (ties, mostly 0.0 as for pairs overlapping
+    # at R) and too many for its budget (2,000 distinct times: the stable-sort fallback)
+    for n_sorted, n_new, ties in ((0, 50, 10), (200, 0, 10), (200, 30, 10), (1, 1, 10), (880, 284, 0),
+                                  (0, 2000, 10**6), (50, 2000, 10)):
         ttc = np.round(rng.uniform(0, 5, n_sorted + n_new), 1)  # many ties
+        if ties == 0:  # the new rows at 0.0 but for a few
+            ttc[n_sorted:] = np.where(rng.random(n_new) < 0.05, ttc[n_sorted:], 0.0)
+        elif ties == 10**6:
+            ttc = rng.uniform(0, 5, n_sorted + n_new)
         key = rng.permutation(10 * (n_sorted + n_new))[:n_sorted + n_new].astype(np.int64)
         o = np.lexsort((key[:n_sorted], ttc[:n_sorted]))
         ttc[:n_sorted], key[:n_sorted] = ttc[:n_sorted][o], key[:n_sorted][o]
