@@ -199,10 +199,10 @@ def pair_keys(recs, ra, rb, rank, cap):
 
 
 @njit(cache=True)
-def assemble(F, ttc_f, ra, rb, rtp, rtau, rov, rpt, rnm, rcs,
+def assemble(F, ttc_f, key_f, ra, rb, rtp, rtau, rov, rpt, rnm, rcs,
              Ap, Bp, tau2, ov2, pt2, nm2, cs2, R, rank, cap):
-    """The reported rows: future records F (sorted, with their ttc) and the past
-    pairs evaluated at R (hits, any order), merged by (ttc, id_a, id_b).
+    """The reported rows: future records F (sorted, with their ttc and pair keys) and the
+    past pairs evaluated at R (hits, any order), merged by (ttc, id_a, id_b).
 
     contact_ns = t_p + round(tau 1e9) for a record, R + round(tau 1e9) for a
     pair evaluated at R (round half to even, as numpy's round).
@@ -214,9 +214,8 @@ def assemble(F, ttc_f, ra, rb, rtp, rtau, rov, rpt, rnm, rcs,
     t_all = np.empty(m)
     k_all = np.empty(m, dtype=np.int64)
     for x in range(kf):
-        r = F[x]
         t_all[x] = ttc_f[x]
-        k_all[x] = rank[ra[r]] * cap + rank[rb[r]]
+        k_all[x] = key_f[x]
     for x in range(Ap.shape[0]):
         t_all[kf + x] = tau2[x]
         k_all[kf + x] = rank[Ap[x]] * cap + rank[Bp[x]]
@@ -295,7 +294,8 @@ def split_and_order(prev, new, prev_past, live, ra, rb, rtp, rtau, R, rank, cap,
     """Scene._ordered_rows' first half: the live records of the kept order `prev`, the new
     records and the past ones, split at R into future rows (ttc at R) and past ones, and the
     future rows ordered by (ttc, id_a, id_b) (see split_past, pair_keys, order_rows).
-    Returns (fut, ttc, past, ordered); ordered False: fut/ttc in some order (sort afresh)."""
+    Returns (fut, ttc, key, past, ordered): key the future rows' pair keys; ordered False:
+    fut/ttc/key in some order (sort afresh)."""
     m = prev.shape[0] + new.shape[0]
     fut = np.empty(m, dtype=np.int64)
     ttc = np.empty(m)
@@ -308,14 +308,15 @@ def split_and_order(prev, new, prev_past, live, ra, rb, rtp, rtau, R, rank, cap,
     ttc = ttc[:nf]
     key = pair_keys(fut, ra, rb, rank, cap)
     ordered = order_rows(fut, ttc, key, n_sorted, max_moves + 8 * nf)
-    return fut, ttc, past[:npast], ordered
+    return fut, ttc, key, past[:npast], ordered
 
 
 @njit(cache=True, error_model="numpy")
-def reported_rows(fut, ttc, past, ra, rb, rtp, rtau, rov, rpt, rnm, rcs, P, V, A, Rad, T, R, H,
+def reported_rows(fut, ttc, key, past, ra, rb, rtp, rtau, rov, rpt, rnm, rcs, P, V, A, Rad, T, R, H,
                   rank, cap):
-    """Scene._ordered_rows' second half: the future rows with ttc <= H, and the past pairs
-    evaluated at R with horizon H (their hits), merged (see evaluate_rows, assemble).
+    """Scene._ordered_rows' second half: the future rows with ttc <= H (fut, ttc, key sorted by
+    (ttc, key)), and the past pairs evaluated at R with horizon H (their hits), merged (see
+    evaluate_rows, assemble).
     Returns assemble's rows and the number of narrow-phase evaluations."""
     kf = np.searchsorted(ttc, H, side="right")
     n = past.shape[0]
@@ -344,7 +345,7 @@ def reported_rows(fut, ttc, past, ra, rb, rtp, rtau, rov, rpt, rnm, rcs, P, V, A
             cs[h] = cs[x]
             ov[h] = ov[x]
             h += 1
-    rows = assemble(fut[:kf], ttc[:kf], ra, rb, rtp, rtau, rov, rpt, rnm, rcs, Ap[:h], Bp[:h],
+    rows = assemble(fut[:kf], ttc[:kf], key[:kf], ra, rb, rtp, rtau, rov, rpt, rnm, rcs, Ap[:h], Bp[:h],
                     tau[:h], ov[:h], pt[:h], nm[:h], cs[:h], R, rank, cap)
     return rows, evaluated
 
@@ -492,8 +493,8 @@ def ordered_query(prev, new, prev_past, live, ra, rb, rtp, rtau, rov, rpt, rnm, 
     reported_rows' rows and count, and the rows' id positions in the UTF-8 blob
     ``(start_a, len_a, start_b, len_b)`` (SceneContacts.id_utf8).
     """
-    fut, ttc, past, ordered = split_and_order(prev, new, prev_past, live, ra, rb, rtp, rtau, R, rank, cap,
-                                              max_moves)
+    fut, ttc, key, past, ordered = split_and_order(prev, new, prev_past, live, ra, rb, rtp, rtau, R, rank,
+                                                   cap, max_moves)
     if not ordered:
         # keys are unique and ttc is never NaN (records are hits): the order of np.lexsort((key, ttc))
         key = pair_keys(fut, ra, rb, rank, cap)
@@ -501,7 +502,8 @@ def ordered_query(prev, new, prev_past, live, ra, rb, rtp, rtau, rov, rpt, rnm, 
         o = o[np.argsort(ttc[o], kind="mergesort")]
         fut = fut[o]
         ttc = ttc[o]
-    rows, evaluated = reported_rows(fut, ttc, past, ra, rb, rtp, rtau, rov, rpt, rnm, rcs, P, V, A, Rad, T,
+        key = key[o]
+    rows, evaluated = reported_rows(fut, ttc, key, past, ra, rb, rtp, rtau, rov, rpt, rnm, rcs, P, V, A, Rad, T,
                                     R, H, rank, cap)
     Ar = rows[0]
     Br = rows[1]
