@@ -26,6 +26,11 @@ from circle_collision_ros.core.broad_phase import _rel_keep, cell_keys, swept_bo
 from circle_collision_ros.core.contact import contact_row
 from circle_collision_ros.core.narrow_phase import _ttc_scalar
 
+#: contact_row itself (the one formula), compiled into evaluate_rows' loop instead of called:
+#: the call passes ten array structs per pair, a fifth of the time of evaluating the ~280
+#: pairs overlapping at R in a one-body update of the 10,000-body benchmark scene (34 -> 27 us).
+_contact_row_inlined = njit(inline="always", error_model="numpy")(contact_row.py_func)
+
 __all__ = ["evaluate_rows", "order_rows", "split_past", "pair_keys", "assemble", "swept_bound_rows",
            "link_records", "kill_records", "split_and_order", "reported_rows",
            "incremental_pairs", "evaluate_and_store", "ordered_query"]
@@ -84,7 +89,7 @@ def evaluate_rows(P, V, A, Rad, T, ia, ib, t_eval, horizon, tau, point, normal, 
         tau[k] = t
         overlap[k] = False
         if t <= horizon:
-            closing[k] = contact_row(pa2, va2, aa2, 0, Rad[a], pb2, vb2, ab2, 0, t, point, normal, k, g, w)
+            closing[k] = _contact_row_inlined(pa2, va2, aa2, 0, Rad[a], pb2, vb2, ab2, 0, t, point, normal, k, g, w)
             if t == 0.0:  # the overlap test of Scene._resolve: norm(p_a - p_b) - (r_a + r_b) < 0
                 overlap[k] = math.sqrt(s) - rs < 0.0
     return ia.shape[0]
