@@ -71,6 +71,7 @@ import math
 import threading
 import weakref
 from dataclasses import dataclass
+from functools import cached_property
 from typing import Hashable, NamedTuple, Sequence
 
 import numpy as np
@@ -98,14 +99,18 @@ class MergeResult(NamedTuple):
 class SceneContacts:
     """Reported pairs at ``reference_ns``, soonest first (arrays are read-only).
 
-    id_a, id_b : body ids (id_a sorts first).  ttc : s from reference_ns.
-    contact_ns : absolute contact time, ns.  overlapping : (K,) bool.
+    id_a, id_b : body ids (id_a sorts first; gathered on first use).  ttc : s from
+    reference_ns.  contact_ns : absolute contact time, ns.  overlapping : (K,) bool.
     point, normal : (K, D) m and unit.  closing_speed : (K,) m/s.
     """
 
     reference_ns: int
-    id_a: np.ndarray
-    id_b: np.ndarray
+    #: the scene's ids by slot as published (the scene copies before it changes them)
+    #: and each row's two slots: id_a / id_b are gathered from them when first read --
+    #: the node's path encodes from id_utf8 and never reads them
+    slot_ids: np.ndarray
+    slot_a: np.ndarray
+    slot_b: np.ndarray
     ttc: np.ndarray
     contact_ns: np.ndarray
     overlapping: np.ndarray
@@ -115,6 +120,14 @@ class SceneContacts:
     #: The ids as UTF-8 for encoders: ``(blob, start_a, len_a, start_b, len_b)``,
     #: row k's id_a is ``blob[start_a[k]:start_a[k] + len_a[k]]`` (None: ids not all str).
     id_utf8: tuple | None = None
+
+    @cached_property
+    def id_a(self) -> np.ndarray:
+        return self.slot_ids[self.slot_a]
+
+    @cached_property
+    def id_b(self) -> np.ndarray:
+        return self.slot_ids[self.slot_b]
 
     def __len__(self) -> int:
         return int(self.ttc.shape[0])
@@ -252,6 +265,7 @@ class Scene:
         self._hi = np.zeros((cap, D))
         self._alive = np.zeros(cap, dtype=bool)
         self._ids = np.full(cap, None, dtype=object)
+        self._ids_published = False  # a SceneContacts reads _ids: copy it before a change
         self._rank = np.full(cap, -1, dtype=np.int64)
         # Each id's UTF-8 bytes in an append-only blob (published contacts keep
         # referring to the blob of their time; growth and compaction copy).
@@ -452,7 +466,7 @@ class Scene:
             self._preserve((s,))
             bid = ids[rows[x]]
             self._slot[bid] = s
-            self._ids[s] = bid
+            self._writable_ids()[s] = bid
             self._alive[s] = True
             self._rank_insert(s)
             slots[x] = s
@@ -501,7 +515,7 @@ class Scene:
             s = self._alloc()
             self._preserve((s,))
             self._slot[bid] = s
-            self._ids[s] = bid
+            self._writable_ids()[s] = bid
             self._alive[s] = True
             self._n_new = 1
             self._rank_insert(s)
@@ -574,7 +588,7 @@ class Scene:
         self._preserve((s,))
         del self._slot[self._ids[s]]
         self._rank_remove(s)
-        self._ids[s] = None
+        self._writable_ids()[s] = None
         self._alive[s] = False
         self._set_uncertain(s, False)
         self._dirty.add(s)
@@ -593,6 +607,15 @@ class Scene:
         before = int(np.count_nonzero(self._U[slots]))
         self._U[slots] = flags
         self._n_uncertain += int(np.count_nonzero(self._U[slots])) - before
+
+    def _writable_ids(self) -> np.ndarray:
+        """_ids, first copied if a published SceneContacts reads from it (copy on write: a
+        stream that keeps its bodies never copies, and a prediction never gathers its ids
+        unless they are read)."""
+        if self._ids_published:
+            self._ids = self._ids.copy()
+            self._ids_published = False
+        return self._ids
 
     def _alloc(self) -> int:
         if not self._free:
@@ -614,6 +637,7 @@ class Scene:
             ids = np.full(new, None, dtype=object)
             ids[:old] = self._ids
             self._ids = ids
+            self._ids_published = False
             head = np.full(new, -1, dtype=np.int64)
             head[:old] = self._rhead
             self._rhead = head
@@ -1047,8 +1071,8 @@ class Scene:
                 if x.size:
                     x.flags.writeable = False
             utf8 = (blob,) + tuple(id_rows)
-        return SceneContacts(self.reference_ns or 0, self._ids[A], self._ids[B], ttc, cns, over,
-                             pt, nm, cs, utf8)
+        self._ids_published = True
+        return SceneContacts(self.reference_ns or 0, self._ids, A, B, ttc, cns, over, pt, nm, cs, utf8)
 
     def full_recomputation(self) -> SceneContacts:
         """The rule applied from scratch to the stored states (caches untouched).

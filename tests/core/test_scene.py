@@ -482,3 +482,27 @@ def test_uncertain_body_count_follows_every_change() -> None:
             scene.expire(stamp, 8_000)
         assert scene._n_uncertain == int((scene._alive & scene._U).sum()), step
         assert (scene.uncertain_pairs(0.01).id_a.size == 0) or scene._n_uncertain > 0
+
+
+def test_published_ids_survive_removal_and_slot_reuse() -> None:
+    """SceneContacts gathers id_a/id_b on first read from the ids the scene had when it
+    published (the scene copies them before a change): reading them after removals, slot
+    reuse and growth still gives the published pairs."""
+    scene = Scene(5.0, 2)
+    n = 12
+    ids = [f"body{k:02d}" for k in range(n)]
+    p = np.column_stack([np.arange(n) * 1.5, np.zeros(n)])  # neighbours overlap
+    scene.merge(ids, np.full(n, 10), p, np.zeros((n, 2)), np.zeros((n, 2)), np.ones(n), np.zeros(n, bool), 10)
+    first = scene.predictions()
+    want = list(zip(first.slot_ids[first.slot_a].tolist(), first.slot_ids[first.slot_b].tolist()))
+    assert want and all(a < b for a, b in want)
+    # remove half, add new ids into the freed slots, then grow past the capacity
+    scene.merge(ids[::2], np.full(n // 2, 20), p[::2], np.zeros((n // 2, 2)), np.zeros((n // 2, 2)),
+                np.ones(n // 2), np.ones(n // 2, bool), 20)
+    more = [f"new{k:03d}" for k in range(40)]
+    scene.merge(more, np.full(40, 30), np.column_stack([np.arange(40) * 1.5, np.ones(40)]),
+                np.zeros((40, 2)), np.zeros((40, 2)), np.ones(40), np.zeros(40, bool), 30)
+    second = scene.predictions()
+    assert list(zip(first.id_a.tolist(), first.id_b.tolist())) == want
+    assert set(second.id_a.tolist()) & set(ids[::2]) == set()
+    assert any(a.startswith("new") for a in second.id_a.tolist())
