@@ -189,7 +189,7 @@ for d in (2, 3):
     c = np.eye(2 * d)[None] * 0.01
     uncertain_pairs(z[:1], z[:1], z[:1], np.ones(1), c, z[:1] + 1.5, z[:1], z[:1], np.ones(1), c, 1.0, 0.01)
     inflation_radius(c, 1.0)
-    # the node's own path: the scene, its stream passes, decoding and encoding messages
+    # the node path: the scene, its stream passes, decoding and encoding messages
     from circle_collision_ros.pipeline.predictor import CollisionPredictor, PredictorConfig
     CollisionPredictor(PredictorConfig(dimensions=d)).warm_up()
 ')
