@@ -291,10 +291,10 @@ def test_one_state_validation_on_scalars_equals_the_vectorised_checks() -> None:
     assert 40 < fast_taken < 360  # both paths exercised
 
 
-_FIRST_REBUILD = """
+#: A fresh process that warms up, then lists each kernel compiled or loaded afterwards.
+_AFTER_WARM_UP = """
 import numpy as np
 import numba.core.dispatcher as dispatcher
-from circle_collision_ros.core.scene import Scene
 from circle_collision_ros.pipeline.predictor import CollisionPredictor, PredictorConfig
 CollisionPredictor(PredictorConfig(dimensions={d})).warm_up()
 loaded = []
@@ -303,6 +303,10 @@ def spy(self, *args, **kwargs):
     loaded.append(self.py_func.__name__)
     return original(self, *args, **kwargs)
 dispatcher.Dispatcher._compile_for_args = spy
+"""
+
+_FIRST_REBUILD = _AFTER_WARM_UP + """
+from circle_collision_ros.core.scene import Scene
 k = 120  # a rebuild of k (k - 1) / 2 = 7,140 overlapping pairs: the vectorised, threaded path
 scene = Scene(5.0, {d})
 scene.upsert_many([f"b{{i}}" for i in range(k)], np.random.default_rng(1).uniform(0, 1, (k, {d})),
@@ -326,21 +330,11 @@ def test_warm_up_loads_the_large_scene_kernels(dimensions) -> None:
     assert "loaded: []" in out.stdout, out.stdout
 
 
-_FIRST_MESSAGES = """
-import numpy as np
-import numba.core.dispatcher as dispatcher
+_FIRST_MESSAGES = _AFTER_WARM_UP + """
 from dataclasses import replace
 from circle_collision_msgs.msg import CircleState, CircleStateArray
 from circle_collision_ros.pipeline.cdr_codec import decode_states, encode_state, encode_state_array
-from circle_collision_ros.pipeline.predictor import CollisionPredictor, PredictorConfig
 from circle_collision_ros.pipeline.state_batch import StateBatch
-CollisionPredictor(PredictorConfig(dimensions={d})).warm_up()
-loaded = []
-original = dispatcher.Dispatcher._compile_for_args
-def spy(self, *args, **kwargs):
-    loaded.append(self.py_func.__name__)
-    return original(self, *args, **kwargs)
-dispatcher.Dispatcher._compile_for_args = spy
 rng = np.random.default_rng(3)
 n, t = 40, 1_700_000_000 * 10**9
 cov = np.zeros((n, 36))
