@@ -354,6 +354,11 @@ for uncertain in (False, True):
             one = replace(batch.select(np.array([k])), stamp_ns=np.array([t + k + 1], np.int64))
             node.receive_batch(decode_states(encode_state(one), CircleState), t + k + 1)
             node.predict().to_cdr()
+# a first prediction with no contact (bodies far apart), as a node's often is
+lonely = CollisionPredictor(PredictorConfig(dimensions={d}, frame_id="odom"))
+lonely.receive_batch(decode_states(encode_state_array(batch.select(np.array([0])), t, "odom"), CircleStateArray), t)
+assert len(lonely.predict().contacts) == 0
+lonely.predict().to_cdr()
 print("loaded:", loaded)
 """
 

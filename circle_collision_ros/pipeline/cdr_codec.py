@@ -544,14 +544,13 @@ def encode_contact_rows(stamp: tuple[int, int], frame_id: str, horizon: float, c
     takes the general path, which leaves such rows out)."""
     if sys.byteorder != "little":
         raise NotImplementedError("the compiled CDR encoder needs a little-endian machine")
-    blob, start_a, len_a, start_b, len_b = contacts.id_utf8
     frame = np.frombuffer(frame_id.encode(), dtype=np.uint8)
-    end = int(_contacts_end(frame.shape[0], len_a, len_b))
+    rows = _readonly(frame, *contacts.id_utf8, contacts.ttc, contacts.contact_ns, contacts.overlapping,
+                     contacts.point, contacts.normal, contacts.closing_speed)
+    end = int(_contacts_end(frame.shape[0], rows[3], rows[5]))  # len_a, len_b
     buf = np.zeros(_ORIGIN + 8 * -(-(end - _ORIGIN) // 8), dtype=np.uint8)
     buf[:_ORIGIN] = np.frombuffer(CDR_LE + b"\x00\x00", dtype=np.uint8)
     body = buf[_ORIGIN:]
-    rows = _readonly(frame, blob, start_a, len_a, start_b, len_b, contacts.ttc, contacts.contact_ns,
-                     contacts.overlapping, contacts.point, contacts.normal, contacts.closing_speed)
     if _encode_contacts(buf, body.view(np.uint32), body.view(np.float64), int(stamp[0]), int(stamp[1]),
                         rows[0], float(horizon), *rows[1:], contact, overlapping) < 0:
         return None
