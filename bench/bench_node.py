@@ -33,6 +33,11 @@ Ingested / coalesced / missing come from the node's /diagnostics.
 
 runs each size twice in the same run, without and with a covariance on every body
 (position sigma 0.2 m, velocity sigma half that), and prints both rows (issue 18).
+
+    .venv/bin/python bench/bench_node.py --targets --covariance 0.2 [--seconds 10]
+
+runs the issue-14 target scenarios with that covariance on every body (the single-state
+streams and the arrays alike); each scenario's name says "covariance sigma ..." or "exact".
 """
 from __future__ import annotations
 
@@ -78,8 +83,9 @@ class ArrayFrames:
 
     _SEC0 = 1_000_000  # sentinel stamps (sec = _SEC0 + k) locate each state's header
 
-    def __init__(self, scene: SyntheticScene) -> None:
+    def __init__(self, scene: SyntheticScene, sigma: float = 0.0) -> None:
         n = self.count = scene.count
+        self.sigma = sigma
         self._ids = [f"b{k:05d}" for k in range(n)]
         stamps = (self._SEC0 + np.arange(n, dtype=np.int64)) * 1_000_000_000
         self._buf = bytearray(self._encode(scene, stamps, 0))
@@ -100,9 +106,10 @@ class ArrayFrames:
 
     def _encode(self, scene: SyntheticScene, stamps: np.ndarray, stamp_ns: int) -> bytes:
         n = scene.count
+        # the covariance follows the doubles the frames rewrite, so it never moves them
         batch = StateBatch(ids=self._ids, frames=["map"] * n, stamp_ns=stamps, radius=scene.radii,
                            position=scene.p, velocity=scene.v, acceleration=scene.a,
-                           remove=np.zeros(n, dtype=bool))
+                           remove=np.zeros(n, dtype=bool), **covariance_fields(n, self.sigma))
         return encode_state_array(batch, stamp_ns, "map")
 
     def bytes(self, scene: SyntheticScene, stamp_ns: int) -> bytes:
@@ -124,31 +131,33 @@ class ArrayFrames:
         return data
 
 
-_FRAMES: dict[int, ArrayFrames] = {}
+_FRAMES: dict[tuple[int, float], ArrayFrames] = {}
+
+
+def body_covariance(sigma: float) -> list[float]:
+    """The 36 values every body carries with --covariance SIGMA: diagonal, position sigma,
+    velocity sigma / 2 (empty for sigma 0: an exact state)."""
+    if not sigma:
+        return []
+    return np.diag([sigma ** 2] * 3 + [(sigma / 2) ** 2] * 3).ravel().tolist()
+
+
+def covariance_fields(n: int, sigma: float) -> dict:
+    """StateBatch's covariance fields of n bodies carrying body_covariance(sigma)."""
+    if not sigma:
+        return {}
+    return {"covariance": np.tile(body_covariance(sigma), (n, 1)),
+            "covariance_size": np.full(n, 36, dtype=np.int64)}
 
 
 def scene_bytes(scene: SyntheticScene, stamp_ns: int, sigma: float = 0.0) -> bytes:
     """The scene as serialized CircleStateArray bytes, every state stamped `stamp_ns`; sigma > 0:
-    every body with a diagonal covariance (position sigma, velocity sigma / 2), encoded afresh."""
-    if sigma:
-        return covariance_scene_bytes(scene, stamp_ns, sigma)
-    frames = _FRAMES.get(id(scene))
+    every body with body_covariance(sigma). Built in place (ArrayFrames) either way, so the
+    client's send rate does not depend on the covariance."""
+    frames = _FRAMES.get((id(scene), sigma))
     if frames is None or frames.count != scene.count:
-        frames = _FRAMES[id(scene)] = ArrayFrames(scene)
+        frames = _FRAMES[(id(scene), sigma)] = ArrayFrames(scene, sigma)
     return frames.bytes(scene, stamp_ns)
-
-
-def covariance_scene_bytes(scene: SyntheticScene, stamp_ns: int, sigma: float) -> bytes:
-    """The scene as serialized CircleStateArray bytes, every state stamped `stamp_ns`; sigma > 0:
-    every body with a diagonal covariance (position sigma, velocity sigma / 2)."""
-    n = scene.count
-    cov = np.tile(np.diag([sigma ** 2] * 3 + [(sigma / 2) ** 2] * 3).ravel(), (n, 1)) if sigma else None
-    batch = StateBatch(ids=[f"b{k:05d}" for k in range(n)], frames=["map"] * n,
-                       stamp_ns=np.full(n, stamp_ns, dtype=np.int64), radius=scene.radii,
-                       position=scene.p, velocity=scene.v, acceleration=scene.a,
-                       remove=np.zeros(n, dtype=bool), covariance=cov,
-                       covariance_size=None if cov is None else np.full(n, 36, dtype=np.int64))
-    return encode_state_array(batch, stamp_ns, "map")
 
 
 def _stamp_of(data: bytes) -> int:
@@ -273,8 +282,9 @@ class Targets:
     ARRAY_10000_P99_MS = 100.0
 
 
-def _single_state_template(stamp_ns: int) -> tuple[bytearray, int]:
-    """Serialized CircleState with id 'b00000'; returns (bytes, offset of position.x)."""
+def _single_state_template(stamp_ns: int, sigma: float = 0.0) -> tuple[bytearray, int]:
+    """Serialized CircleState with id 'b00000' (and body_covariance(sigma)); returns (bytes,
+    offset of position.x)."""
     from geometry_msgs.msg import Point
     from rclpy.serialization import serialize_message
     from std_msgs.msg import Header
@@ -283,7 +293,7 @@ def _single_state_template(stamp_ns: int) -> tuple[bytearray, int]:
     sentinel = 1234.5678125
     msg = CircleState(header=Header(stamp=Time(sec=stamp_ns // 10**9, nanosec=stamp_ns % 10**9),
                                     frame_id="map"), id="b00000", radius=1.0,
-                      position=Point(x=sentinel, y=0.0, z=0.0))
+                      position=Point(x=sentinel, y=0.0, z=0.0), covariance=body_covariance(sigma))
     data = bytearray(serialize_message(msg))
     return data, bytes(data).index(struct.pack("<d", sentinel))
 
@@ -417,15 +427,20 @@ def _node_counts(diag: dict[str, str]) -> dict:
         "node_diag_p99_ms": float(diag.get("latency_ms_p99", "nan"))}
 
 
-def run_streams(bodies: int, rate: float, seconds: float) -> dict:
-    """Every body has its own CircleState publisher on one single_state_topics topic."""
+def _covariance_label(sigma: float) -> str:
+    return f", covariance sigma {sigma:g} m" if sigma else ", exact"
+
+
+def run_streams(bodies: int, rate: float, seconds: float, sigma: float = 0.0) -> dict:
+    """Every body has its own CircleState publisher on one single_state_topics topic; sigma > 0:
+    every state carries body_covariance(sigma)."""
     run = ScenarioRun({"single_state_topics": "['body_states']", "state_topics": "['unused']",
                        "marker_rate": "0.0", "max_bodies": "100000"})
     try:
         qos = QoSProfile(depth=10, reliability=ReliabilityPolicy.BEST_EFFORT)
         pubs = [run.client.create_publisher(CircleState, "body_states", qos) for _ in range(bodies)]
         run.wait_matched(pubs)
-        template, pos_at = _single_state_template(time.time_ns())
+        template, pos_at = _single_state_template(time.time_ns(), sigma)
         id_at = bytes(template).index(b"b00000")
         scene = SyntheticScene(bodies, size=float(np.sqrt(bodies * 333.0)), dimensions=2, seed=bodies)
         messages = []
@@ -459,8 +474,10 @@ def run_streams(bodies: int, rate: float, seconds: float) -> dict:
                 next_send[k] += period
             time.sleep(max(0.0, min(0.002, float(next_send.min()) - time.monotonic())))
         diag = run.diagnostics_after(2.2)
-        result = {"scenario": f"{bodies} bodies, own CircleState stream each, {rate:.0f} Hz",
-                  "bodies": bodies, "rate_hz": rate, **run.latencies(), **_node_counts(diag)}
+        result = {"scenario": f"{bodies} bodies, own CircleState stream each, {rate:.0f} Hz"
+                              + _covariance_label(sigma),
+                  "bodies": bodies, "rate_hz": rate, "covariance_sigma": sigma, **run.latencies(),
+                  **_node_counts(diag)}
         result["published_total"] = published  # warm-up included, like the node's count
         result["ingested_fraction"] = result["messages"] / max(1, published)
         return result
@@ -469,7 +486,8 @@ def run_streams(bodies: int, rate: float, seconds: float) -> dict:
 
 
 def run_arrays(bodies: int, rate: float, seconds: float, marker_rate: float,
-               state_reliability: str = "best_effort") -> dict:
+               state_reliability: str = "best_effort", sigma: float = 0.0) -> dict:
+    """Arrays of every body at `rate`; sigma > 0: every state carries body_covariance(sigma)."""
     run = ScenarioRun({"marker_rate": str(float(marker_rate)), "max_bodies": "100000",
                        "state_reliability": state_reliability})
     try:
@@ -479,7 +497,7 @@ def run_arrays(bodies: int, rate: float, seconds: float, marker_rate: float,
         scene = SyntheticScene(bodies, size=float(np.sqrt(bodies * 333.0)), dimensions=2, seed=bodies)
         period = 1.0 / rate
         for _ in range(5):  # warm-up, not measured
-            pub.publish(scene_bytes(scene, time.time_ns()))
+            pub.publish(scene_bytes(scene, time.time_ns(), sigma))
             time.sleep(period)
         time.sleep(1.0)
         start = time.monotonic()
@@ -489,7 +507,7 @@ def run_arrays(bodies: int, rate: float, seconds: float, marker_rate: float,
             if time.monotonic() >= next_send:
                 scene.step(period)
                 stamp = time.time_ns()
-                data = scene_bytes(scene, stamp)  # built before the timed publish call
+                data = scene_bytes(scene, stamp, sigma)  # built before the timed publish call
                 wall = time.time_ns()
                 pub.publish(data)
                 frames += 1
@@ -501,8 +519,9 @@ def run_arrays(bodies: int, rate: float, seconds: float, marker_rate: float,
         counts = _node_counts(diag)
         label = f"{bodies} bodies in arrays, {rate:.0f} Hz, markers " + (
             f"{marker_rate:g} Hz" if marker_rate else "off") + (
-            ", reliable KEEP_LAST 1" if state_reliability == "reliable" else "")
+            ", reliable KEEP_LAST 1" if state_reliability == "reliable" else "") + _covariance_label(sigma)
         return {"scenario": label, "bodies": bodies, "rate_hz": rate, "marker_rate": marker_rate,
+                "covariance_sigma": sigma,
                 **run.latencies(), **counts, "frames": frames, "warmup_frames": 5}
     finally:
         run.close()
@@ -517,20 +536,20 @@ def measure_qos(seconds: float) -> list[dict]:
     return rows
 
 
-def measure_targets(seconds: float) -> list[dict]:
-    rows = [run_streams(300, 30.0, seconds)]
-    rows.append(run_arrays(1000, 30.0, seconds, marker_rate=10.0))
-    rows.append(run_arrays(1000, 30.0, seconds, marker_rate=0.0))
-    rows.append(run_arrays(5000, 30.0, seconds, marker_rate=10.0))
-    rows.append(run_arrays(10000, 10.0, seconds, marker_rate=10.0))
+def measure_targets(seconds: float, sigma: float = 0.0) -> list[dict]:
+    """Issue 14's scenarios; sigma > 0: every body of every scenario carries body_covariance(sigma)
+    (issue 18: the same targets hold with covariance on)."""
+    rows = [run_streams(300, 30.0, seconds, sigma)]
+    rows.append(run_arrays(1000, 30.0, seconds, marker_rate=10.0, sigma=sigma))
+    rows.append(run_arrays(1000, 30.0, seconds, marker_rate=0.0, sigma=sigma))
+    rows.append(run_arrays(5000, 30.0, seconds, marker_rate=10.0, sigma=sigma))
+    rows.append(run_arrays(10000, 10.0, seconds, marker_rate=10.0, sigma=sigma))
     return rows
 
 
 def targets_table(rows: list[dict]) -> str:
     """Markdown: each scenario's figures and the target it is held to."""
     by = {r["scenario"]: r for r in rows}
-    on = next((r for r in rows if r["bodies"] == 1000 and r.get("marker_rate")), None)
-    off = next((r for r in rows if r["bodies"] == 1000 and r.get("marker_rate") == 0.0), None)
     lines = ["| scenario | inputs sent | ingested by node | coalesced | missing | answered/unanswered |"
              " p50 ms | p99 ms | max ms | node /diagnostics p99 ms | target | met |",
              "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|---|"]
@@ -542,6 +561,8 @@ def targets_table(rows: list[dict]) -> str:
         else:
             ingested = f"{r['messages']}"
             every = r["unanswered"] == 0 and r["inputs_missing"] == 0
+            off = next((o for o in rows if o["bodies"] == 1000 and o.get("marker_rate") == 0.0
+                        and o.get("covariance_sigma", 0.0) == r.get("covariance_sigma", 0.0)), None)
             if r["bodies"] == 1000 and r.get("marker_rate"):
                 ratio = r["p99_ms"] / off["p99_ms"] if off else float("nan")
                 target = (f"p99 <= {Targets.ARRAY_1000_P99_MS:g} ms and <= {Targets.MARKER_RATIO:.1f} x "
@@ -559,7 +580,6 @@ def targets_table(rows: list[dict]) -> str:
                      f" {r['inputs_missing']} | {r['answers']}/{r['unanswered']} | {r['p50_ms']:.2f} |"
                      f" {r['p99_ms']:.2f} | {r['max_ms']:.2f} | {r['node_diag_p99_ms']:.2f} | {target} |"
                      f" {'yes' if met else 'NO'} |")
-    _ = on
     return "\n".join(lines)
 
 
@@ -577,13 +597,14 @@ def main() -> int:
                         help="compare best-effort and reliable KEEP_LAST 1 state subscriptions at "
                              "1,000/5,000/10,000 bodies (issue 19)")
     parser.add_argument("--covariance", type=float, default=0.0, metavar="SIGMA",
-                        help="also run each size with a covariance on every body (position sigma, m)")
+                        help="also run each size with a covariance on every body (position sigma, m); "
+                             "with --targets: every body of every scenario carries it")
     opts = parser.parse_args()
     seconds = 3.0 if opts.quick else opts.seconds
     if opts.receive:
         return receive_predictions(opts.receive)
     if opts.targets or opts.qos:
-        rows = measure_targets(seconds) if opts.targets else measure_qos(seconds)
+        rows = measure_targets(seconds, opts.covariance) if opts.targets else measure_qos(seconds)
         print(targets_table(rows))
         if opts.json:
             Path(opts.json).write_text(json.dumps(rows, indent=2))
