@@ -253,3 +253,203 @@ def test_uncertain_pair_budget_defers_and_counts() -> None:
     _, again = _predict(batch, uncertain_pair_budget=2)
     assert again.to_cdr() == part.to_cdr()
     assert full.uncertainty.deferred == 0
+
+
+def _counting_core(monkeypatch) -> list:
+    """Rows each call of core.uncertainty.uncertain_pairs was given (the scene calls it through
+    the module), as (id of pa row set,) -> number of rows."""
+    from circle_collision_ros.core import uncertainty
+    calls = []
+    real = uncertainty.uncertain_pairs
+
+    def counted(pa, *args, **kwargs):
+        calls.append(len(pa))
+        return real(pa, *args, **kwargs)
+
+    monkeypatch.setattr(uncertainty, "uncertain_pairs", counted)
+    return calls
+
+
+def _merge_batch(scene: Scene, batch: StateBatch, rows=None) -> None:
+    from circle_collision_ros.pipeline.state_batch import covariance_block
+    rows = np.arange(len(batch)) if rows is None else np.asarray(rows)
+    scene.merge([batch.ids[k] for k in rows.tolist()], batch.stamp_ns[rows], batch.position[rows],
+                batch.velocity[rows], batch.acceleration[rows], batch.radius[rows], batch.remove[rows],
+                0, covariance_block(batch.covariance[rows], scene.dim))
+
+
+def _same(u, w) -> None:
+    assert u.reference_ns == w.reference_ns
+    assert u.id_a.tolist() == w.id_a.tolist() and u.id_b.tolist() == w.id_b.tolist()
+    for name in ("probability", "probability_bound", "plausible_ttc"):
+        assert getattr(u, name).tobytes() == getattr(w, name).tobytes(), name
+
+
+@pytest.mark.parametrize("budget", [None, 3])
+def test_one_body_update_evaluates_only_that_bodys_pairs(monkeypatch, budget) -> None:
+    """A per-body stream: a newer state of one body (R moves with it) gives the core only the
+    listed pairs of that body; every other pair keeps its answer, and the result equals a
+    from-scratch evaluation of the same stored states bit for bit (Scene.uncertain_pairs: a
+    pair's answer is a function of its two states and its pair time t_p = the newer stamp).
+    Before: every listed pair was evaluated again at the new R on every input."""
+    batch = _batch(24, seed=11, sigma=0.35, spread=9.0)
+    scene = Scene(5.0, 2, method="grid")
+    _merge_batch(scene, batch)
+    first = scene.uncertain_pairs(0.01, scene.predictions(), budget)
+    assert len(first) > 10 and first.deferred == 0 or budget is not None
+    calls = _counting_core(monkeypatch)
+    mover = "b05"
+    k = batch.ids.index(mover)
+    later = StateBatch(**{**batch.__dict__, "stamp_ns": batch.stamp_ns + 20_000_000,
+                          "position": batch.position + 0.01})
+    for step in range(1, 4):  # again and again: a deferred pair of the first call gets its turn
+        stamped = StateBatch(**{**later.__dict__, "stamp_ns": later.stamp_ns + step})
+        _merge_batch(scene, stamped, [k])
+        u = scene.uncertain_pairs(0.01, scene.predictions(), budget)
+    theirs = int(np.count_nonzero((u.id_a == mover) | (u.id_b == mover)))
+    assert 0 < theirs < len(u)
+    if budget is None:
+        assert calls == [theirs] * 3
+    else:  # the body's pairs, and the pairs deferred before (never more than the listed)
+        assert all(c < len(u) for c in calls)
+    assert scene.uncertain_evaluated == calls[-1]
+    # the same stored states from scratch (no budget: nothing deferred, all evaluated)
+    if budget is None:
+        fresh = Scene(5.0, 2, method="grid")
+        _merge_batch(fresh, batch)
+        _merge_batch(fresh, StateBatch(**{**later.__dict__, "stamp_ns": later.stamp_ns + 3}), [k])
+        _same(u, fresh.uncertain_pairs(0.01, fresh.predictions()))
+
+
+def test_pair_time_is_the_newer_stamp_or_the_lag_period_start(monkeypatch) -> None:
+    """t_p (Scene.uncertain_pairs): the newer stamp of the pair while it lies within
+    UNCERTAIN_LAG_NS of R, else R - R mod UNCERTAIN_LAG_NS; the answer is the core's on both
+    states and covariances propagated to t_p, the plausible time reported from R; a lagging
+    pair is evaluated again when R's lag period changes, not on every input."""
+    lag = Scene.UNCERTAIN_LAG_NS
+    C = np.diag([0.09, 0.04, 0.01, 0.0225])
+    scene = Scene(5.0, 2)
+    t0 = BASE + 7 * lag + 1234
+    scene.merge(["a", "b"], [t0, t0 + 5_000_000], [[0.0, 0.0], [4.0, 0.3]], [[1.0, 0.0], [-0.5, 0.0]],
+                [[0.0, 0.0], [0.0, 0.0]], [0.5, 0.5], [False, False], 0, np.stack([C, C]))
+    far = np.array([[500.0, 0.0]])
+
+    def core_at(tp):
+        dt_a, dt_b = (tp - t0) * 1e-9, (tp - t0 - 5_000_000) * 1e-9
+        pa, pb = np.array([[dt_a, 0.0]]), np.array([[4.0 - 0.5 * dt_b, 0.3]])
+        return uncertain_pairs(pa, [[1.0, 0.0]], [[0.0, 0.0]], [0.5], _moved(C, dt_a)[None],
+                               pb, [[-0.5, 0.0]], [[0.0, 0.0]], [0.5], _moved(C, dt_b)[None], 5.0, 0.01)
+
+    def check(R, tp):
+        u = scene.uncertain_pairs(0.01)
+        assert u.id_a.tolist() == ["a"] and u.id_b.tolist() == ["b"] and u.reference_ns == R
+        want = core_at(tp)
+        assert u.probability[0] == pytest.approx(want.collision_probability[0], abs=1e-12)
+        d = (R - tp) * 1e-9
+        assert u.plausible_ttc[0] == pytest.approx(max(0.0, want.plausible_time[0] - d), abs=1e-9)
+        return u
+
+    calls = _counting_core(monkeypatch)
+    # an exact far body moves R: the pair's newer stamp is t0 + 5 ms, within the lag
+    R = t0 + 40_000_000
+    scene.merge(["z"], [R], far, [[0.0, 0.0]], [[0.0, 0.0]], [0.1], [False], 0)
+    check(R, t0 + 5_000_000)
+    assert calls == [1]
+    R += 30_000_000  # still within the lag: nothing to evaluate
+    scene.merge(["z"], [R], far, [[0.0, 0.0]], [[0.0, 0.0]], [0.1], [False], 0)
+    check(R, t0 + 5_000_000)
+    assert calls == [1] and scene.uncertain_evaluated == 0
+    R = t0 + 5_000_000 + lag + 1  # the pair lags: evaluated at the start of R's lag period
+    scene.merge(["z"], [R], far, [[0.0, 0.0]], [[0.0, 0.0]], [0.1], [False], 0)
+    u = check(R, R - R % lag)
+    assert calls == [1, 1]
+    R += 1_000  # same lag period: kept
+    scene.merge(["z"], [R], far, [[0.0, 0.0]], [[0.0, 0.0]], [0.1], [False], 0)
+    assert scene.uncertain_pairs(0.01).probability.tobytes() == u.probability.tobytes()
+    assert calls == [1, 1]
+    R += lag  # the next period: evaluated again
+    scene.merge(["z"], [R], far, [[0.0, 0.0]], [[0.0, 0.0]], [0.1], [False], 0)
+    check(R, R - R % lag)
+    assert calls == [1, 1, 1]
+
+
+def _moved(C: np.ndarray, dt: float) -> np.ndarray:
+    """M C M^T with M = [[I, dt I], [0, I]] (2-D)."""
+    M = np.eye(4)
+    M[0, 2] = M[1, 3] = dt
+    return M @ C @ M.T
+
+
+@pytest.mark.parametrize("m", [4, 6])
+def test_vectorised_covariance_check_decides_as_the_core(m) -> None:
+    """state_validation.covariance_rejected (a compiled screen; eigenvalues only for blocks
+    whose diagonal does not dominate) refuses exactly the blocks core.uncertainty.
+    covariance_problem refuses: PSD, diagonal, indefinite, negated, slightly asymmetric,
+    non-finite, zero, and rounding-negative blocks over 20 orders of magnitude."""
+    from circle_collision_ros.core.uncertainty import covariance_problem
+    from circle_collision_ros.pipeline.state_validation import covariance_rejected
+    rng = np.random.default_rng(m)
+    n = 1400
+    A = rng.normal(size=(n, m, m))
+    S = A @ A.transpose(0, 2, 1) * 10.0 ** rng.integers(-10, 10, (n, 1, 1))
+    S[::7] = np.diag(rng.uniform(0, 1, m))
+    S[1::7] *= -1
+    S[2::7] += rng.normal(size=(m, m)) * 1e-3
+    S[3::7, 0, 1] = np.nan
+    S[4::7] = 0.0
+    S[5::7] += np.eye(m) * rng.uniform(-1e-9, 1e-9)
+    anti = np.diag(rng.uniform(0, 1, m)) + 0.6 * np.eye(m)[::-1]  # dominance fails on some rows
+    S[6::7] = 0.5 * (anti + anti.T)
+    want = np.array([covariance_problem(c) is not None for c in S])
+    assert 0 < want.sum() < n
+    assert covariance_rejected(S).tolist() == want.tolist()
+
+
+def test_covariance_propagation_is_the_numpy_expression_bitwise() -> None:
+    """scene._propagate_covariance (one compiled pass) gives the bits of the block expression
+    Spp + dt (Spv + Svp) + dt^2 Svv, Spv + dt Svv, Svp + dt Svv, Svv in numpy, signed zeros
+    included (recorded covariance bags replay bit for bit)."""
+    from circle_collision_ros.core.scene import _propagate_covariance
+    rng = np.random.default_rng(3)
+    for D in (2, 3):
+        C = rng.normal(size=(500, 2 * D, 2 * D)) * 10.0 ** rng.integers(-8, 8, (500, 1, 1))
+        C[rng.random(C.shape) < 0.2] = -0.0
+        C[rng.random(C.shape) < 0.2] = 0.0
+        dt_ns = rng.integers(0, 3_000_000_000, 500)
+        dt_ns[::3] = 0
+        dt = (dt_ns.astype(np.float64) * 1e-9)[:, None, None]
+        pp, pv, vp, vv = C[:, :D, :D], C[:, :D, D:], C[:, D:, :D], C[:, D:, D:]
+        want = np.empty_like(C)
+        want[:, :D, :D] = pp + dt * (pv + vp) + (dt * dt) * vv
+        want[:, :D, D:] = pv + dt * vv
+        want[:, D:, :D] = vp + dt * vv
+        want[:, D:, D:] = vv
+        assert _propagate_covariance(C, dt_ns).tobytes() == want.tobytes()
+
+
+def test_published_rows_from_the_scenes_pair_match_equal_the_id_match() -> None:
+    """ScenePrediction.columns joins the uncertain rows to the contacts through the scene's
+    contact_rows (the same pair, matched on slot keys); the rows equal those of the join on
+    ids, and contact_rows names exactly the pairs whose ids agree."""
+    from dataclasses import replace
+    from circle_collision_ros.pipeline.prediction_messages import ScenePrediction
+    batch = _batch(40, seed=21, sigma=0.3, spread=9.0, every=2)  # exact and uncertain bodies
+    predictor, prediction = _predict(batch)
+    u, c = prediction.uncertainty, prediction.contacts
+    assert u.matched is c and len(c) > 5 and len(u) > 20
+    rows = u.contact_rows
+    paired = np.flatnonzero(rows >= 0)
+    assert paired.size > 3
+    assert u.id_a[paired].tolist() == c.id_a[rows[paired]].tolist()
+    assert u.id_b[paired].tolist() == c.id_b[rows[paired]].tolist()
+    contact_pairs = set(zip(c.id_a.tolist(), c.id_b.tolist()))
+    unpaired = np.flatnonzero(rows < 0)
+    assert not contact_pairs & set(zip(u.id_a[unpaired].tolist(), u.id_b[unpaired].tolist()))
+    by_ids = ScenePrediction(c, prediction.capture, prediction.horizon, prediction.frame_id, False,
+                             replace(u, contact_rows=None, matched=None), prediction.probability_threshold)
+    fast, slow = prediction.columns, by_ids.columns
+    assert fast.id_a == slow.id_a and fast.id_b == slow.id_b
+    for name in ("status", "ttc", "contact_ns", "point", "normal", "closing_speed", "probability",
+                 "probability_bound", "plausible_ttc"):
+        assert getattr(fast, name).tobytes() == getattr(slow, name).tobytes(), name
+    assert prediction.to_cdr() == by_ids.to_cdr()

@@ -75,6 +75,7 @@ from functools import cached_property
 from typing import Hashable, NamedTuple, Sequence
 
 import numpy as np
+from numba import njit
 
 from circle_collision_ros.core import broad_phase as _bp
 from circle_collision_ros.core import scene_kernels as _sk
@@ -140,9 +141,11 @@ class SceneUncertainty:
     Every pair with at least one uncertain body (non-zero covariance) that the broad phase,
     with radii inflated by ``core.uncertainty.inflation_radius``, cannot rule out, plus every
     such pair with a mean contact; each evaluated by ``core.uncertainty.uncertain_pairs`` on
-    the states and covariances propagated to ``R`` (``Sigma' = M Sigma M^T``). Arrays (K,):
-    id_a (sorts first), id_b, probability, probability_bound, plausible_ttc (s from R, +inf
-    if never).  Pairs of two exact bodies are never listed (the exact path answers them).
+    the states and covariances propagated to its pair time t_p (``Sigma' = M Sigma M^T``;
+    t_p = R for a tracker array, within ``Scene.UNCERTAIN_LAG_NS`` before R otherwise, see
+    ``Scene.uncertain_pairs``). Arrays (K,): id_a (sorts first), id_b, probability (of
+    contact within [t_p, t_p + H]), probability_bound, plausible_ttc (s from R, +inf if
+    never).  Pairs of two exact bodies are never listed (the exact path answers them).
     """
 
     reference_ns: int
@@ -153,6 +156,10 @@ class SceneUncertainty:
     plausible_ttc: np.ndarray
     #: rows not evaluated for lack of budget (``max_evaluated``): probability 1.0, bound 1.0
     deferred: int = 0
+    #: (K,) int64: each row's row in `matched` (the contacts given to uncertain_pairs) for the
+    #: same pair, -1 if none; None when no contacts were given
+    contact_rows: np.ndarray | None = None
+    matched: SceneContacts | None = None
 
     def __len__(self) -> int:
         return int(self.probability.shape[0])
@@ -179,16 +186,28 @@ def _propagate_ns(P, V, A, dt_ns):
 
 def _propagate_covariance(C, dt_ns):
     """Joint (position, velocity) covariances (n, 2D, 2D) moved by ``dt_ns``: ``M C M^T``,
-    ``M = [[I, dt I], [0, I]]`` (acceleration is exact, so it adds no uncertainty)."""
-    D = C.shape[1] // 2
-    dt = (np.asarray(dt_ns).astype(np.float64) * 1e-9)[:, None, None]
-    pp, pv, vp, vv = C[:, :D, :D], C[:, :D, D:], C[:, D:, :D], C[:, D:, D:]
+    ``M = [[I, dt I], [0, I]]`` (acceleration is exact, so it adds no uncertainty):
+    ``Spp + dt (Spv + Svp) + dt^2 Svv``, ``Spv + dt Svv``, ``Svp + dt Svv``, ``Svv``, evaluated
+    in that order (one compiled pass, the numpy expression's operations and rounding)."""
+    dt = np.asarray(dt_ns).astype(np.float64) * 1e-9
     out = np.empty_like(C)
-    out[:, :D, :D] = pp + dt * (pv + vp) + (dt * dt) * vv
-    out[:, :D, D:] = pv + dt * vv
-    out[:, D:, :D] = vp + dt * vv
-    out[:, D:, D:] = vv
+    _propagate_covariance_rows(np.ascontiguousarray(C, dtype=np.float64), dt, out)
     return out
+
+
+@njit(cache=True, error_model="numpy")
+def _propagate_covariance_rows(C, dt, out):
+    D = C.shape[1] // 2
+    for i in range(C.shape[0]):
+        t = dt[i]
+        tt = t * t
+        for r in range(D):
+            for c in range(D):
+                vv = C[i, D + r, D + c]
+                out[i, r, c] = C[i, r, c] + t * (C[i, r, D + c] + C[i, D + r, c]) + tt * vv
+                out[i, r, D + c] = C[i, r, D + c] + t * vv
+                out[i, D + r, c] = C[i, D + r, c] + t * vv
+                out[i, D + r, D + c] = vv
 
 
 _EMPTY_I = np.empty(0, dtype=np.int64)
@@ -215,6 +234,11 @@ class Scene:
     full_rebuild_fraction : above this fraction of changed bodies, one
         vectorised rebuild replaces per-body updates.
     """
+
+    #: Uncertain pairs: how far (ns) a pair's time t_p may lie before R (see uncertain_pairs).
+    #: A pair whose newer state is older than this is evaluated at the start of R's period of
+    #: this length, so such pairs are evaluated again once per period, not per input.
+    UNCERTAIN_LAG_NS = 100_000_000
 
     def __init__(self, horizon: float, dim: int = 2, *, slack: float | None = None,
                  max_bodies: int | None = None, method: str = "sweep",
@@ -302,6 +326,10 @@ class Scene:
         self._uncertain_waiting = {}   # (id_a, id_b) -> serial since which the pair waits (deferred)
         self._uncertain_memo = {}      # core.uncertainty.uncertain_pairs(memo=...): last full evaluations
         self._uncertain_memo_ref = None  # the reference time of those evaluations
+        self._pair_answers = None      # _PairAnswers of the last uncertain_pairs call
+        self.uncertain_evaluated = 0   # pairs the last uncertain_pairs call gave the core
+        self._sv = np.zeros(cap, dtype=np.int64)  # each slot's state serial (bumped per change)
+        self._sv_next = 1
 
     # Pair records: one row per pair with a contact within H + S of its t_p, in
     # growable buffers; rows of updated bodies are marked dead (compacted when
@@ -630,7 +658,8 @@ class Scene:
             self._C = grown
             for name, dt in (("_R", np.float64), ("_T", np.int64), ("_Tf", np.float64),
                              ("_recv", np.int64), ("_alive", bool), ("_rank", np.int64),
-                             ("_id_start", np.int64), ("_id_len", np.int64), ("_U", bool)):
+                             ("_id_start", np.int64), ("_id_len", np.int64), ("_U", bool),
+                             ("_sv", np.int64)):
                 grown = np.full(new, -1 if name == "_rank" else 0, dtype=dt)
                 grown[:old] = getattr(self, name)
                 setattr(self, name, grown)
@@ -715,7 +744,11 @@ class Scene:
         return cap
 
     def _preserve(self, slots) -> None:
-        """Before rows `slots` change: live captures keep their values (copy on write, per row)."""
+        """Before rows `slots` change: live captures keep their values (copy on write, per row);
+        the rows get new state serials (uncertain_pairs' per-pair answers key on them)."""
+        k = len(slots)
+        self._sv[np.asarray(slots, dtype=np.int64)] = np.arange(self._sv_next, self._sv_next + k)
+        self._sv_next += k
         if self._captures:
             for cap in list(self._captures):
                 if not cap.preserve(slots):
@@ -1095,11 +1128,21 @@ class Scene:
     # ------------------------------------------------------------ uncertain pairs
     def uncertain_pairs(self, threshold: float, contacts: SceneContacts | None = None,
                         max_evaluated: int | None = None) -> SceneUncertainty:
-        """Probabilities of the pairs with an uncertain body, at the reference time R over [0, H].
+        """Probabilities of the pairs with an uncertain body that may touch within [R, R + H].
 
-        Evaluated afresh at R on every call that follows a change (the exact path's
-        shift-by-d rule does not hold for probabilities); cached while the scene and
-        `threshold` are unchanged.  `contacts` (the exact path's rows) adds their
+        Which pairs: those the broad phase at R over [0, H], each uncertain body's radius
+        inflated by ``core.uncertainty.inflation_radius``, cannot rule out.  Each listed pair
+        is evaluated at its pair time t_p over [t_p, t_p + H]: t_p is the newer of its two
+        stamps when that lies within ``UNCERTAIN_LAG_NS`` of R (always so for a tracker array,
+        where t_p = R; for per-body streams the pair's newest information), else
+        ``R - (R mod UNCERTAIN_LAG_NS)``; so 0 <= R - t_p < UNCERTAIN_LAG_NS.  Both states and
+        covariances are propagated to t_p.  A pair's answer is thus a pure function of its two
+        stored states and t_p, and is kept between calls: a call evaluates only the listed pairs
+        whose body changed or whose t_p moved (a one-body update: that body's pairs), and
+        results equal a from-scratch evaluation bit for bit (the core's rows are independent).
+        The plausible time is reported from R: ``max(0, tau - (R - t_p))`` (0: the overlap
+        probability reached the threshold at or before R).  Cached as a whole while the scene
+        and `threshold` are unchanged.  `contacts` (the exact path's rows) adds their
         uncertain pairs should the inflated broad phase not list them.  Pairs certified below
         threshold / 2 skip the full evaluation (``core.uncertainty.uncertain_pairs(screen=True)``);
         `max_evaluated` caps the full evaluations (the rest are deferred, see there).
@@ -1129,41 +1172,129 @@ class Scene:
         R = self.reference_ns
         if R is None or self._n_uncertain == 0:
             self._uncertain_waiting = {}  # no pair listed: none waits
+            self._pair_answers = None
             return SceneUncertainty(R or 0, _NO_IDS, _NO_IDS, _NO_VALUES, _NO_VALUES, _NO_VALUES)
         from circle_collision_ros.core import uncertainty as unc  # heavy kernels: loaded on first use
         slots = self._sorted_slots()
+        I, J, at_R, contact_rows = self._uncertain_listed(slots, R, contacts, unc)
+        if I.size == 0:
+            self._uncertain_waiting = {}
+            self._pair_answers = None
+            return SceneUncertainty(R, _NO_IDS, _NO_IDS, _NO_VALUES, _NO_VALUES, _NO_VALUES)
+        ids = self._ids[slots]
+        ida, idb = ids[I], ids[J]
+        sa, sb = slots[I], slots[J]
+        tp = self._uncertain_pair_times(sa, sb, R)
+        key = (sa << 32) | sb
+        prob, bound, tau = np.empty(I.size), np.empty(I.size), np.empty(I.size)
+        hit = np.zeros(I.size, dtype=bool)
+        old = self._pair_answers
+        if old is not None and old.horizon == self._h and old.threshold == threshold and old.key.size:
+            at = np.minimum(np.searchsorted(old.key, key), old.key.size - 1)
+            hit = ((old.key[at] == key) & (old.state_a[at] == self._sv[sa])
+                   & (old.state_b[at] == self._sv[sb]) & (old.pair_ns[at] == tp))
+            prob[hit], bound[hit], tau[hit] = old.probability[at[hit]], old.bound[at[hit]], old.tau[at[hit]]
+        todo = np.flatnonzero(~hit)
+        answered = hit.copy()
+        if todo.size:
+            deferred = self._evaluate_uncertain(unc, sa[todo], sb[todo], I[todo], J[todo], at_R, tp[todo],
+                                                ida[todo], idb[todo], threshold, max_evaluated)
+            prob[todo], bound[todo], tau[todo] = deferred.probability, deferred.bound, deferred.tau
+            answered[todo[~deferred.deferred]] = True
+        else:
+            self._uncertain_waiting = {}
+            self._uncertain_serial += 1
+        keep = np.flatnonzero(answered)
+        order = keep[np.argsort(key[keep], kind="stable")]
+        self._pair_answers = _PairAnswers(self._h, threshold, key[order], self._sv[sa[order]],
+                                          self._sv[sb[order]], tp[order], prob[order], bound[order],
+                                          tau[order])
+        self.uncertain_evaluated = int(todo.size)
+        # reported from R: the pair's plausible time counts from its t_p <= R (d = R - t_p);
+        # one already reached before R is reported as 0 (plausible now)
+        d = (R - tp).astype(np.float64) * 1e-9
+        plausible = np.where(np.isnan(tau) | (tau > d), tau - d, 0.0)
+        return SceneUncertainty(R, ida, idb, prob, bound, plausible,
+                                int(np.count_nonzero(~answered)) if max_evaluated is not None else 0,
+                                contact_rows, contacts if contact_rows is not None else None)
+
+    def _uncertain_listed(self, slots: np.ndarray, R: int, contacts: SceneContacts | None, unc):
+        """``(I, J, at_R, contact_rows)``: local index pairs (I < J, into `slots`, id order) with
+        an uncertain body that the broad phase at R over [0, H], radii inflated by
+        ``unc.inflation_radius``, cannot rule out, plus the uncertain pairs of `contacts`;
+        at_R = (P, V, C) of `slots` propagated to R (C zero for exact bodies); contact_rows:
+        each pair's row in `contacts`, -1 if none (None without contacts)."""
         dtn = R - self._T[slots]
         P, V = _propagate_ns(self._P[slots], self._V[slots], self._A[slots], dtn)
         A, Rad = self._A[slots], self._R[slots]
         u = self._U[slots]
-        C = np.zeros((slots.size,) + self._C.shape[1:])
-        C[u] = _propagate_covariance(self._C[slots[u]], dtn[u])
-        grow = np.zeros(slots.size)
-        grow[u] = unc.inflation_radius(C[u], self._h)
+        if u.all():  # (an exact body's stored covariance may be stale: zero it)
+            C = _propagate_covariance(self._C[slots], dtn)
+            grow = unc.inflation_radius(C, self._h)
+        else:
+            C = np.zeros((slots.size,) + self._C.shape[1:])
+            C[u] = _propagate_covariance(self._C[slots[u]], dtn[u])
+            grow = np.zeros(slots.size)
+            grow[u] = unc.inflation_radius(C[u], self._h)
         zero = np.zeros(slots.size)
         lo, hi = _bp.swept_bounds(P, V, A, Rad + grow, zero, zero + self._h)
+        # the sweep whatever the scene's method: on these few inflated bodies per cell it is
+        # 4-5x faster than the grid (same pairs; bench_node.py's density, 1,000-10,000 bodies)
         I, J, _ = _bp.candidate_pairs(lo, hi, p=P, v=V, a=A, r=Rad + grow, tref=zero, t_start=0.0,
-                                      t_end=self._h, method=self._method)
+                                      t_end=self._h, method="sweep")
         keep = u[I] | u[J]
         I, J = I[keep], J[keep]
         if contacts is not None and len(contacts):
             # slot -> local index through an array (no dict of every body per call)
             local = np.empty(self._ids.shape[0], dtype=np.int64)
             local[slots] = np.arange(slots.size)
-            slot = self._slot.__getitem__
-            ca = local[np.fromiter(map(slot, contacts.id_a.tolist()), np.int64, len(contacts))]
-            cb = local[np.fromiter(map(slot, contacts.id_b.tolist()), np.int64, len(contacts))]
+            if contacts.slot_ids is self._ids:  # no body came or went since: its slots hold
+                ca, cb = local[contacts.slot_a], local[contacts.slot_b]
+            else:
+                slot = self._slot.__getitem__
+                ca = local[np.fromiter(map(slot, contacts.id_a.tolist()), np.int64, len(contacts))]
+                cb = local[np.fromiter(map(slot, contacts.id_b.tolist()), np.int64, len(contacts))]
             m = u[ca] | u[cb]
             I, J = np.concatenate([I, ca[m]]), np.concatenate([J, cb[m]])
         # local order is id order: (min, max) puts the id that sorts first in front
         n = np.int64(slots.size)
         key = np.unique(np.minimum(I, J) * n + np.maximum(I, J))
-        I, J = key // n, key % n
-        if I.size == 0:
-            self._uncertain_waiting = {}
-            return SceneUncertainty(R, _NO_IDS, _NO_IDS, _NO_VALUES, _NO_VALUES, _NO_VALUES)
-        ids = self._ids[slots]
-        ida, idb = ids[I], ids[J]
+        rows = None
+        if contacts is not None:
+            rows = np.full(key.size, -1, dtype=np.int64)
+            if len(contacts):
+                ckey = np.minimum(ca, cb) * n + np.maximum(ca, cb)
+                order = np.argsort(ckey, kind="stable")
+                at = np.minimum(np.searchsorted(ckey[order], key), order.size - 1)
+                same = ckey[order[at]] == key
+                rows[same] = order[at[same]]
+        return key // n, key % n, (P, V, C), rows
+
+    def _uncertain_pair_times(self, sa: np.ndarray, sb: np.ndarray, R: int) -> np.ndarray:
+        """Pair times t_p (ns): the newer stamp of the two if it lies within UNCERTAIN_LAG_NS
+        of R, else the start of R's lag period (R - R mod UNCERTAIN_LAG_NS); R - t_p < the lag."""
+        newer = np.maximum(self._T[sa], self._T[sb])
+        lag = self.UNCERTAIN_LAG_NS
+        return np.where(newer > R - lag, newer, R - R % lag)
+
+    def _evaluate_uncertain(self, unc, sa, sb, la, lb, at_R, tp, ida, idb, threshold: float,
+                            max_evaluated: int | None) -> "_Evaluated":
+        """``unc.uncertain_pairs`` on these pairs (slots sa, sb; local indices la, lb into
+        at_R, the bodies at R), each at its t_p over [0, H] (screened, within the budget; FIFO
+        bookkeeping of the deferred, see uncertain_pairs)."""
+        R = self.reference_ns
+        late = np.flatnonzero(tp != R)  # t_p = R: the bodies as propagated for the listing
+        states = []
+        for s, loc in ((sa, la), (sb, lb)):
+            P, V, C = at_R[0][loc], at_R[1][loc], at_R[2][loc]
+            if late.size:  # the same elementwise operations from the stamp to t_p instead
+                sl, dt = s[late], tp[late] - self._T[s[late]]
+                P[late], V[late] = _propagate_ns(self._P[sl], self._V[sl], self._A[sl], dt)
+                u = self._U[sl]
+                Cl = np.zeros((late.size,) + C.shape[1:])
+                Cl[u] = _propagate_covariance(self._C[sl[u]], dt[u])
+                C[late] = Cl
+            states.append((P, V, self._A[s], self._R[s], C))
         serial = self._uncertain_serial
         waiting = self._uncertain_waiting
         asked = []
@@ -1174,25 +1305,46 @@ class Scene:
             return np.fromiter((waiting.get(k, serial) for k in keys), np.int64, len(keys))
 
         if self._uncertain_memo_ref != R:
-            # a new reference time moves the pairs' inputs (states and covariances are
-            # propagated to R; only bodies at rest with a position-only covariance keep
-            # theirs): skip the look-ups, which can only forgo a reuse, never give a wrong one
+            # a new reference time moves most pairs' inputs (their t_p follow the stamps):
+            # skip the look-ups, which can only forgo a reuse, never give a wrong one
             self._uncertain_memo.clear()
             self._uncertain_memo_ref = R
-        res = unc.uncertain_pairs(P[I], V[I], A[I], Rad[I], C[I], P[J], V[J], A[J], Rad[J], C[J],
-                                  self._h, threshold, screen=True, max_evaluated=max_evaluated,
-                                  priority=waited_since, memo=self._uncertain_memo)
+        res = unc.uncertain_pairs(*states[0], *states[1], self._h, threshold, screen=True,
+                                  max_evaluated=max_evaluated, priority=waited_since,
+                                  memo=self._uncertain_memo)
+        deferred = (res.collision_probability_bound == unc.DEFERRED_BOUND
+                    if max_evaluated is not None else np.zeros(sa.size, dtype=bool))
         still = {}
         for rows, keys in asked:
-            deferred = res.collision_probability_bound[rows] == unc.DEFERRED_BOUND
-            for k, d in zip(keys, deferred.tolist()):
+            for k, d in zip(keys, deferred[rows].tolist()):
                 if d:
                     still[k] = waiting.get(k, serial)
         self._uncertain_waiting = still
         self._uncertain_serial = serial + 1
-        return SceneUncertainty(R, ida, idb, res.collision_probability,
-                                res.collision_probability_bound, res.plausible_time,
-                                unc.deferred_count(res) if max_evaluated is not None else 0)
+        return _Evaluated(res.collision_probability, res.collision_probability_bound,
+                          res.plausible_time, deferred)
+
+
+class _PairAnswers(NamedTuple):
+    """Scene.uncertain_pairs' answers of the last call, per pair (sorted by key = slot_a << 32 |
+    slot_b): valid for a later call while both bodies' states (serials) and t_p are unchanged."""
+
+    horizon: float
+    threshold: float
+    key: np.ndarray
+    state_a: np.ndarray
+    state_b: np.ndarray
+    pair_ns: np.ndarray
+    probability: np.ndarray
+    bound: np.ndarray
+    tau: np.ndarray  # plausible time from t_p, s
+
+
+class _Evaluated(NamedTuple):
+    probability: np.ndarray
+    bound: np.ndarray
+    tau: np.ndarray
+    deferred: np.ndarray
 
 
 class _Capture:

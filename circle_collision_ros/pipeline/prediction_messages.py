@@ -141,8 +141,14 @@ class ScenePrediction:
 
         u = self.uncertainty
         if u is not None and len(u):
-            row = {pair: j for j, pair in enumerate(zip(u.id_a.tolist(), u.id_b.tolist()))}
-            found = np.array([row.get(pair, -1) for pair in zip(id_a, id_b)], dtype=np.int64).reshape(n)
+            if u.matched is c and u.contact_rows is not None:  # the scene matched the pairs
+                found = np.full(len(c), -1, dtype=np.int64)
+                paired = np.flatnonzero(u.contact_rows >= 0)
+                found[u.contact_rows[paired]] = paired
+                found = found[k]
+            else:
+                row = {pair: j for j, pair in enumerate(zip(u.id_a.tolist(), u.id_b.tolist()))}
+                found = np.array([row.get(pair, -1) for pair in zip(id_a, id_b)], dtype=np.int64).reshape(n)
             has = found >= 0
             parts["probability"][0][has] = u.probability[found[has]]
             parts["bound"][0][has] = u.probability_bound[found[has]]
@@ -153,8 +159,9 @@ class ScenePrediction:
             extra[found[has]] = False
             extra &= (u.probability >= self.probability_threshold) & np.isfinite(u.probability) \
                 & np.isfinite(u.probability_bound)
-            keys = list(zip(u.plausible_ttc.tolist(), u.id_a.tolist(), u.id_b.tolist()))
-            e = np.array(sorted(np.flatnonzero(extra).tolist(), key=keys.__getitem__), dtype=np.int64)
+            e = np.flatnonzero(extra)
+            keys = list(zip(u.plausible_ttc[e].tolist(), u.id_a[e].tolist(), u.id_b[e].tolist()))
+            e = e[np.array(sorted(range(e.size), key=keys.__getitem__), dtype=np.int64)]
             no_contact_rows(u.id_a[e].tolist(), u.id_b[e].tolist(), u.probability[e], u.probability_bound[e],
                             u.plausible_ttc[e])
         if self.report_all_pairs and len(self.capture) <= ReportAll.MAX_BODIES:
