@@ -20,6 +20,14 @@ broad phase, propagation to R, joining the rows), and how many pairs the uncerta
 evaluated and reported. --budget is the node's ``uncertain_pair_budget`` (default: the node's
 default; 0: every pair gets the full evaluation); the deferred pairs are counted. The node latency with covariance through DDS is
 ``bench/bench_node.py --covariance SIGMA`` (same run, on and off).
+
+    .venv/bin/python bench/bench_uncertainty_scene.py --stream [--bodies 300] [--updates 600]
+
+the per-body stream instead (the node-streams targets' shape): the scene is filled once, then
+one body at a time gets a newer state (new stamp, so R moves with every update), exact and
+with covariance interleaved; prints the median and p99 node-side time per update (intake +
+predict + to_cdr), the ratio, and how many uncertain pairs each update gave the core (only
+the updated body's pairs: Scene.uncertain_pairs keeps every other pair's answer).
 """
 from __future__ import annotations
 
@@ -54,6 +62,50 @@ def frame(scene: SyntheticScene, stamp_ns: int, covariance: np.ndarray | None) -
                       covariance_size=None if covariance is None else np.full(n, 36, dtype=np.int64))
 
 
+def stream(n: int, updates: int, sigma: float, velocity_sigma: float, horizon: float,
+           budget: int) -> None:
+    """One-body updates in an n-body scene, exact and with covariance interleaved."""
+    scene = SyntheticScene(n, size=float(np.sqrt(n * 333.0)), dimensions=2, seed=n)
+    config = PredictorConfig(horizon=horizon, max_bodies=max(10_000, n), stale_timeout=3600.0,
+                             uncertain_pair_budget=budget)
+    runs = {"exact": (CollisionPredictor(config), None),
+            "covariance": (CollisionPredictor(config), covariance_rows(n, sigma, velocity_sigma))}
+    for predictor, c in runs.values():
+        predictor.receive_batch(frame(scene, BASE_NS, c), BASE_NS)
+        predictor.predict().to_cdr()
+    times = {name: [] for name in runs}
+    given, listed, deferred = [], [], []
+    step_ns = 1_000_000_000 // (30 * n)  # every body at 30 Hz, sources evenly spread
+    for k in range(updates):
+        stamp = BASE_NS + (k + 1) * step_ns
+        b = k % n
+        scene.step(step_ns * 1e-9)
+        for name, (predictor, c) in runs.items():
+            one = frame(scene, stamp, c).select(np.array([b]))
+            t0 = time.perf_counter()
+            predictor.receive_batch(one, stamp)
+            prediction = predictor.predict()
+            prediction.to_cdr()
+            if k >= 50:  # the first updates meet cold caches
+                times[name].append(time.perf_counter() - t0)
+                if c is not None:
+                    given.append(predictor._scene.uncertain_evaluated)
+                    listed.append(len(prediction.uncertainty))
+                    deferred.append(prediction.uncertainty.deferred)
+    med = {k: statistics.median(v) * 1e3 for k, v in times.items()}
+    p99 = {k: float(np.percentile(v, 99)) * 1e3 for k, v in times.items()}
+    print(f"{n} bodies, one-body updates (new stamp each), {len(times['exact'])} timed, horizon {horizon} s, "
+          f"covariance: position sigma {sigma} m, velocity sigma {velocity_sigma} m/s on every body; "
+          f"uncertain_pair_budget {budget}")
+    print("| per update | exact ms | covariance ms | ratio |")
+    print("|---|---:|---:|---:|")
+    for label, d in (("median", med), ("p99", p99)):
+        print(f"| {label} | {d['exact']:.3f} | {d['covariance']:.3f} | {d['covariance'] / d['exact']:.1f}x |")
+    print(f"uncertain pairs listed (median): {statistics.median(listed):.0f}; given to the core per update: "
+          f"median {statistics.median(given):.0f}, max {max(given)}; deferred (median) "
+          f"{statistics.median(deferred):.0f}")
+
+
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--bodies", type=int, default=1000)
@@ -64,7 +116,14 @@ def main() -> int:
     parser.add_argument("--budget", type=int, default=None,
                         help="uncertain_pair_budget (default: the node parameter's default; 0: no limit)")
     parser.add_argument("--quick", action="store_true", help="5 frames")
+    parser.add_argument("--stream", action="store_true", help="one-body updates (see the docstring)")
+    parser.add_argument("--updates", type=int, default=600, help="with --stream")
     opts = parser.parse_args()
+    budget = NODE_BUDGET if opts.budget is None else opts.budget
+    if opts.stream:
+        stream(300 if opts.bodies == 1000 and "--bodies" not in sys.argv else opts.bodies, opts.updates,
+               opts.sigma, opts.velocity_sigma, opts.horizon, budget)
+        return 0
     frames = 5 if opts.quick else opts.frames
     n = opts.bodies
     scene = SyntheticScene(n, size=float(np.sqrt(n * 333.0)), dimensions=2, seed=n)
