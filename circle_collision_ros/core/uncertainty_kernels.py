@@ -19,7 +19,8 @@ from circle_collision_ros.core.quadrature import push_halves
 from circle_collision_ros.core.sobol import scrambled_directions, sobol_points
 
 __all__ = ["BROAD_PHASE_SIGMAS", "TUBE_TAIL", "chi2_tail_even", "S_at", "max_sigma_over",
-           "pair_probability", "QMC_REPLICATES", "QMC_POINTS", "QMC_T"]
+           "pair_probability", "relative_rows", "evaluate_rows", "finish_row", "OUT_SIZE",
+           "QMC_REPLICATES", "QMC_POINTS", "QMC_T"]
 
 
 def chi2_tail_even(x: float, dof: int) -> float:
@@ -588,12 +589,50 @@ def _pair_kernel(dp, dv, da, R, Sigma, H, thr, out):
     out[_OUT_HI] = 1.0 if degenerate else upper + err + _P0_ERR + 2 * TUBE_TAIL
 
 
-def pair_probability(dp, dv, da, R, Sigma, H, thr):
-    """(probability, bound, plausible time) of one uncertain pair (relative state).
+OUT_SIZE = 6
 
-    See docs/uncertainty.md for the method and why each bound holds."""
-    out = np.empty(6)
-    _pair_kernel(dp, dv, da, float(R), Sigma, float(H), float(thr), out)
+
+@njit(cache=True, error_model="numpy")
+def relative_rows(pa, va, aa, ra, pb, vb, ab, rb, sigma, rows, dp, dv, da, rad, sig):
+    """Relative state of the rows ``rows`` of the per-body arrays into dp, dv, da
+    (a - b), rad (ra + rb), sig (sigma[row]); each row's sign canonicalised:
+    X -> -X leaves the problem unchanged, so the row is negated when the first
+    non-zero of (dp, dv, da) is negative (swapping a and b gives the same bits)."""
+    D = pa.shape[1]
+    for j in range(rows.shape[0]):
+        i = rows[j]
+        for c in range(D):
+            dp[j, c] = pa[i, c] - pb[i, c]
+            dv[j, c] = va[i, c] - vb[i, c]
+            da[j, c] = aa[i, c] - ab[i, c]
+        rad[j] = ra[i] + rb[i]
+        first = 0.0
+        for c in range(3 * D):
+            x = dp[j, c] if c < D else (dv[j, c - D] if c < 2 * D else da[j, c - 2 * D])
+            if x != 0.0:
+                first = x
+                break
+        if first < 0.0:
+            for c in range(D):
+                dp[j, c] = -dp[j, c]
+                dv[j, c] = -dv[j, c]
+                da[j, c] = -da[j, c]
+        for r in range(2 * D):
+            for c in range(2 * D):
+                sig[j, r, c] = sigma[i, r, c]
+
+
+@njit(cache=True, error_model="numpy")
+def evaluate_rows(dp, dv, da, rad, sig, H, thr, out):
+    """_pair_kernel on every row (out (n, OUT_SIZE)); rows with out[j, _OUT_QMC] = 1
+    still need ``finish_row``'s RQMC fallback."""
+    for j in range(dp.shape[0]):
+        _pair_kernel(dp[j], dv[j], da[j], rad[j], sig[j], H, thr, out[j])
+
+
+def finish_row(dp, dv, da, R, Sigma, H, out):
+    """(probability, bound, plausible time) of one row from _pair_kernel's out,
+    running the RQMC fallback when the kernel asked for it."""
     if out[_OUT_QMC] == 0.0:
         return float(out[_OUT_P]), float(out[_OUT_BOUND]), float(out[_OUT_TPL])
     D = dp.shape[0]
@@ -601,6 +640,15 @@ def pair_probability(dp, dv, da, R, Sigma, H, thr):
     n = QMC_REPLICATES * QMC_POINTS
     p = min(1.0, max(0.0, min(max(mean, float(out[_OUT_LO])), float(out[_OUT_HI]))))
     return p, max(QMC_T * se, 3.0 / n) + TUBE_TAIL, float(out[_OUT_TPL])
+
+
+def pair_probability(dp, dv, da, R, Sigma, H, thr):
+    """(probability, bound, plausible time) of one uncertain pair (relative state).
+
+    See docs/uncertainty.md for the method and why each bound holds."""
+    out = np.empty(OUT_SIZE)
+    _pair_kernel(dp, dv, da, float(R), Sigma, float(H), float(thr), out)
+    return finish_row(dp, dv, da, R, Sigma, H, out)
 
 
 _GRID = 64
