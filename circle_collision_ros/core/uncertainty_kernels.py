@@ -407,10 +407,120 @@ _SEARCH_STEPS = 64  # certified steps per panel before the conservative exit
 
 
 @njit(cache=True, error_model="numpy")
-def _first_crossing(dp, dv, da, R, Sigma, pa, pb, j, p_start, thr, dt, cache, acc, st):
-    """First t in panel j = [a, b] with P(|X(t)| <= R) >= thr given P(a) = p_start < thr,
-    or +inf when certified absent (also +inf when S(t) turned out degenerate:
-    the caller checks st[_ST_DEGENERATE]).
+def _det_lower(Sigma, ta, tb):
+    """A lower bound of det S(t) over [ta, tb] (<= 0 when none is found): det S(m + h)
+    is a polynomial in h (degree 2D; S(m + h) = A + B h + C h^2 entrywise, m the
+    midpoint), so for |h| <= r it is >= c_0 - sum_k |c_k| r^k; the rounding of the
+    coefficients (a few ulps of products of entries <= M) is covered by 1e-12 M^D."""
+    D = Sigma.shape[0] // 2
+    m = 0.5 * (ta + tb)
+    r = 0.5 * (tb - ta)
+    P = np.zeros((3, 3, 3))  # P[i, j] = (A, B, C) of the symmetrised S_ij
+    M = 0.0
+    for i in range(D):
+        for j in range(D):
+            c = 0.5 * (Sigma[D + i, D + j] + Sigma[D + j, D + i])
+            bb = 0.5 * ((Sigma[i, D + j] + Sigma[D + i, j]) + (Sigma[j, D + i] + Sigma[D + j, i]))
+            aa = 0.5 * (Sigma[i, j] + Sigma[j, i])
+            P[i, j, 0] = aa + m * (bb + m * c)
+            P[i, j, 1] = bb + 2.0 * m * c
+            P[i, j, 2] = c
+            M += abs(P[i, j, 0]) + r * (abs(P[i, j, 1]) + r * abs(P[i, j, 2]))
+    coef = np.zeros(7)
+    if D == 2:
+        for u in range(3):
+            for v in range(3):
+                coef[u + v] += P[0, 0, u] * P[1, 1, v] - P[0, 1, u] * P[0, 1, v]
+    else:
+        # det = s00 (s11 s22 - s12^2) - s01 (s01 s22 - s12 s02) + s02 (s01 s12 - s11 s02)
+        for u in range(3):
+            for v in range(3):
+                for w in range(3):
+                    coef[u + v + w] += (P[0, 0, u] * (P[1, 1, v] * P[2, 2, w] - P[1, 2, v] * P[1, 2, w])
+                                        - P[0, 1, u] * (P[0, 1, v] * P[2, 2, w] - P[1, 2, v] * P[0, 2, w])
+                                        + P[0, 2, u] * (P[0, 1, v] * P[1, 2, w] - P[1, 1, v] * P[0, 2, w]))
+    low = coef[0]
+    rk = 1.0
+    for k in range(1, 2 * D + 1):
+        rk *= r
+        low -= abs(coef[k]) * rk
+    return low - 1e-12 * M ** D
+
+
+@njit(cache=True, error_model="numpy")
+def instant_bound(dp, dv, da, R, Sigma, ta, tb):
+    """A rigorous upper bound of P(|X(t)| <= R) for every t in [ta, tb] (no quadrature).
+
+    With d = (min |g(t)| - R)^+ (box bound, _mean_range) and lam >= lambda_max(S(t))
+    (max_sigma_over): every point of the ball is >= d from g(t), so its Mahalanobis
+    distance is >= q = d^2 / lam.  Then (i) P <= P(chi^2_D >= q) (X - g = S^(1/2) w,
+    |X - g| <= sqrt(lam) |w|), and (ii) P <= vol(ball) * max density on the ball
+    <= vol / ((2 pi)^(D/2) sqrt(det_min)) e^(-q/2), det_min a lower bound of
+    det S(t) (_det_lower).  Returns min of (i), (ii) and 1.  (ii) is the tight one
+    when sigma >> R, (i) in the tails when sigma << distance."""
+    D = dp.shape[0]
+    lam = max_sigma_over(Sigma, ta, tb) ** 2
+    gmin, _ = _mean_range(dp, dv, da, ta, tb)
+    d = gmin - R
+    if d > 0.0:
+        if not (lam > 0.0):
+            return 0.0
+        q = d * d / lam
+    else:
+        q = 0.0
+    if D == 2:
+        bound = math.exp(-0.5 * q)
+    else:
+        bound = math.erfc(math.sqrt(0.5 * q)) + math.sqrt(2.0 * q / math.pi) * math.exp(-0.5 * q)
+    det = _det_lower(Sigma, ta, tb)
+    if det > 0.0:
+        if D == 2:
+            dens = R * R / (2.0 * math.sqrt(det)) * math.exp(-0.5 * q)
+        else:
+            dens = (4.0 / 3.0) * math.pi * R ** 3 / ((2.0 * math.pi) ** 1.5 * math.sqrt(det)) * math.exp(-0.5 * q)
+        bound = min(bound, dens)
+    # rounding of the exp/erfc/sqrt chain (a few ulps) is far inside this factor
+    return min(1.0, bound * (1.0 + 1e-9))
+
+
+_CLEAR_DEPTH = 6  # the analytic certificate's finest piece: 1/64 of a panel
+
+
+@njit(cache=True, error_model="numpy")
+def _clear_prefix(dp, dv, da, R, Sigma, a, b, thr):
+    """The largest c in [a, b] on the dyadic grid of depth _CLEAR_DEPTH such that
+    instant_bound < thr on pieces covering [a, c]: then P(|X(t)| <= R) < thr on
+    [a, c] is certified with no quadrature (pieces visited left to right; the
+    first piece of the finest depth that fails ends the prefix)."""
+    sa = np.empty(_CLEAR_DEPTH + 2)
+    sb = np.empty(_CLEAR_DEPTH + 2)
+    sd = np.empty(_CLEAR_DEPTH + 2, dtype=np.int64)
+    sa[0] = a
+    sb[0] = b
+    sd[0] = 0
+    top = 1
+    c = a
+    while top > 0:
+        top -= 1
+        ta = sa[top]
+        tb = sb[top]
+        d = sd[top]
+        if instant_bound(dp, dv, da, R, Sigma, ta, tb) < thr:
+            c = tb
+            continue
+        m = 0.5 * (ta + tb)
+        if d >= _CLEAR_DEPTH or not (ta < m < tb):
+            return c
+        top = push_halves(sa, sb, sd, top, ta, m, tb, d)
+    return c
+
+
+@njit(cache=True, error_model="numpy")
+def _first_crossing(dp, dv, da, R, Sigma, pa, pb, j, a0, p_start, thr, dt, cache, acc, st):
+    """First t in panel j = [a, b] with P(|X(t)| <= R) >= thr given that P < thr
+    is certified on [a, a0] and P(a0) = p_start < thr, or +inf when certified
+    absent (also +inf when S(t) turned out degenerate: the caller checks
+    st[_ST_DEGENERATE]).
 
     Invariant: P < thr on [a, lo] is certified (each step by
     sup_[lo, c] P <= P(lo) + int_lo^c nu+ + errors < thr).  Until a point
@@ -422,33 +532,46 @@ def _first_crossing(dp, dv, da, R, Sigma, pa, pb, j, p_start, thr, dt, cache, ac
     first crossing, never a later one): lo when the step shrinks below dt,
     or after _SEARCH_STEPS steps (P within the certificate's resolution of
     the threshold over a long stretch)."""
-    a = pa[j]
     b = pb[j]
-    lo = a
+    lo = a0
     plo = p_start
     hi = math.inf
     phi = -1.0
-    step = b - a
+    step = b - a0
     c = b
     stall = 0
+    first = True
     for _ in range(_SEARCH_STEPS):
         if hi - lo <= dt:
             return hi
         if c - lo <= dt:
             return lo
-        if lo == a and c == b:
-            v, e = _rice_panel(dp, dv, da, R, Sigma, pa, pb, j, cache, acc, st)  # the panel's own
+        if first and c == b:
+            # the panel's own integral (computed once per pair, the probability
+            # needs it too): nu+ >= 0, so over [a, b] it bounds the one over [lo, b]
+            v, e = _rice_panel(dp, dv, da, R, Sigma, pa, pb, j, cache, acc, st)
+            width = b - pa[j]
         else:
             v, e = _rice_short(dp, dv, da, R, Sigma, lo, c, acc, st)
+            width = c - lo
+        first = False
         if st[_ST_DEGENERATE] != 0.0:
             return math.inf
         # entry-rate model of the step that the certificate would still pass
-        rate = (v + e) / (c - lo)
+        rate = (v + e) / width
         if plo + v + e + _P0_ERR < thr:  # certified: no crossing in [lo, c]
             if c == b:
                 return math.inf
+            pc = _prob_at(dp, dv, da, R, Sigma, c, st)
+            if pc > plo + v + e + _P0_ERR:
+                # P(c) <= P(lo) + int nu+ is a theorem, so the 3-point rule
+                # under-estimated the integral (a step across a steep rise of
+                # nu+): the step proves nothing; retry a shorter one
+                step = 0.25 * (c - lo)
+                c = lo + step
+                continue
             lo = c
-            plo = _prob_at(dp, dv, da, R, Sigma, c, st)
+            plo = pc
             step = 2.0 * step
             if rate > 0.0:
                 step = min(step, 0.9 * (thr - plo - _P0_ERR) / rate)
@@ -526,7 +649,17 @@ def _pair_kernel(dp, dv, da, R, Sigma, H, thr, out):
                 tpl = pa[j]
                 found = True
                 break
-            r = _first_crossing(dp, dv, da, R, Sigma, pa, pb, j, p_start, thr, dt, cache, acc, st)
+            # the analytic bound certifies the start of the panel without quadrature
+            a0 = _clear_prefix(dp, dv, da, R, Sigma, pa[j], pb[j], thr)
+            if a0 >= pb[j]:
+                continue
+            if a0 > pa[j]:
+                p_start = _prob_at(dp, dv, da, R, Sigma, a0, st)
+                if p_start >= thr:  # (cannot happen: P(a0) <= the bound < thr)
+                    tpl = a0
+                    found = True
+                    break
+            r = _first_crossing(dp, dv, da, R, Sigma, pa, pb, j, a0, p_start, thr, dt, cache, acc, st)
             if st[_ST_DEGENERATE] != 0.0:
                 found = True
                 break
