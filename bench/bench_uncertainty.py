@@ -13,9 +13,11 @@ Per pair: ours = ``uncertain_pairs`` (one row, threshold 0.01); plain Monte
 Carlo with 1e3, 1e4, 1e5 samples (seeded numpy normals through the exact
 batched solver ``time_to_collision``); the reference is MC with 1e6 samples
 (other seed) and its standard error SE_ref = sqrt(p (1 - p) / 1e6).  Times
-are per pair, the best of 3 calls for ours and one call for MC (sampling
-included), single-threaded (numba.set_num_threads(1)), all measured in the same run (the machine is shared: compare
-ratios, not absolute times).
+are per pair, the best of 3 calls for ours and for each MC size (sampling
+included; the best of 3 for both, so that a burst of load on the shared
+machine during one MC call does not inflate the ratio), single-threaded
+(numba.set_num_threads(1)), all measured in the same run (the machine is
+shared: compare ratios, not absolute times).
 
 Targets checked per family: |ours - ref| <= max(0.005, 3 SE_ref) on every
 pair; our stated bound never exceeded (|ours - ref| <= bound + 3 SE_ref:
@@ -93,8 +95,17 @@ FAMILIES = [("head-on", 2), ("crossing", 2), ("near-miss", 2), ("overlap at star
             ("head-on 3-D", 3), ("crossing 3-D", 3)]
 
 
-def monte_carlo(pair, n, seed):
-    """(estimate, seconds): n samples of (dp, dv) through the exact batched solver."""
+def monte_carlo(pair, n, seed, repeat=1):
+    """(estimate, seconds): n samples of (dp, dv) through the exact batched solver;
+    seconds = the best of ``repeat`` identical calls (same seed, same estimate)."""
+    best = math.inf
+    for _ in range(repeat):
+        p, t = _monte_carlo_once(pair, n, seed)
+        best = min(best, t)
+    return p, best
+
+
+def _monte_carlo_once(pair, n, seed):
     pa, va, aa, ra, ca, pb, vb, ab, rb, cb = pair
     D = pa.shape[0]
     t0 = time.perf_counter()
@@ -131,7 +142,7 @@ def run(pairs: int, seed: int = 18):
             ref, _ = monte_carlo(pair, REF_SIZE, seed=10_000 + 97 * fi + k)
             se_ref = math.sqrt(max(ref * (1 - ref), 1.0 / REF_SIZE) / REF_SIZE)
             p, b, t_ours = ours(pair)
-            mc = [monte_carlo(pair, n, seed=20_000 + 97 * fi + k + n) for n in MC_SIZES]
+            mc = [monte_carlo(pair, n, seed=20_000 + 97 * fi + k + n, repeat=3) for n in MC_SIZES]
             recs.append(dict(ref=ref, se_ref=se_ref, ours=p, bound=b, t_ours=t_ours,
                              mc=[(abs(q - ref), t) for q, t in mc]))
         rows.append((name, recs))

@@ -712,8 +712,8 @@ def _first_crossing(dp, dv, da, R, Sigma, pa, pb, j, a0, p_start, thr, dt, cache
             if c == b:
                 return math.inf
             pc = _prob_at(dp, dv, da, R, Sigma, c, st)
-            if pc > plo + v + e + _P0_ERR:
-                # P(c) <= P(lo) + int nu+ is a theorem, so the 3-point rule
+            if pc > plo + v + e + 2.0 * _P0_ERR:
+                # P(c) <= P(lo) + int nu+ is a theorem (each P within _P0_ERR), so the 3-point rule
                 # under-estimated the integral (a step across a steep rise of
                 # nu+): the step proves nothing; retry a shorter one
                 step = 0.25 * (c - lo)
@@ -795,21 +795,16 @@ def _pair_kernel(dp, dv, da, R, Sigma, H, thr, out):
     else:
         found = False
         for j in range(npan):
-            p_start = p0 if pa[j] == 0.0 else _prob_at(dp, dv, da, R, Sigma, pa[j], st)
-            if p_start >= thr:
-                tpl = pa[j]
-                found = True
-                break
-            # the analytic bound certifies the start of the panel without quadrature
+            # the analytic bound certifies the start of the panel without
+            # quadrature (P < thr on [pa[j], a0]); the walk starts at a0
             a0 = _clear_prefix(dp, dv, da, R, Sigma, pa[j], pb[j], thr)
             if a0 >= pb[j]:
                 continue
-            if a0 > pa[j]:
-                p_start = _prob_at(dp, dv, da, R, Sigma, a0, st)
-                if p_start >= thr:  # (cannot happen: P(a0) <= the bound < thr)
-                    tpl = a0
-                    found = True
-                    break
+            p_start = p0 if a0 == 0.0 else _prob_at(dp, dv, da, R, Sigma, a0, st)
+            if p_start >= thr:
+                tpl = a0
+                found = True
+                break
             r = _first_crossing(dp, dv, da, R, Sigma, pa, pb, j, a0, p_start, thr, dt, cache, acc, st)
             if st[_ST_DEGENERATE] != 0.0:
                 found = True
