@@ -357,6 +357,23 @@ def _crit_in(c4, c3, c2, c1, lo, hi):
     return t
 
 
+@njit(cache=True, error_model="numpy", inline="always")
+def _quartic_coefficients(p, v, a):
+    """(c4, c3, c2, c1, |p|^2) of |p + v t + a t^2 / 2|^2 = c4 t^4 + c3 t^3 + c2 t^2 + c1 t + |p|^2."""
+    c4 = 0.0
+    c3 = 0.0
+    c2 = 0.0
+    c1 = 0.0
+    pp = 0.0
+    for k in range(p.shape[0]):
+        c4 += 0.25 * a[k] * a[k]
+        c3 += v[k] * a[k]
+        c2 += v[k] * v[k] + p[k] * a[k]
+        c1 += 2.0 * p[k] * v[k]
+        pp += p[k] * p[k]
+    return c4, c3, c2, c1, pp
+
+
 @njit(cache=True, error_model="numpy")
 def _quartic_crossings(p, v, a, R, H):
     """(inside at 0, number of entries in (0, H]) of the path X(t) = p + v t + a t^2 / 2
@@ -365,18 +382,7 @@ def _quartic_crossings(p, v, a, R, H):
     monotone, so an entry is a piece with f > 0 at its start and f <= 0 at its
     end.  (Only a graze, f touching 0, can be miscounted: a null event for a
     Gaussian state.)  Scalars only: this runs once per RQMC sample."""
-    D = p.shape[0]
-    c4 = 0.0
-    c3 = 0.0
-    c2 = 0.0
-    c1 = 0.0
-    pp = 0.0
-    for k in range(D):
-        c4 += 0.25 * a[k] * a[k]
-        c3 += v[k] * a[k]
-        c2 += v[k] * v[k] + p[k] * a[k]
-        c1 += 2.0 * p[k] * v[k]
-        pp += p[k] * p[k]
+    c4, c3, c2, c1, pp = _quartic_coefficients(p, v, a)
     pn = math.sqrt(pp)
     c0 = (pn - R) * (pn + R)
     # roots of f'' = 12 c4 t^2 + 6 c3 t + 2 c2 in (0, H): the ends of f''s monotone pieces
@@ -447,13 +453,7 @@ def overcount_replicates(dp, dv, da, R, H, L, Z, m, est):
             # of f = |X|^2 - R^2 inside (0, H): impossible where f'' =
             # 2 (|Xdot|^2 + X.da) > 0 on all of [0, H] (a quadratic in t; its
             # minimum over [0, H] is checked), which is most paths
-            c4 = 0.0
-            c3 = 0.0
-            c2 = 0.0
-            for k in range(D):
-                c4 += 0.25 * da[k] * da[k]
-                c3 += v[k] * da[k]
-                c2 += v[k] * v[k] + p[k] * da[k]
+            c4, c3, c2, _, _ = _quartic_coefficients(p, v, da)
             tm = min(max(-c3 / (4.0 * c4), 0.0), H) if c4 > 0.0 else (0.0 if c3 >= 0.0 else H)
             if (12.0 * c4 * tm + 6.0 * c3) * tm + 2.0 * c2 > 0.0:
                 continue
