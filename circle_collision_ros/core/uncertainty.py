@@ -34,10 +34,12 @@ from circle_collision_ros.core.uncertainty_kernels import (
     BROAD_PHASE_SIGMAS,
     TUBE_TAIL,
     OUT_SIZE,
-    evaluate_rows,
+    evaluate_uncertain_rows,
+    factor,
     finish_row,
     max_sigma_rows,
     normal_table,
+    overcount_replicates,
     qmc_probability,
     relative_rows,
     row_classes,
@@ -236,7 +238,7 @@ def uncertain_pairs(pa, va, aa, ra, cov_a, pb, vb, ab, rb, cov_b,
         now = np.sort(order[:m])
         todo, dp, dv, da, rad, sig = todo[now], dp[now], dv[now], da[now], rad[now], sig[now]
     out = np.empty((todo.size, OUT_SIZE))
-    evaluate_rows(dp, dv, da, rad, sig, H, thr, out)
+    evaluate_uncertain_rows(dp, dv, da, rad, sig, H, thr, out)
     for j, i in enumerate(todo.tolist()):
         prob[i], bound[i], tpl[i] = r = finish_row(dp[j], dv[j], da[j], float(rad[j]), sig[j], H, out[j])
         if memo is not None:
@@ -275,9 +277,13 @@ def inflation_radius(cov, horizon: float) -> np.ndarray:
 
 
 def load_fallback_kernels(dimensions: int) -> None:
-    """Compile (or load from numba's cache) the RQMC fallback's kernels for `dimensions`.
+    """Compile (or load from numba's cache) the RQMC kernels for `dimensions`: the contact
+    indicator's (degenerate covariances) and the over-count's (accelerating pairs).
 
-    Only pairs whose bracket stays wide take the fallback, so a warm-up scene may not reach
-    it; called directly, a node's first such pair waits for no compile."""
+    A warm-up scene may reach neither; called directly, a node's first such pair waits
+    for no compile."""
     z = np.zeros(dimensions)
-    qmc_probability(z + 1.5, z, z + 0.1, 1.0, np.eye(2 * dimensions) * 0.01, 1.0, normal_table(2 * dimensions))
+    cov = np.eye(2 * dimensions) * 0.01
+    Z = normal_table(2 * dimensions)
+    qmc_probability(z + 1.5, z, z + 0.1, 1.0, cov, 1.0, Z)
+    overcount_replicates(z + 1.5, z, z + 0.1, 1.0, 1.0, factor(cov), Z, 1, np.empty(Z.shape[0]))

@@ -19,7 +19,8 @@ from circle_collision_ros.core.quadrature import push_halves
 from circle_collision_ros.core.sobol import scrambled_directions, sobol_points
 
 __all__ = ["BROAD_PHASE_SIGMAS", "TUBE_TAIL", "chi2_tail_even", "S_at", "max_sigma_over",
-           "pair_probability", "relative_rows", "evaluate_rows", "finish_row", "OUT_SIZE",
+           "pair_probability", "relative_rows", "evaluate_uncertain_rows", "finish_row", "OUT_SIZE", "factor",
+           "overcount_replicates",
            "QMC_REPLICATES", "QMC_POINTS", "QMC_T"]
 
 
@@ -290,7 +291,7 @@ def screen_sigmas(threshold: float, dof: int) -> tuple[float, float]:
 
 
 @njit(cache=True, error_model="numpy")
-def _factor(Sigma):
+def factor(Sigma):
     """L (2D, 2D) with L L^T = Sigma (eigen factor; PSD after clamping)."""
     lam, V = eig_sym(Sigma)
     n = Sigma.shape[0]
@@ -310,7 +311,7 @@ def qmc_probability(dp, dv, da, R, Sigma, H, Z):
     depend on anything but this pair)."""
     D = dp.shape[0]
     r, m, _ = Z.shape
-    L = _factor(np.ascontiguousarray(Sigma))
+    L = factor(np.ascontiguousarray(Sigma))
     Zf = Z.reshape(r * m, 2 * D)
     Y = np.zeros((r * m, 2 * D))
     for j in range(2 * D):  # elementwise, not BLAS: the same bits on every machine/thread count
@@ -897,7 +898,7 @@ def relative_rows(pa, va, aa, ra, pb, vb, ab, rb, sigma, rows, dp, dv, da, rad, 
 
 
 @njit(cache=True, error_model="numpy")
-def evaluate_rows(dp, dv, da, rad, sig, H, thr, out):
+def evaluate_uncertain_rows(dp, dv, da, rad, sig, H, thr, out):
     """_pair_kernel on every row (out (n, OUT_SIZE)); rows with out[j, _OUT_QMC] = 1
     still need ``finish_row``'s RQMC fallback."""
     for j in range(dp.shape[0]):
@@ -914,7 +915,7 @@ def finish_row(dp, dv, da, R, Sigma, H, out):
         # accelerating: P = upper - E[O]; QMC_CV_POINTS per replicate first, all
         # QMC_POINTS when the stated bound would exceed QMC_CV_TARGET
         Z = normal_table(2 * D)
-        L = _factor(np.ascontiguousarray(Sigma))
+        L = factor(np.ascontiguousarray(Sigma))
         est = np.empty(QMC_REPLICATES)
         for m in (QMC_CV_POINTS, QMC_POINTS):
             overcount_replicates(dp, dv, da, float(R), float(H), L, Z, m, est)

@@ -26,7 +26,7 @@ from circle_collision_ros.core.uncertainty import uncertain_pairs
 from circle_collision_ros.core.uncertainty_kernels import (
     S_at,
     _det_lower,
-    _factor,
+    factor,
     _quartic_crossings,
     instant_bound,
     instant_probability,
@@ -99,7 +99,7 @@ def test_overcount_shortcut_changes_no_count():
     for it in range(25):
         Sigma = np.diag([0.3, 0.3, 0.2, 0.2]) * 10 ** rng.uniform(-1, 0.5)
         dp, dv, da = rng.normal(size=2) * 2, rng.normal(size=2), rng.normal(size=2) * 3
-        L = _factor(Sigma)
+        L = factor(Sigma)
         est = np.empty(Z.shape[0])
         overcount_replicates(dp, dv, da, 1.0, 3.0, L, Z, 64, est)
         direct = 0
@@ -128,6 +128,6 @@ def test_accelerating_pair_that_comes_back_is_within_its_bound():
     # the over-count is large here: P0 + E[entries] alone would be far off
     Z = normal_table(4)
     est = np.empty(Z.shape[0])
-    overcount_replicates(pair[0], pair[1], pair[2], 0.5, 3.0, _factor(cov * 2), Z, 512, est)
+    overcount_replicates(pair[0], pair[1], pair[2], 0.5, 3.0, factor(cov * 2), Z, 512, est)
     assert est.mean() > 0.05
     assert math.isfinite(float(res.plausible_time[0]))
