@@ -332,15 +332,17 @@ def test_warm_up_loads_the_large_scene_kernels(dimensions) -> None:
 
 _FIRST_MESSAGES = _AFTER_WARM_UP + """
 from dataclasses import replace
+from itertools import product
 from circle_collision_msgs.msg import CircleState, CircleStateArray
+from circle_collision_ros.core.parallel_policy import threads_forced
 from circle_collision_ros.pipeline.cdr_codec import decode_states, encode_state, encode_state_array
 from circle_collision_ros.pipeline.state_batch import StateBatch
 rng = np.random.default_rng(3)
 n, t = 40, 1_700_000_000 * 10**9
 cov = np.zeros((n, 36))
 cov[:, ::7] = rng.uniform(0.0, 0.05, (n, 6))
-for uncertain in (False, True):
-    for report_all in (False, True):
+for threaded, uncertain, report_all in product((False, True), repeat=3):
+    with threads_forced(threaded):  # large frames take the threaded twins
         batch = StateBatch(ids=[f"robot_{{k}}" for k in range(n)], frames=["odom"] * n,
                            stamp_ns=np.full(n, t, np.int64), radius=rng.uniform(0.2, 1.0, n),
                            position=rng.uniform(-10, 10, (n, 3)), velocity=rng.normal(0, 1, (n, 3)),

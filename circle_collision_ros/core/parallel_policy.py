@@ -32,15 +32,18 @@ from __future__ import annotations
 import math
 import os
 import time
+from collections.abc import Iterator
+from contextlib import contextmanager
 
 import numba
 
-__all__ = ["cores_free", "threads_pay"]
+__all__ = ["cores_free", "threads_pay", "threads_forced"]
 
 #: s after a yes during which our own pool's (possibly spinning) workers are not
 #: counted as other work.
 _GRACE_S = 0.05
 _last_yes = -math.inf
+_forced: bool | None = None  # threads_forced's answer, None: decide
 
 try:
     _CORES = len(os.sched_getaffinity(0))
@@ -70,6 +73,8 @@ def threads_pay(work: int, min_work: int) -> bool:
     items (below it a parallel launch costs more than it saves even on idle
     cores) and a core free for the worker thread now."""
     global _last_yes
+    if _forced is not None:
+        return _forced
     if work < min_work or _CORES <= 1:
         return False
     now = time.monotonic()
@@ -78,3 +83,19 @@ def threads_pay(work: int, min_work: int) -> bool:
         _last_yes = now
         return True
     return False
+
+
+@contextmanager
+def threads_forced(threaded: bool) -> Iterator[None]:
+    """Within the block threads_pay answers `threaded` whatever the work and the load.
+
+    For warm-ups only (not thread-safe: call it before other threads run kernels): a
+    threaded twin that the warm-up's small inputs and the load of the moment would not
+    choose is then compiled (or loaded) too, and not in the first large frame of a node.
+    """
+    global _forced
+    saved, _forced = _forced, bool(threaded)
+    try:
+        yield
+    finally:
+        _forced = saved

@@ -46,3 +46,14 @@ def test_busy_cores_make_kernels_serial():
         for p in procs:
             p.kill()
             p.wait()
+
+
+def test_threads_forced_overrides_and_restores() -> None:
+    """Warm-ups force each choice so both twins get compiled; the policy decides again after."""
+    from circle_collision_ros.core.parallel_policy import threads_forced, threads_pay
+    with threads_forced(True):
+        assert threads_pay(1, 10**9)  # below any threshold: threaded all the same
+        with threads_forced(False):
+            assert not threads_pay(10**9, 1)
+        assert threads_pay(1, 10**9)
+    assert not threads_pay(1, 10**9)  # deciding again: too little work
