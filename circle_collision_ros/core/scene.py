@@ -217,8 +217,8 @@ _FIRST_ROW.flags.writeable = False
 # The empty columns of an exact scene's SceneUncertainty (published read-only, shared).
 _NO_IDS = np.empty(0, dtype=object)
 _NO_VALUES = np.empty(0)
-for _x in (_NO_IDS, _NO_VALUES):
-    _x.flags.writeable = False
+_NO_IDS.flags.writeable = False
+_NO_VALUES.flags.writeable = False
 
 
 class Scene:

@@ -151,6 +151,13 @@ def _insertion_pass(rec, ttc, key, n, max_moves):
 
 
 @njit(cache=True)
+def _time_then_key(ttc, key):
+    """The permutation ordering rows by (ttc, key), as np.lexsort((key, ttc)): two stable sorts."""
+    o = np.argsort(key, kind="mergesort")
+    return o[np.argsort(ttc[o], kind="mergesort")]
+
+
+@njit(cache=True)
 def order_rows(rec, ttc, key, n_sorted, max_moves):
     """Sort rec/ttc/key[:n] in place by (ttc, key) where the first n_sorted
     rows are nearly sorted (insertion sort) and the rest are new (sorted, then
@@ -166,15 +173,14 @@ def order_rows(rec, ttc, key, n_sorted, max_moves):
         return True
     # The new rows: key order (unique keys, so quicksort's order is exact), then by ttc with
     # an insertion pass. New rows mostly tie in ttc (0.0: the pairs overlapping at R), so it
-    # moves little: order_rows took 10 instead of 20 us at 880 + 284 rows (the 10,000-body
-    # benchmark scene's one-body update) than with two stable sorts, kept past the budget.
+    # moves little: order_rows took 10 us at 880 + 284 rows (the 10,000-body benchmark
+    # scene's one-body update) where two stable sorts took 20; they remain past the budget.
     o = np.argsort(key[n_sorted:])
     nt = ttc[n_sorted:][o]
     nk = key[n_sorted:][o]
     nr = rec[n_sorted:][o]
     if not _insertion_pass(nr, nt, nk, m, 8 * m + 64):
-        o = np.argsort(key[n_sorted:], kind="mergesort")
-        o = o[np.argsort(ttc[n_sorted:][o], kind="mergesort")]
+        o = _time_then_key(ttc[n_sorted:], key[n_sorted:])
         nt = ttc[n_sorted:][o]
         nk = key[n_sorted:][o]
         nr = rec[n_sorted:][o]
@@ -503,8 +509,7 @@ def ordered_query(prev, new, prev_past, live, ra, rb, rtp, rtau, rov, rpt, rnm, 
     if not ordered:
         # keys are unique and ttc is never NaN (records are hits): the order of np.lexsort((key, ttc))
         key = pair_keys(fut, ra, rb, rank, cap)
-        o = np.argsort(key, kind="mergesort")
-        o = o[np.argsort(ttc[o], kind="mergesort")]
+        o = _time_then_key(ttc, key)
         fut = fut[o]
         ttc = ttc[o]
         key = key[o]

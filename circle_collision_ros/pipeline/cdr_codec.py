@@ -177,9 +177,8 @@ def _decoded(data: bytes, buf: np.ndarray, strings: np.ndarray, col: int) -> lis
     count = strings.shape[0]
     if count == 0:
         return []
-    if count == 1:  # a per-body stream's message: one slice, no compiled pass
-        return [data[strings[0, col]:strings[0, col] + strings[0, col + 1]].decode()]
-    joined, same = _joined(buf, strings, col)
+    # one string (a per-body stream's message) needs no compiled pass to be "all the same"
+    joined, same = (None, True) if count == 1 else _joined(buf, strings, col)
     if same:
         return [data[strings[0, col]:strings[0, col] + strings[0, col + 1]].decode()] * count
     parts = joined.tobytes().decode().split("\0")
@@ -544,14 +543,15 @@ def encode_contact_rows(stamp: tuple[int, int], frame_id: str, horizon: float, c
     takes the general path, which leaves such rows out)."""
     if sys.byteorder != "little":
         raise NotImplementedError("the compiled CDR encoder needs a little-endian machine")
-    frame = np.frombuffer(frame_id.encode(), dtype=np.uint8)
-    rows = _readonly(frame, *contacts.id_utf8, contacts.ttc, contacts.contact_ns, contacts.overlapping,
-                     contacts.point, contacts.normal, contacts.closing_speed)
-    end = int(_contacts_end(frame.shape[0], rows[3], rows[5]))  # len_a, len_b
+    frame, blob, start_a, len_a, start_b, len_b, ttc, contact_ns, over, point, normal, closing = _readonly(
+        np.frombuffer(frame_id.encode(), dtype=np.uint8), *contacts.id_utf8, contacts.ttc,
+        contacts.contact_ns, contacts.overlapping, contacts.point, contacts.normal, contacts.closing_speed)
+    end = int(_contacts_end(frame.shape[0], len_a, len_b))
     buf = np.zeros(_ORIGIN + 8 * -(-(end - _ORIGIN) // 8), dtype=np.uint8)
     buf[:_ORIGIN] = np.frombuffer(CDR_LE + b"\x00\x00", dtype=np.uint8)
     body = buf[_ORIGIN:]
     if _encode_contacts(buf, body.view(np.uint32), body.view(np.float64), int(stamp[0]), int(stamp[1]),
-                        rows[0], float(horizon), *rows[1:], contact, overlapping) < 0:
+                        frame, float(horizon), blob, start_a, len_a, start_b, len_b, ttc, contact_ns, over,
+                        point, normal, closing, contact, overlapping) < 0:
         return None
     return buf[:end].tobytes()
