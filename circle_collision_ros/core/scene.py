@@ -360,6 +360,9 @@ class Scene:
         self._fut = None
         self._fut_ttc = None
         self._past = _EMPTY_I
+        # Records stored in pair order (a rebuild), not in the kept order: the next query
+        # compacts them into it (see _compact).
+        self._records_scattered = True
 
     @property
     def horizon(self) -> float:
@@ -867,15 +870,28 @@ class Scene:
         return self._rn
 
     def _compact(self, cap: int | None = None) -> None:
-        """Drop dead records (row numbers change: the kept order is renumbered)."""
+        """Drop dead records and store the live ones in the kept order (then the past
+        records, then the rest): each query walks the kept order and reads its rows' records,
+        so it then streams through them instead of jumping (row numbers change: the kept
+        order is renumbered)."""
         n = self._rn
-        live = np.flatnonzero(self._rlive[:n])
+        alive = self._rlive[:n]
+        if self._fut is None:
+            live = np.flatnonzero(alive)
+        else:
+            kept = self._fut[alive[self._fut]]
+            past = self._past[alive[self._past]]
+            placed = np.zeros(n, dtype=bool)
+            placed[kept] = True
+            placed[past] = True
+            live = np.concatenate([kept, past, np.flatnonzero(alive & ~placed)])
         old = [getattr(self, name)[live] for name in self._REC]
         renumber = np.full(n, -1, dtype=np.int64)
         renumber[live] = np.arange(live.size)
         fut, fut_ttc, past = self._fut, self._fut_ttc, self._past
         new_rows = [renumber[r] for r in self._new_rows]
         self._clear_records(max(256, 2 * live.size) if cap is None else cap)
+        self._records_scattered = fut is None
         for name, arr in zip(self._REC, old):
             getattr(self, name)[:live.size] = arr
         self._rlive[:live.size] = True
@@ -989,8 +1005,9 @@ class Scene:
         self._flush()
         rows, id_rows = self._ordered_rows()
         self._new_rows = []
-        if self._rdead > max(1024, self._rn // 2):
+        if self._rdead > max(1024, self._rn // 2) or self._records_scattered:
             self._compact()
+            self._records_scattered = False
         res = self._publish(rows, id_rows)
         self._cache = (self._version, res)
         return res

@@ -329,7 +329,8 @@ def test_one_body_updates_between_grid_rebuilds_equal_full() -> None:
 def test_record_lists_survive_compaction_and_growth() -> None:
     """Each body's records are found through its own list (not a scan of all records); through
     thousands of one-body updates in a dense scene (dead records compacted, buffers grown, slots
-    freed and reused) the incremental rows stay bitwise equal to the full recomputation."""
+    freed and reused) the incremental rows stay bitwise equal to the full recomputation.  A
+    compaction stores the records in the kept order (the query then reads them in sequence)."""
     rng = np.random.default_rng(12)
     n = 300
     sc = Scene(4.0, 2, slack=50.0)  # a long epoch: the records live through many updates
@@ -348,10 +349,37 @@ def test_record_lists_survive_compaction_and_growth() -> None:
                       T0 + (k + 2) * MS)
         res = sc.predictions()
         compactions += sc._rdead < dead
+        if k in (600, 1200):  # a compaction after a query stores the kept order, then the past records
+            sc._compact()
+            kept, past = sc._fut.size, sc._past.size
+            assert np.array_equal(sc._fut, np.arange(kept)), k
+            assert np.array_equal(np.sort(sc._past), np.arange(kept, kept + past)), k
         if k % 10 == 0:
             assert same(res, sc.full_recomputation()), k
     assert compactions >= 1
     assert same(sc.predictions(), sc.full_recomputation())
+
+
+def test_records_follow_the_kept_order_after_a_rebuild() -> None:
+    """A rebuild stores its records in pair order; the query after it re-stores them in the
+    kept order (sorted by ttc), then the past ones, so the next queries read them in sequence."""
+    rng = np.random.default_rng(14)
+    n = 200
+    sc = Scene(4.0, 2)
+    ids = [f"b{k:03d}" for k in range(n)]
+    sc.upsert_many(ids, rng.uniform(0, 30, (n, 2)), rng.normal(0, 1, (n, 2)), np.zeros((n, 2)),
+                   rng.uniform(0.5, 1.5, n), T0)
+    res = sc.predictions()
+    sc.upsert(ids[0], (1.0, 1.0), (0.5, 0.0), (0.0, 0.0), 1.0, T0 + 400 * MS)  # shifts R: past rows
+    res = sc.predictions()
+    assert sc._past.size and sc._fut.size > 20
+    sc.set_horizon(4.5)  # rebuild
+    res = sc.predictions()
+    kept, past = sc._fut.size, sc._past.size
+    assert kept > 20 and past > 0
+    assert np.array_equal(sc._fut, np.arange(kept))
+    assert np.array_equal(np.sort(sc._past), np.arange(kept, kept + past))
+    assert same(res, sc.full_recomputation())
 
 
 def _snapshot_equal(x, y) -> bool:
