@@ -300,6 +300,8 @@ class Scene:
         self._utf8_ok = True  # every id seen since clear() is a str
         self._okeys: list = []
         self._rank_ok = True
+        self._rank_serial = getattr(self, "_rank_serial", 0) + 1  # bumped whenever _rank changes
+        self._rkey_basis = None  # (_rank_serial, slot capacity) of the records' pair keys
         self._order = None  # alive slots in id order (cached until membership changes)
         self._slot: dict = {}
         self._free: list[int] = list(range(cap - 1, -1, -1))
@@ -336,7 +338,11 @@ class Scene:
     # dead rows dominate) so an update touches O(its pairs) rows.  Each slot's
     # records form a linked list (_rhead[slot], _rnext[row, 0 for a / 1 for b])
     # so an update finds its rows without a scan of all records.
-    _REC = ("_ra", "_rb", "_rtp", "_rtau", "_rpt", "_rnm", "_rcs", "_rov")
+    # Each record also keeps its two bodies' stored states (_rsP, _rsV, _rsA: (rows, 2, D),
+    # _rsR, _rsT: (rows, 2)), equal to the scene's while it lives (a state change kills the
+    # body's records): a pair evaluated again at each new R reads them in record order.
+    _REC = ("_ra", "_rb", "_rtp", "_rtau", "_rpt", "_rnm", "_rcs", "_rov", "_rkey",
+            "_rsP", "_rsV", "_rsA", "_rsR", "_rsT")
 
     def _clear_records(self, cap: int = 256) -> None:
         D = self._dim
@@ -348,6 +354,15 @@ class Scene:
         self._rnm = np.zeros((cap, D))
         self._rcs = np.zeros(cap)
         self._rov = np.zeros(cap, dtype=bool)      # overlapping at t_p (tau == 0, gap < 0)
+        # pair key (rank_a * slots + rank_b, the sort key after ttc): current for records
+        # below _rkey_n while the ranks and the slot capacity are those of _rkey_basis
+        self._rkey = np.zeros(cap, dtype=np.int64)
+        self._rkey_n = 0
+        self._rsP = np.zeros((cap, 2, D))
+        self._rsV = np.zeros((cap, 2, D))
+        self._rsA = np.zeros((cap, 2, D))
+        self._rsR = np.zeros((cap, 2))
+        self._rsT = np.zeros((cap, 2), dtype=np.int64)
         self._rlive = np.zeros(cap, dtype=bool)
         self._rnext = np.full((cap, 2), -1, dtype=np.int64)
         self._rhead[:] = -1
@@ -408,6 +423,7 @@ class Scene:
         self._rank[:] = -1
         self._rank[np.array(order, dtype=np.int64)] = np.arange(len(order))
         self._rank_ok = True
+        self._rank_serial += 1
 
     def _rank_insert(self, s: int) -> None:
         self._order = None
@@ -420,6 +436,7 @@ class Scene:
         self._okeys.insert(pos, self._ids[s])
         self._rank[self._rank >= pos] += 1
         self._rank[s] = pos
+        self._rank_serial += 1
 
     def _rank_remove(self, s: int) -> None:
         self._order = None
@@ -429,6 +446,7 @@ class Scene:
         del self._okeys[pos]
         self._rank[self._rank > pos] -= 1
         self._rank[s] = -1
+        self._rank_serial += 1
 
     def _sorted_slots(self) -> np.ndarray:
         if self._order is None:
@@ -845,12 +863,16 @@ class Scene:
         k = tp.shape[0]
         n = self._reserve_records(k)
         sl = slice(n, n + k)
-        if hit.all():
-            self._ra[sl] = A
-            self._rb[sl] = B
-        else:
-            self._ra[sl] = A[hit]
-            self._rb[sl] = B[hit]
+        if not hit.all():
+            A, B = A[hit], B[hit]
+        self._ra[sl] = A
+        self._rb[sl] = B
+        for j, S in enumerate((A, B)):
+            self._rsP[sl, j] = self._P[S]
+            self._rsV[sl, j] = self._V[S]
+            self._rsA[sl, j] = self._A[S]
+            self._rsR[sl, j] = self._R[S]
+            self._rsT[sl, j] = self._T[S]
         self._rtp[sl] = tp
         self._rtau[sl] = tau
         self._rpt[sl] = pt
@@ -890,8 +912,10 @@ class Scene:
         renumber[live] = np.arange(live.size)
         fut, fut_ttc, past = self._fut, self._fut_ttc, self._past
         new_rows = [renumber[r] for r in self._new_rows]
+        keys_current = self._rkey_n >= n
         self._clear_records(max(256, 2 * live.size) if cap is None else cap)
         self._records_scattered = fut is None
+        self._rkey_n = live.size if keys_current else 0  # renumbered: all or nothing
         for name, arr in zip(self._REC, old):
             getattr(self, name)[:live.size] = arr
         self._rlive[:live.size] = True
@@ -966,7 +990,7 @@ class Scene:
         end, evaluated = _sk.evaluate_and_store(
             A, B, self._epoch, self._P, self._V, self._A, self._R, self._T, self._h_eval, self._ra,
             self._rb, self._rtp, self._rtau, self._rpt, self._rnm, self._rcs, self._rov, self._rlive,
-            self._rnext, self._rhead, n)
+            self._rnext, self._rhead, self._rsP, self._rsV, self._rsA, self._rsR, self._rsT, n)
         self.evaluated_pairs += evaluated
         if end > n:
             self._rn = end
@@ -1039,10 +1063,13 @@ class Scene:
             prev, prev_past = self._fut, self._past
             new = np.concatenate(self._new_rows) if self._new_rows else _EMPTY_I
         self._ensure_rank()
+        basis = (self._rank_serial, self._R.shape[0])
+        key_from = self._rkey_n if basis == self._rkey_basis else 0  # else every key is stale
         fut, ttc, past, rows, evaluated, id_rows = _sk.ordered_query(
-            prev, new, prev_past, live, self._ra, self._rb, tp_all, tau_all, self._rov, self._rpt, self._rnm,
-            self._rcs, self._P, self._V, self._A, self._R, self._T, R, self._h, self._rank,
-            np.int64(self._R.shape[0]), 1024, self._id_start, self._id_len)
+            prev, new, prev_past, live, self._ra, self._rb, self._rkey, key_from, self._rn, tp_all, tau_all,
+            self._rov, self._rpt, self._rnm, self._rcs, self._rsP, self._rsV, self._rsA, self._rsR, self._rsT, R,
+            self._h, self._rank, np.int64(basis[1]), 1024, self._id_start, self._id_len)
+        self._rkey_basis, self._rkey_n = basis, self._rn
         self._fut, self._fut_ttc, self._past = fut, ttc, past
         self.evaluated_pairs += evaluated
         return rows, id_rows

@@ -382,6 +382,28 @@ def test_records_follow_the_kept_order_after_a_rebuild() -> None:
     assert same(res, sc.full_recomputation())
 
 
+@pytest.mark.parametrize("grow", [False, True])
+def test_pair_keys_follow_new_ids(grow) -> None:
+    """Rows tied in ttc (pairs overlapping at R: ttc 0) are ordered by their ids. The records
+    keep their pair keys between queries; a new id between existing ones changes the ranks
+    (and enough new ids grow the slot arrays, the keys' scale): the kept keys are renewed,
+    so old and new rows still interleave by id, bitwise as the full recomputation orders them."""
+    sc = Scene(4.0, 2)
+    ids = [f"b{k:03d}" for k in range(0, 40, 2)]  # even numbers: room for ids between them
+    n = len(ids)
+    xs = np.repeat(np.arange(n // 2) * 10.0, 2) + np.tile([0.0, 1.0], n // 2)  # overlapping twos
+    sc.upsert_many(ids, np.c_[xs, np.zeros(n)], np.zeros((n, 2)), np.zeros((n, 2)), np.ones(n), T0)
+    first = sc.predictions()
+    assert len(first) == n // 2 and np.all(first.ttc == 0.0)
+    for k, odd in enumerate(range(1, 40, 4) if not grow else range(1, 40, 2)):
+        # a new id between two others, overlapping a body of an existing overlapping pair
+        sc.upsert(f"b{odd:03d}", (10.0 * (k % (n // 2)) + 0.5, 0.5), (0.0, 0.0), (0.0, 0.0), 1.0,
+                  T0 + (k + 1) * MS)
+        res = sc.predictions()
+        assert same(res, sc.full_recomputation()), odd
+    assert np.all(res.ttc == 0.0) and len(res) > len(first)
+
+
 def _snapshot_equal(x, y) -> bool:
     return (x.reference_ns == y.reference_ns and x.ids == y.ids and np.array_equal(x.positions, y.positions)
             and np.array_equal(x.velocities, y.velocities) and np.array_equal(x.accelerations, y.accelerations)
