@@ -149,6 +149,39 @@ def test_encoded_ids_survive_churn() -> None:
         assert prediction.to_cdr() == data
 
 
+def test_kept_rows_follow_their_ids_when_the_blob_is_compacted() -> None:
+    """Pairs that stay (overlapping bodies never updated) keep their rows' places in the id blob
+    between queries; churn (bodies with long ids added and removed while the reference time moves)
+    makes the blob drop removed ids and move the live ones: every publication still names its
+    pairs right (equal to the reference writer)."""
+    from circle_collision_msgs.msg import CircleState
+
+    def state(body_id: str, x: float, stamp_ns: int, remove: bool = False) -> CircleState:
+        s = CircleState(id=body_id, radius=1.0, remove=remove)
+        s.header.frame_id = "map"
+        s.header.stamp.sec, s.header.stamp.nanosec = divmod(stamp_ns, 1_000_000_000)
+        s.position.x = x
+        return s
+
+    predictor = CollisionPredictor(PredictorConfig(horizon=5.0, frame_id="map", stale_timeout=1e3))
+    churn = [f"early{j}_" + "x" * 40 for j in range(10)]  # ahead of the staying ids in the blob
+    stay = [state(f"stay{k:02d}", 10.0 * (k // 2) + 1.5 * (k % 2), BASE_NS) for k in range(20)]
+    predictor.receive_batch(StateBatch.from_messages(
+        [state(i, 1000.0 + 10.0 * j, BASE_NS) for j, i in enumerate(churn)] + stay), BASE_NS)
+    serial = predictor._scene._utf8_serial
+    for k in range(1, 80):
+        stamp = BASE_NS + k * 1_000_000
+        gone = [state(i, 0.0, stamp, remove=True) for i in churn]
+        churn = [f"churn{k}_{j}_" + "x" * 40 for j in range(6)]
+        new = [state(i, 1000.0 + 10.0 * j, stamp) for j, i in enumerate(churn)]
+        predictor.receive_batch(StateBatch.from_messages(gone + new), stamp)
+        prediction = predictor.predict()
+        assert len(prediction.contacts) == 10  # the staying pairs, overlapping
+        assert prediction.to_cdr() == reference_encoding(prediction.stamp, prediction.frame_id,
+                                                         prediction.horizon, prediction.rows())[0]
+    assert predictor._scene._utf8_serial > serial  # the blob was compacted on the way
+
+
 @pytest.mark.parametrize("seed, n, dim, report_all, frame", [c for c in CASES if not c[3]])
 def test_exact_contacts_encoder_equals_the_columns_path(seed, n, dim, report_all, frame) -> None:
     """The node's common case (exact contacts only) is written by one compiled pass straight from

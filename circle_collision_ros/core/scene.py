@@ -301,7 +301,10 @@ class Scene:
         self._okeys: list = []
         self._rank_ok = True
         self._rank_serial = getattr(self, "_rank_serial", 0) + 1  # bumped whenever _rank changes
-        self._rkey_basis = None  # (_rank_serial, slot capacity) of the records' pair keys
+        # bumped when live ids move in the blob (today that comes with new ids, so with new
+        # ranks too; the serial keeps _rids' validity independent of that)
+        self._utf8_serial = getattr(self, "_utf8_serial", 0) + 1
+        self._rkey_basis = None  # (_rank_serial, slot capacity, _utf8_serial) of _rkey, _rids
         self._order = None  # alive slots in id order (cached until membership changes)
         self._slot: dict = {}
         self._free: list[int] = list(range(cap - 1, -1, -1))
@@ -341,7 +344,7 @@ class Scene:
     # Each record also keeps its two bodies' stored states (_rsP, _rsV, _rsA: (rows, 2, D),
     # _rsR, _rsT: (rows, 2)), equal to the scene's while it lives (a state change kills the
     # body's records): a pair evaluated again at each new R reads them in record order.
-    _REC = ("_ra", "_rb", "_rtp", "_rtau", "_rpt", "_rnm", "_rcs", "_rov", "_rkey",
+    _REC = ("_ra", "_rb", "_rtp", "_rtau", "_rpt", "_rnm", "_rcs", "_rov", "_rkey", "_rids",
             "_rsP", "_rsV", "_rsA", "_rsR", "_rsT")
 
     def _clear_records(self, cap: int = 256) -> None:
@@ -354,9 +357,11 @@ class Scene:
         self._rnm = np.zeros((cap, D))
         self._rcs = np.zeros(cap)
         self._rov = np.zeros(cap, dtype=bool)      # overlapping at t_p (tau == 0, gap < 0)
-        # pair key (rank_a * slots + rank_b, the sort key after ttc): current for records
-        # below _rkey_n while the ranks and the slot capacity are those of _rkey_basis
+        # pair key (rank_a * slots + rank_b, the sort key after ttc) and the ids' places in
+        # the UTF-8 blob (start_a, len_a, start_b, len_b): current for records below _rkey_n
+        # while the ranks, the slot capacity and the blob layout are those of _rkey_basis
         self._rkey = np.zeros(cap, dtype=np.int64)
+        self._rids = np.zeros((cap, 4), dtype=np.int64)
         self._rkey_n = 0
         self._rsP = np.zeros((cap, 2, D))
         self._rsV = np.zeros((cap, 2, D))
@@ -732,6 +737,7 @@ class Scene:
                     self._id_start[s] = pos
                     pos += m
                 n = pos
+                self._utf8_serial += 1
             else:
                 blob = np.zeros(max(1024, 2 * (n + k)), dtype=np.uint8)
                 blob[:n] = self._utf8[:n]
@@ -1063,12 +1069,12 @@ class Scene:
             prev, prev_past = self._fut, self._past
             new = np.concatenate(self._new_rows) if self._new_rows else _EMPTY_I
         self._ensure_rank()
-        basis = (self._rank_serial, self._R.shape[0])
+        basis = (self._rank_serial, self._R.shape[0], self._utf8_serial)
         key_from = self._rkey_n if basis == self._rkey_basis else 0  # else every key is stale
         fut, ttc, past, rows, evaluated, id_rows = _sk.ordered_query(
-            prev, new, prev_past, live, self._ra, self._rb, self._rkey, key_from, self._rn, tp_all, tau_all,
-            self._rov, self._rpt, self._rnm, self._rcs, self._rsP, self._rsV, self._rsA, self._rsR, self._rsT, R,
-            self._h, self._rank, np.int64(basis[1]), 1024, self._id_start, self._id_len)
+            prev, new, prev_past, live, self._ra, self._rb, self._rkey, self._rids, key_from, self._rn, tp_all,
+            tau_all, self._rov, self._rpt, self._rnm, self._rcs, self._rsP, self._rsV, self._rsA, self._rsR,
+            self._rsT, R, self._h, self._rank, np.int64(basis[1]), 1024, self._id_start, self._id_len)
         self._rkey_basis, self._rkey_n = basis, self._rn
         self._fut, self._fut_ttc, self._past = fut, ttc, past
         self.evaluated_pairs += evaluated

@@ -31,7 +31,7 @@ from circle_collision_ros.core.narrow_phase import _ttc_scalar
 #: pairs overlapping at R in a one-body update of the 10,000-body benchmark scene (34 -> 27 us).
 _contact_row_inlined = njit(inline="always", error_model="numpy")(contact_row.py_func)
 
-__all__ = ["evaluate_rows", "order_rows", "split_past", "pair_keys", "assemble", "swept_bound_rows",
+__all__ = ["evaluate_rows", "order_rows", "split_past", "record_keys", "assemble", "swept_bound_rows",
            "link_records", "kill_records", "split_and_order", "reported_rows",
            "incremental_pairs", "evaluate_and_store", "ordered_query"]
 
@@ -200,26 +200,34 @@ def order_rows(rec, ttc, key, n_sorted, max_moves):
 
 
 @njit(cache=True)
-def pair_keys(first, end, ra, rb, rank, cap, rkey):
-    """rkey[r] = (rank of a) * cap + (rank of b) for records first..end-1: unique per pair, id
-    order.  The scene keeps each record's key until the ranks change, so a query reads the
-    keys in record order instead of gathering two ranks per row at random (at 10,000 bodies,
-    with the caches evicted, the gathers took 67 us of a one-body update's ~300)."""
+def record_keys(first, end, ra, rb, rank, cap, id_start, id_len, rkey, rids):
+    """For records first..end-1: rkey[r] = (rank of a) * cap + (rank of b) (unique per pair,
+    id order) and rids[r] = (start_a, len_a, start_b, len_b), the ids' places in the UTF-8
+    blob.  The scene keeps both until the ranks, the slot capacity or the blob's layout
+    change, so a query reads them in record order instead of gathering six slot values per
+    row at random (at 10,000 bodies with the caches evicted, a one-body update's query spent
+    67 us on the rank gathers and 72 us on the id gathers)."""
     for r in range(first, end):
-        rkey[r] = rank[ra[r]] * cap + rank[rb[r]]
+        a = ra[r]
+        b = rb[r]
+        rkey[r] = rank[a] * cap + rank[b]
+        rids[r, 0] = id_start[a]
+        rids[r, 1] = id_len[a]
+        rids[r, 2] = id_start[b]
+        rids[r, 3] = id_len[b]
 
 
 @njit(cache=True)
-def assemble(F, ttc_f, key_f, ra, rb, rtp, rtau, rov, rpt, rnm, rcs,
-             Ap, Bp, key2, tau2, ov2, pt2, nm2, cs2, R):
+def assemble(F, ttc_f, key_f, Pr, tau2, ov2, pt2, nm2, cs2, ra, rb, rkey, rids, rtp, rtau, rov, rpt, rnm, rcs, R):
     """The reported rows: future records F (sorted, with their ttc and pair keys) and the
-    past pairs evaluated at R (hits, any order, with their pair keys), merged by (ttc, id_a, id_b).
+    past records Pr evaluated at R (hits, any order: tau2.. their results), merged by (ttc,
+    id_a, id_b); with each row's ids' places in the UTF-8 blob (record_keys).
 
     contact_ns = t_p + round(tau 1e9) for a record, R + round(tau 1e9) for a
     pair evaluated at R (round half to even, as numpy's round).
     """
     kf = F.shape[0]
-    m = kf + Ap.shape[0]
+    m = kf + Pr.shape[0]
     D = rpt.shape[1]
     o = np.arange(m)
     t_all = np.empty(m)
@@ -227,9 +235,9 @@ def assemble(F, ttc_f, key_f, ra, rb, rtp, rtau, rov, rpt, rnm, rcs,
     for x in range(kf):
         t_all[x] = ttc_f[x]
         k_all[x] = key_f[x]
-    for x in range(Ap.shape[0]):
+    for x in range(Pr.shape[0]):
         t_all[kf + x] = tau2[x]
-        k_all[kf + x] = key2[x]
+        k_all[kf + x] = rkey[Pr[x]]
     order_rows(o, t_all, k_all, kf, m * m)  # F is sorted: no moves; never gives up
     A = np.empty(m, dtype=np.int64)
     B = np.empty(m, dtype=np.int64)
@@ -238,12 +246,11 @@ def assemble(F, ttc_f, key_f, ra, rb, rtp, rtau, rov, rpt, rnm, rcs,
     pt = np.empty((m, D))
     nm = np.empty((m, D))
     cs = np.empty(m)
+    ids = np.empty((4, m), dtype=np.int64)
     for x in range(m):
         y = o[x]
         if y < kf:
             r = F[y]
-            A[x] = ra[r]
-            B[x] = rb[r]
             cns[x] = rtp[r] + np.int64(np.rint(rtau[r] * 1e9))
             over[x] = rov[r]
             for d in range(D):
@@ -252,15 +259,18 @@ def assemble(F, ttc_f, key_f, ra, rb, rtp, rtau, rov, rpt, rnm, rcs,
             cs[x] = rcs[r]
         else:
             y -= kf
-            A[x] = Ap[y]
-            B[x] = Bp[y]
+            r = Pr[y]
             cns[x] = R + np.int64(np.rint(tau2[y] * 1e9))
             over[x] = ov2[y]
             for d in range(D):
                 pt[x, d] = pt2[y, d]
                 nm[x, d] = nm2[y, d]
             cs[x] = cs2[y]
-    return A, B, t_all, cns, over, pt, nm, cs
+        A[x] = ra[r]
+        B[x] = rb[r]
+        for j in range(4):
+            ids[j, x] = rids[r, j]
+    return (A, B, t_all, cns, over, pt, nm, cs), (ids[0], ids[1], ids[2], ids[3])
 
 
 @njit(cache=True, error_model="numpy")
@@ -304,7 +314,7 @@ def kill_records(slots, ra, rnext, rhead, rlive):
 def split_and_order(prev, new, prev_past, live, rkey, rtp, rtau, R, max_moves):
     """Scene._ordered_rows' first half: the live records of the kept order `prev`, the new
     records and the past ones, split at R into future rows (ttc at R) and past ones, and the
-    future rows ordered by (ttc, id_a, id_b) (see split_past, order_rows; rkey: pair_keys).
+    future rows ordered by (ttc, id_a, id_b) (see split_past, order_rows; rkey: record_keys).
     Returns (fut, ttc, key, past, ordered): key the future rows' pair keys; ordered False:
     fut/ttc/key in some order (sort afresh)."""
     m = prev.shape[0] + new.shape[0]
@@ -325,24 +335,18 @@ def split_and_order(prev, new, prev_past, live, rkey, rtp, rtau, R, max_moves):
 
 
 @njit(cache=True, error_model="numpy")
-def reported_rows(fut, ttc, key, past, ra, rb, rkey, rtp, rtau, rov, rpt, rnm, rcs, rsP, rsV, rsA, rsR, rsT,
+def reported_rows(fut, ttc, key, past, ra, rb, rkey, rids, rtp, rtau, rov, rpt, rnm, rcs, rsP, rsV, rsA, rsR, rsT,
                   R, H):
     """Scene._ordered_rows' second half: the future rows with ttc <= H (fut, ttc, key sorted by
     (ttc, key)), and the past pairs evaluated at R with horizon H (their hits), merged (see
     evaluate_rows, assemble).
-    Returns assemble's rows and the number of narrow-phase evaluations."""
+    Returns assemble's rows and id places, and the number of narrow-phase evaluations."""
     kf = np.searchsorted(ttc, H, side="right")
     n = past.shape[0]
     D = rpt.shape[1]
-    Ap = np.empty(n, dtype=np.int64)
-    Bp = np.empty(n, dtype=np.int64)
-    Kp = np.empty(n, dtype=np.int64)
     Ia = np.empty(n, dtype=np.int64)  # rows of the records' own states (rsP.. as 2 rows each)
     Ib = np.empty(n, dtype=np.int64)
     for x in range(n):
-        Ap[x] = ra[past[x]]
-        Bp[x] = rb[past[x]]
-        Kp[x] = rkey[past[x]]
         Ia[x] = 2 * past[x]
         Ib[x] = 2 * past[x] + 1
     t_eval = np.full(n, R, dtype=np.int64)
@@ -358,12 +362,11 @@ def reported_rows(fut, ttc, key, past, ra, rb, rkey, rtp, rtau, rov, rpt, rnm, r
     m = rsP.shape[0] * 2
     evaluated = evaluate_rows(rsP.reshape(m, D), rsV.reshape(m, D), rsA.reshape(m, D), rsR.reshape(m),
                               rsT.reshape(m), Ia, Ib, t_eval, H, tau, pt, nm, cs, ov)
+    Pr = np.empty(n, dtype=np.int64)
     h = 0
     for x in range(n):  # keep the hits, in order
         if tau[x] <= H:
-            Ap[h] = Ap[x]
-            Bp[h] = Bp[x]
-            Kp[h] = Kp[x]
+            Pr[h] = past[x]
             tau[h] = tau[x]
             for d in range(D):
                 pt[h, d] = pt[x, d]
@@ -371,9 +374,9 @@ def reported_rows(fut, ttc, key, past, ra, rb, rkey, rtp, rtau, rov, rpt, rnm, r
             cs[h] = cs[x]
             ov[h] = ov[x]
             h += 1
-    rows = assemble(fut[:kf], ttc[:kf], key[:kf], ra, rb, rtp, rtau, rov, rpt, rnm, rcs, Ap[:h], Bp[:h],
-                    Kp[:h], tau[:h], ov[:h], pt[:h], nm[:h], cs[:h], R)
-    return rows, evaluated
+    rows, ids = assemble(fut[:kf], ttc[:kf], key[:kf], Pr[:h], tau[:h], ov[:h], pt[:h], nm[:h], cs[:h],
+                         ra, rb, rkey, rids, rtp, rtau, rov, rpt, rnm, rcs, R)
+    return rows, ids, evaluated
 
 
 @njit(cache=True, inline="always")
@@ -518,17 +521,17 @@ def evaluate_and_store(ia, ib, E, P, V, A, Rad, T, horizon, ra, rb, rtp, rtau, r
 
 
 @njit(cache=True, error_model="numpy")
-def ordered_query(prev, new, prev_past, live, ra, rb, rkey, key_from, key_end, rtp, rtau, rov, rpt, rnm, rcs,
-                  rsP, rsV, rsA, rsR, rsT, R, H, rank, cap, max_moves, id_start, id_len):
-    """Scene._ordered_rows in one pass: the pair keys of records key_from..key_end-1 (pair_keys;
-    the other records' keys are current), split_and_order (sorting afresh, by (ttc, pair key),
-    when the kept order needed more than the budget of moves), then reported_rows.
+def ordered_query(prev, new, prev_past, live, ra, rb, rkey, rids, key_from, key_end, rtp, rtau, rov, rpt, rnm,
+                  rcs, rsP, rsV, rsA, rsR, rsT, R, H, rank, cap, max_moves, id_start, id_len):
+    """Scene._ordered_rows in one pass: the keys and id places of records key_from..key_end-1
+    (record_keys; the other records' are current), split_and_order (sorting afresh, by (ttc,
+    pair key), when the kept order needed more than the budget of moves), then reported_rows.
 
     Returns (fut, ttc, past, rows, evaluated, ids): the new kept order and past records,
     reported_rows' rows and count, and the rows' id positions in the UTF-8 blob
     ``(start_a, len_a, start_b, len_b)`` (SceneContacts.id_utf8).
     """
-    pair_keys(key_from, key_end, ra, rb, rank, cap, rkey)
+    record_keys(key_from, key_end, ra, rb, rank, cap, id_start, id_len, rkey, rids)
     fut, ttc, key, past, ordered = split_and_order(prev, new, prev_past, live, rkey, rtp, rtau, R, max_moves)
     if not ordered:
         # keys are unique and ttc is never NaN (records are hits): the order of np.lexsort((key, ttc))
@@ -538,18 +541,6 @@ def ordered_query(prev, new, prev_past, live, ra, rb, rkey, key_from, key_end, r
         fut = fut[o]
         ttc = ttc[o]
         key = key[o]
-    rows, evaluated = reported_rows(fut, ttc, key, past, ra, rb, rkey, rtp, rtau, rov, rpt, rnm, rcs, rsP, rsV,
-                                    rsA, rsR, rsT, R, H)
-    Ar = rows[0]
-    Br = rows[1]
-    k = Ar.shape[0]
-    start_a = np.empty(k, dtype=np.int64)
-    len_a = np.empty(k, dtype=np.int64)
-    start_b = np.empty(k, dtype=np.int64)
-    len_b = np.empty(k, dtype=np.int64)
-    for x in range(k):
-        start_a[x] = id_start[Ar[x]]
-        len_a[x] = id_len[Ar[x]]
-        start_b[x] = id_start[Br[x]]
-        len_b[x] = id_len[Br[x]]
-    return fut, ttc, past, rows, evaluated, (start_a, len_a, start_b, len_b)
+    rows, ids, evaluated = reported_rows(fut, ttc, key, past, ra, rb, rkey, rids, rtp, rtau, rov, rpt, rnm, rcs,
+                                         rsP, rsV, rsA, rsR, rsT, R, H)
+    return fut, ttc, past, rows, evaluated, ids
