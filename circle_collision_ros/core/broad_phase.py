@@ -661,7 +661,10 @@ def choose_cell_size(lo: np.ndarray, hi: np.ndarray) -> tuple[float, np.ndarray]
     cells), enlarged if needed so that linear cell keys fit in int64.
     """
     D = lo.shape[1]
-    ext = np.max(hi - lo, axis=1)
+    d = hi - lo
+    ext = d[:, 0].copy()
+    for k in range(1, D):  # the row maximum, exactly np.max(d, axis=1), without its per-row loop
+        np.maximum(ext, d[:, k], out=ext)
     cell = float(np.mean(ext)) if ext.size else 1.0
     origin = lo.min(axis=0) if lo.size else np.zeros(D)
     span = float(np.max(hi.max(axis=0) - origin)) if lo.size else 0.0

@@ -961,7 +961,9 @@ class Scene:
             self._cell, _ = _bp.choose_cell_size(self._lo[slots], self._hi[slots])
         keys, owner, big = _bp.cell_keys(self._lo[slots], self._hi[slots], self._cell,
                                          _bp._MAX_CELLS_PER_BODY)
-        o = np.argsort(keys, kind="stable")
+        # Any order within a cell will do: a query sorts and dedups the pairs it collects
+        # (incremental_pairs), so quicksort (0.4 ms at 31,000 keys; stable: 1.9 ms).
+        o = np.argsort(keys)
         self._gkeys = keys[o]
         self._gslot = slots[owner[o]]
         cap = self._R.shape[0]
