@@ -709,10 +709,12 @@ def _first_crossing(dp, dv, da, R, Sigma, pa, pb, j, a0, p_start, thr, dt, cache
     with P >= thr is known the candidate c walks right with a step that
     doubles after a certified step and halves after a failed one; once
     P(hi) >= thr is known, the first crossing lies in (lo, hi] and c is the
-    secant of P between lo and hi (bisection when a side stalls).  Returns hi
-    once hi - lo <= dt.  Conservative exits (an earlier time than the true
-    first crossing, never a later one): lo when the step shrinks below dt,
-    or after _SEARCH_STEPS steps (P within the certificate's resolution of
+    root of log P interpolated between lo and hi, aimed short by the last
+    certified step's over-count (bisection when the bracket did not halve in
+    two updates).  Returns hi once hi - lo <= dt.  Conservative exits (an
+    earlier time than the true first crossing, never a later one): lo when
+    the step model shrinks below dt and [lo, lo + dt] cannot be certified
+    either, or after _SEARCH_STEPS steps (P within the certificate's resolution of
     the threshold over a long stretch).
 
     Each candidate's P(c) is computed before its entry-rate step: P(c) >= thr
@@ -728,24 +730,32 @@ def _first_crossing(dp, dv, da, R, Sigma, pa, pb, j, a0, p_start, thr, dt, cache
     phi = -1.0
     step = b - a0
     c = b
-    stall = 0
+    over = 0.25  # the last certified step's over-count (exits + errors) / (integral + error)
+    w1 = math.inf  # the bracket's width one and two updates ago (bisection safeguard)
+    w2 = math.inf
+    probed = -math.inf  # the lo whose [lo, lo + dt] was last tried
     first = True
     for _ in range(_SEARCH_STEPS):
         if hi - lo <= dt:
             return hi
+        pc = -1.0  # P(c), not computed yet
         if c - lo <= dt:
-            # the certificate cannot step further (P(lo) within its resolution of
-            # thr): one probe at lo + dt; at or above thr the crossing is in
-            # (lo, lo + dt], which is answered like a bracket; else the
-            # conservative exit
-            if lo + dt < hi and lo + dt <= b:
-                if _prob_at(dp, dv, da, R, Sigma, lo + dt, st) >= thr:
-                    return lo + dt
-            return lo
+            # the step model says the certificate cannot step further (P(lo)
+            # within its resolution of thr): one probe at lo + dt; at or above
+            # thr the crossing is in (lo, lo + dt], which is answered like a
+            # bracket; else one attempt to certify [lo, lo + dt] (the model's
+            # rate is that of the last step: the certificate may still pass),
+            # and the conservative exit when that fails
+            if not (lo + dt < hi and lo + dt <= b) or probed == lo:
+                return lo
+            probed = lo
+            c = lo + dt
+            pc = _prob_at(dp, dv, da, R, Sigma, c, st)
+            if pc >= thr:
+                return c
         whole = first and c == b
         first = False
-        pc = -1.0  # P(c), not computed yet
-        if not (whole and panel_free):
+        if pc < 0.0 and not (whole and panel_free):
             pc = _prob_at(dp, dv, da, R, Sigma, c, st)
         certified = False
         if pc < thr:
@@ -774,16 +784,17 @@ def _first_crossing(dp, dv, da, R, Sigma, pa, pb, j, a0, p_start, thr, dt, cache
                     step = 0.25 * (c - lo)
                     c = lo + step
                     continue
+                over = min(max((plo + v + e - pc) / (v + e), 0.0), 1.0) if v + e > 0.0 else 0.0
                 lo = c
                 plo = pc
-                step = 2.0 * step
+                step = 2.0 * step if hi == math.inf else math.inf
                 if rate > 0.0:
                     step = min(step, 0.9 * (thr - plo - _P0_ERR) / rate)
-                stall = stall + 1 if stall >= 0 else 1
             else:
                 if pc < 0.0:
                     pc = _prob_at(dp, dv, da, R, Sigma, c, st)
                 if pc < thr:  # neither certified nor above: a shorter step
+                    over = max(over, 0.25)
                     step = 0.5 * (c - lo)
                     if rate > 0.0:
                         step = min(step, 0.9 * (thr - plo - _P0_ERR) / rate)
@@ -792,16 +803,27 @@ def _first_crossing(dp, dv, da, R, Sigma, pa, pb, j, a0, p_start, thr, dt, cache
         if not certified:  # P(c) >= thr: c is the new hi
             hi = c
             phi = pc
-            stall = stall - 1 if stall <= 0 else -1
         if hi == math.inf:
             c = min(lo + step, b)
             continue
-        if abs(stall) >= 2 or not (phi > plo):
+        w = hi - lo
+        if w > 0.5 * w2 or not (phi > plo):
+            # the bracket did not halve in two updates: bisection
             c = 0.5 * (lo + hi)
         else:
-            c = lo + (thr - plo) / (phi - plo) * (hi - lo)
-            w = hi - lo
-            c = min(max(c, lo + 1e-3 * w), hi - 1e-3 * w)
+            # the root of log P interpolated linearly between lo and hi (P rises
+            # like a Gaussian tail below the threshold: the plain secant creeps),
+            # the plain secant where P(lo) = 0; then aimed short of that root by
+            # twice the last certified step's over-count, so that the
+            # certificate can pass it
+            if plo > 0.0:
+                f = math.log(thr / plo) / math.log(phi / plo)
+            else:
+                f = (thr - plo) / (phi - plo)
+            f = min(max(f, 1e-3), 1.0 - 1e-3)
+            c = lo + max(0.5, 1.0 - 2.0 * over) * f * w
+        w2 = w1
+        w1 = w
         if hi - c > dt and c - lo > step:  # not beyond what the certificate is expected to pass
             c = lo + step
     return lo
