@@ -157,6 +157,44 @@ _TUBE_DEPTH = 8  # leaves of width >= H / 256
 
 
 @njit(cache=True, error_model="numpy")
+def _ambiguous_through(dp, dv, da, R, Sigma, ta, tb, k):
+    """True when refining the ambiguous node [ta, tb] cannot change what the tube
+    walk reports but the shape of the merged ambiguous run: (i) the tube is not
+    outside at the points ta and tb (zero-width nodes: the leaves holding them have
+    a smaller box bound of |g| and a larger radius, so they are ambiguous too), and
+    (ii) no sub-node can be wholly inside (its radius k sqrt(lambda_max) >=
+    k sqrt(tr S(t) / D) >= R on all of [ta, tb]: gmax + rho < R is impossible).
+    Then [ta, tb] is the hull of its ambiguous leaves and holds no inside leaf, so
+    reporting it whole leaves t_inside and "some interval is ambiguous" unchanged
+    and only adds leaves where the tube is outside (integrating the entry rate
+    there adds true entries of tail paths: the integral moves towards the
+    untruncated one).  Saves most of the 2 x 256 nodes of a wide tube."""
+    D = dp.shape[0]
+    # (ii) tr S(t) = c0 + c1 t + c2 t^2 (c2 = tr Svv >= 0): its minimum over [ta, tb]
+    c0 = 0.0
+    c1 = 0.0
+    c2 = 0.0
+    for i in range(D):
+        c0 += Sigma[i, i]
+        c1 += Sigma[i, D + i] + Sigma[D + i, i]
+        c2 += Sigma[D + i, D + i]
+    trmin = min(c0 + ta * (c1 + ta * c2), c0 + tb * (c1 + tb * c2))
+    if c2 > 0.0:
+        tv = -c1 / (2.0 * c2)
+        if ta < tv < tb:
+            trmin = min(trmin, c0 + tv * (c1 + tv * c2))
+    # 1e-6 relative: far above the rounding of tr, lambda_max and the 1e-9 widening
+    if not (k * k * trmin >= D * R * R * (1.0 + 1e-6)):
+        return False
+    # (i) not outside at ta nor at tb (the walk's own test on zero-width nodes)
+    for t in (ta, tb):
+        gmin, _ = _mean_range(dp, dv, da, t, t)
+        if gmin - k * max_sigma_over(Sigma, t, t) > R:
+            return False
+    return True
+
+
+@njit(cache=True, error_model="numpy")
 def _tube_walk(dp, dv, da, R, Sigma, H, out, k, first_only):
     """The k-sigma tube's interval tree over [0, H], nodes visited depth first, left
     to right.  Returns (count of ambiguous leaves written to out, t_inside); with
@@ -186,7 +224,8 @@ def _tube_walk(dp, dv, da, R, Sigma, H, out, k, first_only):
             t_inside = min(t_inside, ta)
             continue
         m = 0.5 * (ta + tb)
-        if d >= _TUBE_DEPTH or not (ta < m < tb):
+        if d >= _TUBE_DEPTH or not (ta < m < tb) or (not first_only and _ambiguous_through(
+                dp, dv, da, R, Sigma, ta, tb, k)):
             if first_only:
                 return 0, ta
             if cnt > 0 and out[cnt - 1, 1] == ta:
@@ -659,7 +698,7 @@ def _clear_prefix(dp, dv, da, R, Sigma, a, b, thr):
 
 
 @njit(cache=True, error_model="numpy")
-def _first_crossing(dp, dv, da, R, Sigma, pa, pb, j, a0, p_start, thr, dt, cache, acc, st):
+def _first_crossing(dp, dv, da, R, Sigma, pa, pb, j, a0, p_start, thr, dt, cache, acc, st, panel_free):
     """First t in panel j = [a, b] with P(|X(t)| <= R) >= thr given that P < thr
     is certified on [a, a0] and P(a0) = p_start < thr, or +inf when certified
     absent (also +inf when S(t) turned out degenerate: the caller checks
@@ -670,11 +709,20 @@ def _first_crossing(dp, dv, da, R, Sigma, pa, pb, j, a0, p_start, thr, dt, cache
     with P >= thr is known the candidate c walks right with a step that
     doubles after a certified step and halves after a failed one; once
     P(hi) >= thr is known, the first crossing lies in (lo, hi] and c is the
-    secant of P between lo and hi (bisection when a side stalls).  Returns hi
-    once hi - lo <= dt.  Conservative exits (an earlier time than the true
-    first crossing, never a later one): lo when the step shrinks below dt,
-    or after _SEARCH_STEPS steps (P within the certificate's resolution of
-    the threshold over a long stretch)."""
+    root of log P interpolated between lo and hi, aimed short by the last
+    certified step's over-count (bisection when the bracket did not halve in
+    two updates).  Returns hi once hi - lo <= dt.  Conservative exits (an
+    earlier time than the true first crossing, never a later one): lo when
+    the step model shrinks below dt and [lo, lo + dt] cannot be certified
+    either, or after _SEARCH_STEPS steps (P within the certificate's resolution of
+    the threshold over a long stretch).
+
+    Each candidate's P(c) is computed before its entry-rate step: P(c) >= thr
+    makes c the new hi with no quadrature (a certified step needs P(c) anyway,
+    as the next P(lo)).  Only the panel's first candidate c = b with
+    panel_free (the caller computes the panel integral for the probability
+    anyway: t_inside > H) tries the certificate first, which proves the whole
+    panel clear without P(b)."""
     b = pb[j]
     lo = a0
     plo = p_start
@@ -682,71 +730,100 @@ def _first_crossing(dp, dv, da, R, Sigma, pa, pb, j, a0, p_start, thr, dt, cache
     phi = -1.0
     step = b - a0
     c = b
-    stall = 0
+    over = 0.25  # the last certified step's over-count (exits + errors) / (integral + error)
+    w1 = math.inf  # the bracket's width one and two updates ago (bisection safeguard)
+    w2 = math.inf
+    probed = -math.inf  # the lo whose [lo, lo + dt] was last tried
     first = True
     for _ in range(_SEARCH_STEPS):
         if hi - lo <= dt:
             return hi
+        pc = -1.0  # P(c), not computed yet
         if c - lo <= dt:
-            # the certificate cannot step further (P(lo) within its resolution of
-            # thr): one probe at lo + dt; at or above thr the crossing is in
-            # (lo, lo + dt], which is answered like a bracket; else the
-            # conservative exit
-            if lo + dt < hi and lo + dt <= b:
-                if _prob_at(dp, dv, da, R, Sigma, lo + dt, st) >= thr:
-                    return lo + dt
-            return lo
-        if first and c == b:
-            # the panel's own integral (computed once per pair, the probability
-            # needs it too): nu+ >= 0, so over [a, b] it bounds the one over [lo, b]
-            v, e = _rice_panel(dp, dv, da, R, Sigma, pa, pb, j, cache, acc, st)
-            width = b - pa[j]
-        else:
-            v, e = _rice_short(dp, dv, da, R, Sigma, lo, c, acc, st)
-            width = c - lo
-        first = False
-        if st[_ST_DEGENERATE] != 0.0:
-            return math.inf
-        # entry-rate model of the step that the certificate would still pass
-        rate = (v + e) / width
-        if plo + v + e + _P0_ERR < thr:  # certified: no crossing in [lo, c]
-            if c == b:
-                return math.inf
-            pc = _prob_at(dp, dv, da, R, Sigma, c, st)
-            if pc > plo + v + e + 2.0 * _P0_ERR:
-                # P(c) <= P(lo) + int nu+ is a theorem (each P within _P0_ERR), so the 3-point rule
-                # under-estimated the integral (a step across a steep rise of
-                # nu+): the step proves nothing; retry a shorter one
-                step = 0.25 * (c - lo)
-                c = lo + step
-                continue
-            lo = c
-            plo = pc
-            step = 2.0 * step
-            if rate > 0.0:
-                step = min(step, 0.9 * (thr - plo - _P0_ERR) / rate)
-            stall = stall + 1 if stall >= 0 else 1
-        else:
+            # the step model says the certificate cannot step further (P(lo)
+            # within its resolution of thr): one probe at lo + dt; at or above
+            # thr the crossing is in (lo, lo + dt], which is answered like a
+            # bracket; else one attempt to certify [lo, lo + dt] (the model's
+            # rate is that of the last step: the certificate may still pass),
+            # and the conservative exit when that fails
+            if not (lo + dt < hi and lo + dt <= b) or probed == lo:
+                return lo
+            probed = lo
+            c = lo + dt
             pc = _prob_at(dp, dv, da, R, Sigma, c, st)
             if pc >= thr:
-                hi = c
-                phi = pc
-                stall = stall - 1 if stall <= 0 else -1
-            else:  # neither certified nor above: a shorter step
-                step = 0.5 * (c - lo)
+                return c
+        whole = first and c == b
+        first = False
+        if pc < 0.0 and not (whole and panel_free):
+            pc = _prob_at(dp, dv, da, R, Sigma, c, st)
+        certified = False
+        if pc < thr:
+            if whole:
+                # the panel's own integral (computed once per pair; nu+ >= 0, so
+                # over [a, b] it bounds the one over [lo, b])
+                v, e = _rice_panel(dp, dv, da, R, Sigma, pa, pb, j, cache, acc, st)
+                width = b - pa[j]
+            else:
+                v, e = _rice_short(dp, dv, da, R, Sigma, lo, c, acc, st)
+                width = c - lo
+            if st[_ST_DEGENERATE] != 0.0:
+                return math.inf
+            # entry-rate model of the step that the certificate would still pass
+            rate = (v + e) / width
+            certified = plo + v + e + _P0_ERR < thr
+            if certified:  # no crossing in [lo, c]
+                if c == b:
+                    return math.inf
+                if pc < 0.0:
+                    pc = _prob_at(dp, dv, da, R, Sigma, c, st)
+                if pc > plo + v + e + 2.0 * _P0_ERR:
+                    # P(c) <= P(lo) + int nu+ is a theorem (each P within _P0_ERR), so the 3-point rule
+                    # under-estimated the integral (a step across a steep rise of
+                    # nu+): the step proves nothing; retry a shorter one
+                    step = 0.25 * (c - lo)
+                    c = lo + step
+                    continue
+                over = min(max((plo + v + e - pc) / (v + e), 0.0), 1.0) if v + e > 0.0 else 0.0
+                lo = c
+                plo = pc
+                step = 2.0 * step if hi == math.inf else math.inf
                 if rate > 0.0:
                     step = min(step, 0.9 * (thr - plo - _P0_ERR) / rate)
-                c = lo + max(step, 0.0)
-                continue
+            else:
+                if pc < 0.0:
+                    pc = _prob_at(dp, dv, da, R, Sigma, c, st)
+                if pc < thr:  # neither certified nor above: a shorter step
+                    over = max(over, 0.25)
+                    step = 0.5 * (c - lo)
+                    if rate > 0.0:
+                        step = min(step, 0.9 * (thr - plo - _P0_ERR) / rate)
+                    c = lo + max(step, 0.0)
+                    continue
+        if not certified:  # P(c) >= thr: c is the new hi
+            hi = c
+            phi = pc
         if hi == math.inf:
             c = min(lo + step, b)
             continue
-        if abs(stall) >= 2 or not (phi > plo):
+        w = hi - lo
+        if w > 0.5 * w2 or not (phi > plo):
+            # the bracket did not halve in two updates: bisection
             c = 0.5 * (lo + hi)
         else:
-            c = lo + (thr - plo) / (phi - plo) * (hi - lo)
-            w = hi - lo
-            c = min(max(c, lo + 1e-3 * w), hi - 1e-3 * w)
+            # the root of log P interpolated linearly between lo and hi (P rises
+            # like a Gaussian tail below the threshold: the plain secant creeps),
+            # the plain secant where P(lo) = 0; then aimed short of that root by
+            # twice the last certified step's over-count, so that the
+            # certificate can pass it
+            if plo > 0.0:
+                f = math.log(thr / plo) / math.log(phi / plo)
+            else:
+                f = (thr - plo) / (phi - plo)
+            f = min(max(f, 1e-3), 1.0 - 1e-3)
+            c = lo + max(0.5, 1.0 - 2.0 * over) * f * w
+        w2 = w1
+        w1 = w
         if hi - c > dt and c - lo > step:  # not beyond what the certificate is expected to pass
             c = lo + step
     return lo
@@ -806,7 +883,8 @@ def _pair_kernel(dp, dv, da, R, Sigma, H, thr, out):
                 tpl = a0
                 found = True
                 break
-            r = _first_crossing(dp, dv, da, R, Sigma, pa, pb, j, a0, p_start, thr, dt, cache, acc, st)
+            r = _first_crossing(dp, dv, da, R, Sigma, pa, pb, j, a0, p_start, thr, dt, cache, acc, st,
+                                t_inside > H)
             if st[_ST_DEGENERATE] != 0.0:
                 found = True
                 break

@@ -1,6 +1,6 @@
-"""The analytic interval bound of the plausible-time walk and the over-count estimator
-of accelerating pairs (docs/uncertainty.md, "Earliest plausible contact" and
-"Accelerating").
+"""The analytic interval bound of the plausible-time walk, the over-count estimator
+of accelerating pairs and the tube's whole ambiguous nodes (docs/uncertainty.md,
+"Earliest plausible contact", "Accelerating" and "Localisation").
 
 Guarantees proved here:
 * ``instant_bound(.., ta, tb)`` >= P(|X(t)| <= R) for every t in [ta, tb]
@@ -13,7 +13,11 @@ Guarantees proved here:
   the exact solver and a 200,001-point time grid do;
 * ``overcount_replicates``' convexity shortcut changes no count;
 * an accelerating pair whose paths often exit and come back (over-count
-  E[O] ~ 0.3) is answered within its stated bound of 1e6-sample Monte Carlo.
+  E[O] ~ 0.3) is answered within its stated bound of 1e6-sample Monte Carlo;
+* ``tube_intervals``' whole ambiguous nodes: every reported interval is a hull
+  of ambiguous leaves of the fully refined walk, covering all of them, with the
+  same t_inside (mutations dropping either condition of ``_ambiguous_through``
+  fail it).
 """
 from __future__ import annotations
 
@@ -24,8 +28,13 @@ import numpy as np
 from circle_collision_ros.core import time_to_collision
 from circle_collision_ros.core.uncertainty import uncertain_pairs
 from circle_collision_ros.core.uncertainty_kernels import (
+    BROAD_PHASE_SIGMAS,
+    _TUBE_DEPTH,
     S_at,
     _det_lower,
+    _mean_range,
+    max_sigma_over,
+    tube_intervals,
     factor,
     _quartic_crossings,
     instant_bound,
@@ -131,3 +140,57 @@ def test_accelerating_pair_that_comes_back_is_within_its_bound():
     overcount_replicates(pair[0], pair[1], pair[2], 0.5, 3.0, factor(cov * 2), Z, 512, est)
     assert est.mean() > 0.05
     assert math.isfinite(float(res.plausible_time[0]))
+
+
+def _tube_leaves_reference(dp, dv, da, R, Sigma, H, k):
+    """The k-sigma tube walk refined to every leaf (no whole ambiguous nodes): the
+    ambiguous leaves (unmerged) and t_inside, by the same node tests."""
+    leaves, t_inside = [], math.inf
+    stack = [(0.0, H, 0)]
+    while stack:
+        ta, tb, d = stack.pop()
+        rho = k * max_sigma_over(Sigma, ta, tb)
+        gmin, gmax = _mean_range(dp, dv, da, ta, tb)
+        if gmin - rho > R:
+            continue
+        if gmax + rho < R:
+            t_inside = min(t_inside, ta)
+            continue
+        m = 0.5 * (ta + tb)
+        if d >= _TUBE_DEPTH or not (ta < m < tb):
+            leaves.append((ta, tb))
+            continue
+        stack += [(m, tb, d + 1), (ta, m, d + 1)]
+    return leaves, t_inside
+
+
+def test_tube_whole_ambiguous_nodes_are_hulls_of_the_leaves():
+    """tube_intervals keeps an ambiguous node whole when both ends are ambiguous and
+    k^2 tr S(t) / D >= R^2 on it: the reported intervals must be unions of whole
+    reference leaves' hulls (every ambiguous leaf covered, every interval starting
+    and ending at an ambiguous leaf's end), with t_inside and "any interval"
+    unchanged; sigma from ~1e-4 R (no shortcut, inside nodes) to ~10 R."""
+    rng = np.random.default_rng(181)
+    H = 3.0
+    out = np.empty((1 << _TUBE_DEPTH, 2))
+    wide = inside = 0
+    for i in range(300):
+        D = 2 if i % 3 else 3
+        kind = KINDS[i % len(KINDS)]
+        pa, va, aa, ra, ca, pb, vb, ab, rb, cb = random_pair(rng, D, kind)
+        Sigma = (ca + cb) * 10 ** rng.uniform(-8, 2)
+        dp, dv, da, R = pa - pb, va - vb, aa - ab, float(ra + rb)
+        cnt, t_inside = tube_intervals(dp, dv, da, R, Sigma, H, out, BROAD_PHASE_SIGMAS)
+        ref, ref_inside = _tube_leaves_reference(dp, dv, da, R, Sigma, H, BROAD_PHASE_SIGMAS)
+        assert t_inside == ref_inside
+        assert (cnt > 0) == (len(ref) > 0)
+        got = [(out[j, 0], out[j, 1]) for j in range(cnt)]
+        starts = {a for a, _ in ref}
+        ends = {b for _, b in ref}
+        for a, b in got:
+            assert a in starts and b in ends, (a, b)
+        for a, b in ref:
+            assert any(ga <= a and b <= gb for ga, gb in got), (a, b)
+        wide += BROAD_PHASE_SIGMAS ** 2 * np.trace(Sigma[:D, :D]) / D >= R * R and cnt > 0
+        inside += t_inside <= H
+    assert wide >= 30 and inside >= 30, (wide, inside)  # both regimes drawn
