@@ -323,13 +323,15 @@ class Scene:
         self._captures = weakref.WeakSet()  # live captures sharing the state arrays
         self._uncertain_cache = None
         self._uncertain_serial = 0     # uncertain_pairs evaluations so far (the budget's clock)
-        self._uncertain_waiting = {}   # (id_a, id_b) -> serial since which the pair waits (deferred)
+        self._uncertain_waiting = _NO_WAITING  # the deferred pairs and since when they wait
         self._uncertain_memo = {}      # core.uncertainty.uncertain_pairs(memo=...): last full evaluations
         self._uncertain_memo_ref = None  # the reference time of those evaluations
         self._pair_answers = None      # _PairAnswers of the last uncertain_pairs call
         self.uncertain_evaluated = 0   # pairs the last uncertain_pairs call gave the core
         self._sv = np.zeros(cap, dtype=np.int64)  # each slot's state serial (bumped per change)
         self._sv_next = 1
+        self._born = np.zeros(cap, dtype=np.int64)  # each slot's body serial (set when a body takes it)
+        self._born_next = 1
 
     # Pair records: one row per pair with a contact within H + S of its t_p, in
     # growable buffers; rows of updated bodies are marked dead (compacted when
@@ -659,7 +661,7 @@ class Scene:
             for name, dt in (("_R", np.float64), ("_T", np.int64), ("_Tf", np.float64),
                              ("_recv", np.int64), ("_alive", bool), ("_rank", np.int64),
                              ("_id_start", np.int64), ("_id_len", np.int64), ("_U", bool),
-                             ("_sv", np.int64)):
+                             ("_sv", np.int64), ("_born", np.int64)):
                 grown = np.full(new, -1 if name == "_rank" else 0, dtype=dt)
                 grown[:old] = getattr(self, name)
                 setattr(self, name, grown)
@@ -681,7 +683,10 @@ class Scene:
                 moved[:old] = self._moved
                 self._moved = moved
             self._free = list(range(new - 1, old - 1, -1))
-        return self._free.pop()
+        s = self._free.pop()
+        self._born[s] = self._born_next
+        self._born_next += 1
+        return s
 
     def _add_utf8(self, slots: np.ndarray) -> None:
         """Append the UTF-8 bytes of the ids of new `slots` to the id blob."""
@@ -1171,14 +1176,14 @@ class Scene:
                          max_evaluated: int | None) -> SceneUncertainty:
         R = self.reference_ns
         if R is None or self._n_uncertain == 0:
-            self._uncertain_waiting = {}  # no pair listed: none waits
+            self._uncertain_waiting = _NO_WAITING  # no pair listed: none waits
             self._pair_answers = None
             return SceneUncertainty(R or 0, _NO_IDS, _NO_IDS, _NO_VALUES, _NO_VALUES, _NO_VALUES)
         from circle_collision_ros.core import uncertainty as unc  # heavy kernels: loaded on first use
         slots = self._sorted_slots()
         I, J, at_R, contact_rows = self._uncertain_listed(slots, R, contacts, unc)
         if I.size == 0:
-            self._uncertain_waiting = {}
+            self._uncertain_waiting = _NO_WAITING
             self._pair_answers = None
             return SceneUncertainty(R, _NO_IDS, _NO_IDS, _NO_VALUES, _NO_VALUES, _NO_VALUES)
         ids = self._ids[slots]
@@ -1198,11 +1203,11 @@ class Scene:
         answered = hit.copy()
         if todo.size:
             deferred = self._evaluate_uncertain(unc, sa[todo], sb[todo], I[todo], J[todo], at_R, tp[todo],
-                                                ida[todo], idb[todo], threshold, max_evaluated)
+                                                key[todo], threshold, max_evaluated)
             prob[todo], bound[todo], tau[todo] = deferred.probability, deferred.bound, deferred.tau
             answered[todo[~deferred.deferred]] = True
         else:
-            self._uncertain_waiting = {}
+            self._uncertain_waiting = _NO_WAITING
             self._uncertain_serial += 1
         keep = np.flatnonzero(answered)
         order = keep[np.argsort(key[keep], kind="stable")]
@@ -1258,7 +1263,10 @@ class Scene:
             I, J = np.concatenate([I, ca[m]]), np.concatenate([J, cb[m]])
         # local order is id order: (min, max) puts the id that sorts first in front
         n = np.int64(slots.size)
-        key = np.unique(np.minimum(I, J) * n + np.maximum(I, J))
+        key = np.minimum(I, J) * n + np.maximum(I, J)
+        key.sort()  # then drop repeats (a contact the broad phase listed too): np.unique's result
+        if key.size > 1:
+            key = key[np.concatenate(([True], key[1:] != key[:-1]))]
         rows = None
         if contacts is not None:
             rows = np.full(key.size, -1, dtype=np.int64)
@@ -1277,11 +1285,11 @@ class Scene:
         lag = self.UNCERTAIN_LAG_NS
         return np.where(newer > R - lag, newer, R - R % lag)
 
-    def _evaluate_uncertain(self, unc, sa, sb, la, lb, at_R, tp, ida, idb, threshold: float,
+    def _evaluate_uncertain(self, unc, sa, sb, la, lb, at_R, tp, key, threshold: float,
                             max_evaluated: int | None) -> "_Evaluated":
         """``unc.uncertain_pairs`` on these pairs (slots sa, sb; local indices la, lb into
-        at_R, the bodies at R), each at its t_p over [0, H] (screened, within the budget; FIFO
-        bookkeeping of the deferred, see uncertain_pairs)."""
+        at_R, the bodies at R; key = sa << 32 | sb), each at its t_p over [0, H] (screened,
+        within the budget; FIFO bookkeeping of the deferred, see uncertain_pairs)."""
         R = self.reference_ns
         late = np.flatnonzero(tp != R)  # t_p = R: the bodies as propagated for the listing
         states = []
@@ -1297,12 +1305,13 @@ class Scene:
             states.append((P, V, self._A[s], self._R[s], C))
         serial = self._uncertain_serial
         waiting = self._uncertain_waiting
+        born_a, born_b = self._born[sa], self._born[sb]
         asked = []
 
         def waited_since(rows):  # the rows competing for the budget (called only when over it)
-            keys = list(zip(ida[rows].tolist(), idb[rows].tolist()))
-            asked.append((rows, keys))
-            return np.fromiter((waiting.get(k, serial) for k in keys), np.int64, len(keys))
+            since = waiting.since_of(key[rows], born_a[rows], born_b[rows], serial)
+            asked.append((rows, since))
+            return since
 
         if self._uncertain_memo_ref != R:
             # a new reference time moves most pairs' inputs (their t_p follow the stamps):
@@ -1314,15 +1323,41 @@ class Scene:
                                   memo=self._uncertain_memo)
         deferred = (res.collision_probability_bound == unc.DEFERRED_BOUND
                     if max_evaluated is not None else np.zeros(sa.size, dtype=bool))
-        still = {}
-        for rows, keys in asked:
-            for k, d in zip(keys, deferred[rows].tolist()):
-                if d:
-                    still[k] = waiting.get(k, serial)
-        self._uncertain_waiting = still
+        # the deferred of the rows that competed wait on (since as looked up); the rest stop
+        rows = np.concatenate([r for r, _ in asked]) if asked else _EMPTY_I
+        since = np.concatenate([w for _, w in asked]) if asked else _EMPTY_I
+        still = deferred[rows]
+        rows, since = rows[still], since[still]
+        order = np.argsort(key[rows], kind="stable")  # keys are distinct: any sort gives this order
+        rows = rows[order]
+        self._uncertain_waiting = _Waiting(key[rows], born_a[rows], born_b[rows], since[order])
         self._uncertain_serial = serial + 1
         return _Evaluated(res.collision_probability, res.collision_probability_bound,
                           res.plausible_time, deferred)
+
+
+class _Waiting(NamedTuple):
+    """The pairs the last uncertain evaluation deferred (the budget's FIFO), sorted by key =
+    slot_a << 32 | slot_b, with their bodies' serials (``Scene._born``: a slot another body
+    took since is another pair; a body removed and added again is a new body, its pairs wait
+    from then) and the evaluation serial since which each waits."""
+
+    key: np.ndarray
+    born_a: np.ndarray
+    born_b: np.ndarray
+    since: np.ndarray
+
+    def since_of(self, key: np.ndarray, born_a: np.ndarray, born_b: np.ndarray, default: int) -> np.ndarray:
+        """(n,) int64: since when each pair (key, born_a, born_b) waits; `default` if it does not."""
+        out = np.full(key.size, default, dtype=np.int64)
+        if self.key.size and key.size:
+            at = np.minimum(np.searchsorted(self.key, key), self.key.size - 1)
+            same = (self.key[at] == key) & (self.born_a[at] == born_a) & (self.born_b[at] == born_b)
+            out[same] = self.since[at[same]]
+        return out
+
+
+_NO_WAITING = _Waiting(_EMPTY_I, _EMPTY_I, _EMPTY_I, _EMPTY_I)
 
 
 class _PairAnswers(NamedTuple):
