@@ -458,26 +458,40 @@ def test_batch_covariance_checks_decide_row_by_row_as_the_core(dimensions) -> No
     assert 0 < want_bad.sum() and 0 < want_uncertain.sum() and (~want_bad & ~want_uncertain).sum() > 0
 
 
-def test_covariance_propagation_is_the_numpy_expression_bitwise() -> None:
-    """scene._propagate_covariance (one compiled pass) gives the bits of the block expression
-    Spp + dt (Spv + Svp) + dt^2 Svv, Spv + dt Svv, Svp + dt Svv, Svv in numpy, signed zeros
-    included (recorded covariance bags replay bit for bit)."""
-    from circle_collision_ros.core.scene import _propagate_covariance
+def test_state_and_covariance_propagation_is_the_numpy_expression_bitwise() -> None:
+    """scene._states_at (one compiled pass over the stored bodies) gives the bits of the numpy
+    expressions: p + dt (v + (dt/2) a), v + dt a (scene._propagate_ns) and the covariance
+    blocks Spp + dt (Spv + Svp) + dt^2 Svv, Spv + dt Svv, Svp + dt Svv, Svv, zero for exact
+    bodies, signed zeros included (recorded covariance bags replay bit for bit)."""
+    from circle_collision_ros.core.scene import _propagate_ns, _states_at
     rng = np.random.default_rng(3)
+    n = 500
     for D in (2, 3):
-        C = rng.normal(size=(500, 2 * D, 2 * D)) * 10.0 ** rng.integers(-8, 8, (500, 1, 1))
+        P, V, A = (rng.normal(size=(n, D)) * 10.0 ** rng.integers(-3, 4, (n, 1)) for _ in range(3))
+        A[rng.random(A.shape) < 0.3] = -0.0
+        C = rng.normal(size=(n, 2 * D, 2 * D)) * 10.0 ** rng.integers(-8, 8, (n, 1, 1))
         C[rng.random(C.shape) < 0.2] = -0.0
         C[rng.random(C.shape) < 0.2] = 0.0
-        dt_ns = rng.integers(0, 3_000_000_000, 500)
-        dt_ns[::3] = 0
+        T = BASE + rng.integers(0, 3_000_000_000, n)
+        U = rng.random(n) < 0.8
+        slots = rng.permutation(n)[:300]
+        t_ns = T[slots] + rng.integers(0, 3_000_000_000, slots.size)
+        t_ns[::3] = T[slots[::3]]
+        dt_ns = t_ns - T[slots]
         dt = (dt_ns.astype(np.float64) * 1e-9)[:, None, None]
-        pp, pv, vp, vv = C[:, :D, :D], C[:, :D, D:], C[:, D:, :D], C[:, D:, D:]
-        want = np.empty_like(C)
+        c = C[slots]
+        pp, pv, vp, vv = c[:, :D, :D], c[:, :D, D:], c[:, D:, :D], c[:, D:, D:]
+        want = np.empty_like(c)
         want[:, :D, :D] = pp + dt * (pv + vp) + (dt * dt) * vv
         want[:, :D, D:] = pv + dt * vv
         want[:, D:, :D] = vp + dt * vv
         want[:, D:, D:] = vv
-        assert _propagate_covariance(C, dt_ns).tobytes() == want.tobytes()
+        want[~U[slots]] = 0.0
+        want_p, want_v = _propagate_ns(P[slots], V[slots], A[slots], dt_ns)
+        p, v, cov = np.empty((slots.size, D)), np.empty((slots.size, D)), np.empty_like(c)
+        _states_at(P, V, A, C, T, U, slots, t_ns, p, v, cov)
+        assert p.tobytes() == want_p.tobytes() and v.tobytes() == want_v.tobytes()
+        assert cov.tobytes() == want.tobytes()
 
 
 def test_published_rows_from_the_scenes_pair_match_equal_the_id_match() -> None:

@@ -184,30 +184,41 @@ def _propagate_ns(P, V, A, dt_ns):
     return P + dt * (V + (0.5 * dt) * A), V + dt * A
 
 
-def _propagate_covariance(C, dt_ns):
-    """Joint (position, velocity) covariances (n, 2D, 2D) moved by ``dt_ns``: ``M C M^T``,
-    ``M = [[I, dt I], [0, I]]`` (acceleration is exact, so it adds no uncertainty):
-    ``Spp + dt (Spv + Svp) + dt^2 Svv``, ``Spv + dt Svv``, ``Svp + dt Svv``, ``Svv``, evaluated
-    in that order (one compiled pass, the numpy expression's operations and rounding)."""
-    dt = np.asarray(dt_ns).astype(np.float64) * 1e-9
-    out = np.empty_like(C)
-    _propagate_covariance_rows(np.ascontiguousarray(C, dtype=np.float64), dt, out)
-    return out
+@njit(cache=True, error_model="numpy", inline="always")
+def _covariance_row(C, t, out):
+    """A joint (position, velocity) covariance (2D, 2D) moved by t s into out: ``M C M^T``,
+    ``M = [[I, t I], [0, I]]`` (acceleration is exact, so it adds no uncertainty):
+    ``Spp + t (Spv + Svp) + t^2 Svv``, ``Spv + t Svv``, ``Svp + t Svv``, ``Svv``, evaluated
+    in that order (the numpy block expression's operations and rounding)."""
+    D = C.shape[0] // 2
+    tt = t * t
+    for r in range(D):
+        for c in range(D):
+            vv = C[D + r, D + c]
+            out[r, c] = C[r, c] + t * (C[r, D + c] + C[D + r, c]) + tt * vv
+            out[r, D + c] = C[r, D + c] + t * vv
+            out[D + r, c] = C[D + r, c] + t * vv
+            out[D + r, D + c] = vv
 
 
 @njit(cache=True, error_model="numpy")
-def _propagate_covariance_rows(C, dt, out):
-    D = C.shape[1] // 2
-    for i in range(C.shape[0]):
-        t = dt[i]
-        tt = t * t
-        for r in range(D):
-            for c in range(D):
-                vv = C[i, D + r, D + c]
-                out[i, r, c] = C[i, r, c] + t * (C[i, r, D + c] + C[i, D + r, c]) + tt * vv
-                out[i, r, D + c] = C[i, r, D + c] + t * vv
-                out[i, D + r, c] = C[i, D + r, c] + t * vv
-                out[i, D + r, D + c] = vv
+def _states_at(P, V, A, C, T, U, slots, t_ns, p, v, c):
+    """The stored bodies `slots` moved from their stamps T to t_ns[j] (int64 ns), in one
+    compiled pass: p, v as _propagate_ns, c as _covariance_row for an uncertain body
+    (U) and zero for an exact one (its stored covariance may be stale).  The same
+    operations in the same order as those numpy expressions (no fast-math: no
+    contraction into fused multiply-adds), so the same bits."""
+    D = P.shape[1]
+    for j in range(slots.shape[0]):
+        s = slots[j]
+        dt = np.float64(t_ns[j] - T[s]) * 1e-9  # integer difference first (stamps ~1.7e18 ns)
+        for k in range(D):
+            p[j, k] = P[s, k] + dt * (V[s, k] + (0.5 * dt) * A[s, k])
+            v[j, k] = V[s, k] + dt * A[s, k]
+        if U[s]:
+            _covariance_row(C[s], dt, c[j])
+        else:
+            c[j] = 0.0
 
 
 _EMPTY_I = np.empty(0, dtype=np.int64)
@@ -1229,16 +1240,12 @@ class Scene:
         ``unc.inflation_radius``, cannot rule out, plus the uncertain pairs of `contacts`;
         at_R = (P, V, C) of `slots` propagated to R (C zero for exact bodies); contact_rows:
         each pair's row in `contacts`, -1 if none (None without contacts)."""
-        dtn = R - self._T[slots]
-        P, V = _propagate_ns(self._P[slots], self._V[slots], self._A[slots], dtn)
+        P, V, C = self._states_at(slots, np.full(slots.size, R, dtype=np.int64))
         A, Rad = self._A[slots], self._R[slots]
         u = self._U[slots]
-        if u.all():  # (an exact body's stored covariance may be stale: zero it)
-            C = _propagate_covariance(self._C[slots], dtn)
+        if u.all():
             grow = unc.inflation_radius(C, self._h)
         else:
-            C = np.zeros((slots.size,) + self._C.shape[1:])
-            C[u] = _propagate_covariance(self._C[slots[u]], dtn[u])
             grow = np.zeros(slots.size)
             grow[u] = unc.inflation_radius(C[u], self._h)
         zero = np.zeros(slots.size)
@@ -1278,6 +1285,15 @@ class Scene:
                 rows[same] = order[at[same]]
         return key // n, key % n, (P, V, C), rows
 
+    def _states_at(self, slots: np.ndarray, t_ns: np.ndarray):
+        """(P, V, C) of the bodies `slots` moved to the times t_ns (int64 ns, per body), C zero
+        for exact bodies: see _states_at (module level)."""
+        m = slots.shape[0]
+        D = self._dim
+        P, V, C = np.empty((m, D)), np.empty((m, D)), np.empty((m, 2 * D, 2 * D))
+        _states_at(self._P, self._V, self._A, self._C, self._T, self._U, slots, t_ns, P, V, C)
+        return P, V, C
+
     def _uncertain_pair_times(self, sa: np.ndarray, sb: np.ndarray, R: int) -> np.ndarray:
         """Pair times t_p (ns): the newer stamp of the two if it lies within UNCERTAIN_LAG_NS
         of R, else the start of R's lag period (R - R mod UNCERTAIN_LAG_NS); R - t_p < the lag."""
@@ -1295,13 +1311,8 @@ class Scene:
         states = []
         for s, loc in ((sa, la), (sb, lb)):
             P, V, C = at_R[0][loc], at_R[1][loc], at_R[2][loc]
-            if late.size:  # the same elementwise operations from the stamp to t_p instead
-                sl, dt = s[late], tp[late] - self._T[s[late]]
-                P[late], V[late] = _propagate_ns(self._P[sl], self._V[sl], self._A[sl], dt)
-                u = self._U[sl]
-                Cl = np.zeros((late.size,) + C.shape[1:])
-                Cl[u] = _propagate_covariance(self._C[sl[u]], dt[u])
-                C[late] = Cl
+            if late.size:  # the same operations from the stamp to t_p instead
+                P[late], V[late], C[late] = self._states_at(s[late], tp[late])
             states.append((P, V, self._A[s], self._R[s], C))
         serial = self._uncertain_serial
         waiting = self._uncertain_waiting
