@@ -145,7 +145,8 @@ class SceneUncertainty:
     t_p = R for a tracker array, within ``Scene.UNCERTAIN_LAG_NS`` before R otherwise, see
     ``Scene.uncertain_pairs``). Arrays (K,): id_a (sorts first), id_b, probability (of
     contact within [t_p, t_p + H]), probability_bound, plausible_ttc (s from R, +inf if
-    never).  Pairs of two exact bodies are never listed (the exact path answers them).
+    never).  Rows are in (id_a, id_b) order.  Pairs of two exact bodies are never listed
+    (the exact path answers them).
     """
 
     reference_ns: int
@@ -160,6 +161,8 @@ class SceneUncertainty:
     #: same pair, -1 if none; None when no contacts were given
     contact_rows: np.ndarray | None = None
     matched: SceneContacts | None = None
+    #: The ids as UTF-8 for encoders, as SceneContacts.id_utf8 (None: ids not all str).
+    id_utf8: tuple | None = None
 
     def __len__(self) -> int:
         return int(self.probability.shape[0])
@@ -1098,6 +1101,22 @@ class Scene:
         o = o[np.argsort(ttc[o], kind="stable")]
         return tuple(x[o] for x in rows)
 
+    def _id_utf8(self, A: np.ndarray, B: np.ndarray, id_rows=None) -> tuple | None:
+        """``(blob, start_a, len_a, start_b, len_b)`` of pairs (slots A, B), read-only (the
+        encoders compile for that one kind); None when some id is not a str.  id_rows: the
+        four columns when already gathered."""
+        if not self._utf8_ok:
+            return None
+        if id_rows is None:
+            id_rows = (self._id_start[A], self._id_len[A], self._id_start[B], self._id_len[B])
+        # the blob is appended to in place, but never where published ids lie
+        blob = self._utf8.view()
+        blob.flags.writeable = False
+        for x in id_rows:
+            if x.size:
+                x.flags.writeable = False
+        return (blob,) + tuple(id_rows)
+
     def _publish(self, rows, id_rows=None) -> SceneContacts:
         """id_rows: the rows' ``(start_a, len_a, start_b, len_b)`` in the id blob when already
         gathered (the query kernel does it on its way)."""
@@ -1108,20 +1127,9 @@ class Scene:
             # every later kernel call a new read-only specialisation to compile (~15 s, once)
             if x.size:
                 x.flags.writeable = False
-        utf8 = None
-        if self._utf8_ok:
-            if id_rows is None:
-                id_rows = (self._id_start[A], self._id_len[A], self._id_start[B], self._id_len[B])
-            # read-only like the rows (the encoders compile for that one kind); the blob is
-            # appended to in place, but never where published ids lie
-            blob = self._utf8.view()
-            blob.flags.writeable = False
-            for x in id_rows:
-                if x.size:
-                    x.flags.writeable = False
-            utf8 = (blob,) + tuple(id_rows)
         self._ids_published = True
-        return SceneContacts(self.reference_ns or 0, self._ids, A, B, ttc, cns, over, pt, nm, cs, utf8)
+        return SceneContacts(self.reference_ns or 0, self._ids, A, B, ttc, cns, over, pt, nm, cs,
+                             self._id_utf8(A, B, id_rows))
 
     def full_recomputation(self) -> SceneContacts:
         """The rule applied from scratch to the stored states (caches untouched).
@@ -1232,7 +1240,8 @@ class Scene:
         plausible = np.where(np.isnan(tau) | (tau > d), tau - d, 0.0)
         return SceneUncertainty(R, ida, idb, prob, bound, plausible,
                                 int(np.count_nonzero(~answered)) if max_evaluated is not None else 0,
-                                contact_rows, contacts if contact_rows is not None else None)
+                                contact_rows, contacts if contact_rows is not None else None,
+                                self._id_utf8(sa, sb))
 
     def _uncertain_listed(self, slots: np.ndarray, R: int, contacts: SceneContacts | None, unc):
         """``(I, J, at_R, contact_rows)``: local index pairs (I < J, into `slots`, id order) with

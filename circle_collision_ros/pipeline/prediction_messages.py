@@ -141,27 +141,12 @@ class ScenePrediction:
 
         u = self.uncertainty
         if u is not None and len(u):
-            if u.matched is c and u.contact_rows is not None:  # the scene matched the pairs
-                found = np.full(len(c), -1, dtype=np.int64)
-                paired = np.flatnonzero(u.contact_rows >= 0)
-                found[u.contact_rows[paired]] = paired
-                found = found[k]
-            else:
-                row = {pair: j for j, pair in enumerate(zip(u.id_a.tolist(), u.id_b.tolist()))}
-                found = np.array([row.get(pair, -1) for pair in zip(id_a, id_b)], dtype=np.int64).reshape(n)
+            found, e = self._uncertain_join
             has = found >= 0
             parts["probability"][0][has] = u.probability[found[has]]
             parts["bound"][0][has] = u.probability_bound[found[has]]
             parts["plausible"][0] = plausible = ttc.copy()
             plausible[has] = u.plausible_ttc[found[has]]
-            # Uncertain pairs whose mean paths miss within the horizon, listed when probable.
-            extra = np.ones(len(u), dtype=bool)
-            extra[found[has]] = False
-            extra &= (u.probability >= self.probability_threshold) & np.isfinite(u.probability) \
-                & np.isfinite(u.probability_bound)
-            e = np.flatnonzero(extra)
-            keys = list(zip(u.plausible_ttc[e].tolist(), u.id_a[e].tolist(), u.id_b[e].tolist()))
-            e = e[np.array(sorted(range(e.size), key=keys.__getitem__), dtype=np.int64)]
             no_contact_rows(u.id_a[e].tolist(), u.id_b[e].tolist(), u.probability[e], u.probability_bound[e],
                             u.plausible_ttc[e])
         if self.report_all_pairs and len(self.capture) <= ReportAll.MAX_BODIES:
@@ -178,6 +163,49 @@ class ScenePrediction:
                                  np.ascontiguousarray(col["contact_ns"], dtype=np.int64), col["point"],
                                  col["normal"], f64(col["closing"]), f64(col["probability"]), f64(col["bound"]),
                                  f64(col["plausible"]))
+
+    @cached_property
+    def _uncertain_join(self) -> tuple[np.ndarray, np.ndarray]:
+        """(found, extra): for each published contact row, its row in `uncertainty` (-1: none);
+        the uncertainty rows published after the contacts (uncertain pairs whose mean paths miss
+        within the horizon, listed when probable), in publication order."""
+        c, u = self.contacts, self.uncertainty
+        k = self._finite_rows
+        if u.matched is c and u.contact_rows is not None:  # the scene matched the pairs
+            found = np.full(len(c), -1, dtype=np.int64)
+            paired = np.flatnonzero(u.contact_rows >= 0)
+            found[u.contact_rows[paired]] = paired
+            found = found[k]
+        else:
+            row = {pair: j for j, pair in enumerate(zip(u.id_a.tolist(), u.id_b.tolist()))}
+            found = np.array([row.get(pair, -1) for pair in zip(c.id_a[k].tolist(), c.id_b[k].tolist())],
+                             dtype=np.int64)
+        extra = np.ones(len(u), dtype=bool)
+        extra[found[found >= 0]] = False
+        extra &= (u.probability >= self.probability_threshold) & np.isfinite(u.probability) \
+            & np.isfinite(u.probability_bound)
+        e = np.flatnonzero(extra)
+        # by (plausible time, id_a, id_b): the rows are in (id_a, id_b) order (SceneUncertainty),
+        # so a stable sort on the time alone (no NaN here: a row with a finite probability has
+        # a time or +inf; -0.0 and 0.0 tie, as they compare equal)
+        return found, e[np.argsort(u.plausible_ttc[e], kind="stable")]
+
+    def _utf8_ids(self, columns: PredictionColumns) -> tuple | None:
+        """The published rows' ids as UTF-8 for the encoder, ``(blob, start_a, len_a, start_b,
+        len_b)``, from the scene's encoded ids: the contacts' when the rows are exactly the
+        contacts, the contacts' then the extra uncertain rows' when those follow them (both
+        from one id blob); None otherwise (the encoder then encodes the names)."""
+        c, u = self.contacts, self.uncertainty
+        if not isinstance(self._finite_rows, slice) or c.id_utf8 is None:
+            return None
+        if len(columns) == len(c):
+            return c.id_utf8
+        if u is None or not len(u) or u.id_utf8 is None or u.id_utf8[0].base is not c.id_utf8[0].base:
+            return None
+        e = self._uncertain_join[1]
+        if len(columns) != len(c) + e.size:  # report_all_pairs rows follow
+            return None
+        return (u.id_utf8[0],) + tuple(np.concatenate((x, y[e])) for x, y in zip(c.id_utf8[1:], u.id_utf8[1:]))
 
     @property
     def _exact_contacts_only(self) -> bool:
@@ -240,7 +268,5 @@ class ScenePrediction:
             if data is not None:
                 return data
         columns = self.columns
-        # No contact row dropped and none appended: the scene's encoded ids fit the columns.
-        same_rows = isinstance(self._finite_rows, slice) and len(columns) == len(self.contacts)
         return encode_prediction_array(self.stamp, self.frame_id, float(self.horizon), columns,
-                                       self.contacts.id_utf8 if same_rows else None, uncertainty=uncertainty)
+                                       self._utf8_ids(columns), uncertainty=uncertainty)
