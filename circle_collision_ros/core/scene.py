@@ -1212,12 +1212,20 @@ class Scene:
         key = (sa << 32) | sb
         prob, bound, tau = np.empty(I.size), np.empty(I.size), np.empty(I.size)
         hit = np.zeros(I.size, dtype=bool)
+        sv_a, sv_b = self._sv[sa], self._sv[sb]
         old = self._pair_answers
-        if old is not None and old.horizon == self._h and old.threshold == threshold and old.key.size:
-            at = np.minimum(np.searchsorted(old.key, key), old.key.size - 1)
-            hit = ((old.key[at] == key) & (old.state_a[at] == self._sv[sa])
-                   & (old.state_b[at] == self._sv[sb]) & (old.pair_ns[at] == tp))
-            prob[hit], bound[hit], tau[hit] = old.probability[at[hit]], old.bound[at[hit]], old.tau[at[hit]]
+        # a kept answer needs both bodies unchanged since (state serials below old.sv_next):
+        # when every body changed (a tracker array) there is nothing to look up
+        if old is not None and old.horizon == self._h and old.threshold == threshold \
+                and self._sv[slots].min() < old.sv_next:
+            keep = np.flatnonzero(old.answered)
+            keep = keep[np.argsort(old.key[keep], kind="stable")]  # keys are distinct
+            if keep.size:
+                okey = old.key[keep]
+                at = keep[np.minimum(np.searchsorted(okey, key), keep.size - 1)]
+                hit = ((old.key[at] == key) & (old.state_a[at] == sv_a)
+                       & (old.state_b[at] == sv_b) & (old.pair_ns[at] == tp))
+                prob[hit], bound[hit], tau[hit] = old.probability[at[hit]], old.bound[at[hit]], old.tau[at[hit]]
         todo = np.flatnonzero(~hit)
         answered = hit.copy()
         if todo.size:
@@ -1228,11 +1236,8 @@ class Scene:
         else:
             self._uncertain_waiting = _NO_WAITING
             self._uncertain_serial += 1
-        keep = np.flatnonzero(answered)
-        order = keep[np.argsort(key[keep], kind="stable")]
-        self._pair_answers = _PairAnswers(self._h, threshold, key[order], self._sv[sa[order]],
-                                          self._sv[sb[order]], tp[order], prob[order], bound[order],
-                                          tau[order])
+        self._pair_answers = _PairAnswers(self._h, threshold, self._sv_next, key, answered, sv_a, sv_b,
+                                          tp, prob, bound, tau)
         self.uncertain_evaluated = int(todo.size)
         # reported from R: the pair's plausible time counts from its t_p <= R (d = R - t_p);
         # one already reached before R is reported as 0 (plausible now)
@@ -1247,7 +1252,7 @@ class Scene:
         """``(I, J, at_R, contact_rows)``: local index pairs (I < J, into `slots`, id order) with
         an uncertain body that the broad phase at R over [0, H], radii inflated by
         ``unc.inflation_radius``, cannot rule out, plus the uncertain pairs of `contacts`;
-        at_R = (P, V, C) of `slots` propagated to R (C zero for exact bodies); contact_rows:
+        at_R = (P, V, A, radius, C) of `slots`, propagated to R (C zero for exact bodies); contact_rows:
         each pair's row in `contacts`, -1 if none (None without contacts)."""
         P, V, C = self._states_at(slots, np.full(slots.size, R, dtype=np.int64))
         A, Rad = self._A[slots], self._R[slots]
@@ -1292,7 +1297,7 @@ class Scene:
                 at = np.minimum(np.searchsorted(ckey[order], key), order.size - 1)
                 same = ckey[order[at]] == key
                 rows[same] = order[at[same]]
-        return key // n, key % n, (P, V, C), rows
+        return key // n, key % n, (P, V, A, Rad, C), rows
 
     def _states_at(self, slots: np.ndarray, t_ns: np.ndarray):
         """(P, V, C) of the bodies `slots` moved to the times t_ns (int64 ns, per body), C zero
@@ -1319,10 +1324,10 @@ class Scene:
         late = np.flatnonzero(tp != R)  # t_p = R: the bodies as propagated for the listing
         states = []
         for s, loc in ((sa, la), (sb, lb)):
-            P, V, C = at_R[0][loc], at_R[1][loc], at_R[2][loc]
+            P, V, A, Rad, C = _gather_rows(*at_R, loc)
             if late.size:  # the same operations from the stamp to t_p instead
                 P[late], V[late], C[late] = self._states_at(s[late], tp[late])
-            states.append((P, V, self._A[s], self._R[s], C))
+            states.append((P, V, A, Rad, C))
         serial = self._uncertain_serial
         waiting = self._uncertain_waiting
         born_a, born_b = self._born[sa], self._born[sb]
@@ -1356,6 +1361,25 @@ class Scene:
                           res.plausible_time, deferred)
 
 
+def _gather_rows(P, V, A, Rad, C, rows):
+    """(P[rows], V[rows], A[rows], Rad[rows], C[rows]) in one compiled pass."""
+    m, D = rows.shape[0], P.shape[1]
+    out = (np.empty((m, D)), np.empty((m, D)), np.empty((m, D)), np.empty(m), np.empty((m,) + C.shape[1:]))
+    _gather_rows_kernel(P, V, A, Rad, C, rows, *out)
+    return out
+
+
+@njit(cache=True)
+def _gather_rows_kernel(P, V, A, Rad, C, rows, p, v, a, rad, c):
+    for j in range(rows.shape[0]):
+        i = rows[j]
+        p[j] = P[i]
+        v[j] = V[i]
+        a[j] = A[i]
+        rad[j] = Rad[i]
+        c[j] = C[i]
+
+
 class _Waiting(NamedTuple):
     """The pairs the last uncertain evaluation deferred (the budget's FIFO), sorted by key =
     slot_a << 32 | slot_b, with their bodies' serials (``Scene._born``: a slot another body
@@ -1381,12 +1405,15 @@ _NO_WAITING = _Waiting(_EMPTY_I, _EMPTY_I, _EMPTY_I, _EMPTY_I)
 
 
 class _PairAnswers(NamedTuple):
-    """Scene.uncertain_pairs' answers of the last call, per pair (sorted by key = slot_a << 32 |
-    slot_b): valid for a later call while both bodies' states (serials) and t_p are unchanged."""
+    """Scene.uncertain_pairs' answers of the last call, per listed pair (key = slot_a << 32 |
+    slot_b, in listing order; answered: not deferred): valid for a later call while both
+    bodies' states (serials) and t_p are unchanged."""
 
     horizon: float
     threshold: float
+    sv_next: int  # Scene._sv_next then: every state serial of that call is below it
     key: np.ndarray
+    answered: np.ndarray
     state_a: np.ndarray
     state_b: np.ndarray
     pair_ns: np.ndarray
