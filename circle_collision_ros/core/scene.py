@@ -1324,7 +1324,8 @@ class Scene:
         late = np.flatnonzero(tp != R)  # t_p = R: the bodies as propagated for the listing
         states = []
         for s, loc in ((sa, la), (sb, lb)):
-            P, V, A, Rad, C = _gather_rows(*at_R, loc)
+            P, V, A, Rad = _bp.gather_states(loc, *at_R[:4])
+            C = at_R[4][loc]
             if late.size:  # the same operations from the stamp to t_p instead
                 P[late], V[late], C[late] = self._states_at(s[late], tp[late])
             states.append((P, V, A, Rad, C))
@@ -1359,25 +1360,6 @@ class Scene:
         self._uncertain_serial = serial + 1
         return _Evaluated(res.collision_probability, res.collision_probability_bound,
                           res.plausible_time, deferred)
-
-
-def _gather_rows(P, V, A, Rad, C, rows):
-    """(P[rows], V[rows], A[rows], Rad[rows], C[rows]) in one compiled pass."""
-    m, D = rows.shape[0], P.shape[1]
-    out = (np.empty((m, D)), np.empty((m, D)), np.empty((m, D)), np.empty(m), np.empty((m,) + C.shape[1:]))
-    _gather_rows_kernel(P, V, A, Rad, C, rows, *out)
-    return out
-
-
-@njit(cache=True)
-def _gather_rows_kernel(P, V, A, Rad, C, rows, p, v, a, rad, c):
-    for j in range(rows.shape[0]):
-        i = rows[j]
-        p[j] = P[i]
-        v[j] = V[i]
-        a[j] = A[i]
-        rad[j] = Rad[i]
-        c[j] = C[i]
 
 
 class _Waiting(NamedTuple):
