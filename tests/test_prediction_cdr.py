@@ -187,9 +187,10 @@ def test_non_finite_contact_row_takes_the_general_path(field, value) -> None:
 @pytest.mark.parametrize("seed, n, dim, report_all, frame", [c for c in CASES if c[1] >= 25])
 def test_uncertain_rows_encode_from_the_scenes_ids(seed, n, dim, report_all, frame) -> None:
     """With covariance on most bodies, the published rows are the contacts then the probable
-    uncertain pairs (NO_CONTACT). Their ids come from the scene's UTF-8 blob (contacts' and
-    uncertain rows' encoded ids joined, when no report_all_pairs row follows), and the bytes
-    equal the reference writer's (rows() in publication order), the names path's, and rclpy's."""
+    uncertain pairs (NO_CONTACT). Without report_all_pairs rows to_cdr writes them in one
+    compiled pass from the scene's rows and UTF-8 ids (cdr_codec.encode_contact_rows with the
+    uncertain join); the bytes equal the reference writer's (rows() in publication order), the
+    general path's (ScenePrediction.columns + encode_prediction_array), and rclpy's."""
     states = random_states(n, seed=seed, dimensions=dim, spread=6.0)
     rng = np.random.default_rng(seed)
     seen = set()
@@ -207,9 +208,15 @@ def test_uncertain_rows_encode_from_the_scenes_ids(seed, n, dim, report_all, fra
     columns = prediction.columns
     extra = len(columns) - len(prediction.contacts)
     assert extra > 0 and (columns.status[len(prediction.contacts):] == CollisionPrediction.NO_CONTACT).all()
-    joined = prediction._utf8_ids(columns)
-    assert (joined is None) == (report_all and n <= 100)
     data = prediction.to_cdr()
+    if not (report_all and n <= 100):
+        u = prediction.uncertainty
+        found, extra = prediction._uncertain_join
+        assert data == encode_contact_rows(
+            prediction.stamp, prediction.frame_id, prediction.horizon, prediction.contacts,
+            CollisionPrediction.CONTACT, CollisionPrediction.OVERLAPPING,
+            (found, u.probability, u.probability_bound, u.plausible_ttc, extra, u.id_utf8),
+            CollisionPrediction.NO_CONTACT)
     reference, padding = reference_encoding(prediction.stamp, prediction.frame_id, prediction.horizon,
                                             prediction.rows())
     assert data == reference

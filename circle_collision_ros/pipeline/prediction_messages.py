@@ -1,8 +1,12 @@
 """A scene's prediction as published: rows, message objects, or CDR bytes.
 
 One column builder (`ScenePrediction.columns`) feeds the row view and message
-builder (service, markers, tests) and the compiled CDR encoder (the node's
-publications), so they can never disagree.
+builder (service, markers, tests) and the compiled CDR encoder. The node's
+publications (contacts, then the probable uncertain pairs: every case but
+report_all_pairs rows and non-finite contacts) take a one-pass encoder from the
+scene's rows instead (cdr_codec.encode_contact_rows, joined to the uncertain rows
+by the same `_uncertain_join`); tests/test_prediction_cdr.py proves its bytes equal
+the columns path's.
 
 Guarantee: nothing published is NaN. Contacts carry finite times and details;
 NO_CONTACT entries carry time +inf and zeros elsewhere, as the message
@@ -149,7 +153,7 @@ class ScenePrediction:
             plausible[has] = u.plausible_ttc[found[has]]
             no_contact_rows(u.id_a[e].tolist(), u.id_b[e].tolist(), u.probability[e], u.probability_bound[e],
                             u.plausible_ttc[e])
-        if self.report_all_pairs and len(self.capture) <= ReportAll.MAX_BODIES:
+        if self._report_all_rows:
             ids = self.capture.ids()
             rank = {b: r for r, b in enumerate(ids)}
             pairs = set(zip(map(rank.__getitem__, id_a), map(rank.__getitem__, id_b)))
@@ -190,29 +194,10 @@ class ScenePrediction:
         # a time or +inf; -0.0 and 0.0 tie, as they compare equal)
         return found, e[np.argsort(u.plausible_ttc[e], kind="stable")]
 
-    def _utf8_ids(self, columns: PredictionColumns) -> tuple | None:
-        """The published rows' ids as UTF-8 for the encoder, ``(blob, start_a, len_a, start_b,
-        len_b)``, from the scene's encoded ids: the contacts' when the rows are exactly the
-        contacts, the contacts' then the extra uncertain rows' when those follow them (both
-        from one id blob); None otherwise (the encoder then encodes the names)."""
-        c, u = self.contacts, self.uncertainty
-        if not isinstance(self._finite_rows, slice) or c.id_utf8 is None:
-            return None
-        if len(columns) == len(c):
-            return c.id_utf8
-        if u is None or not len(u) or u.id_utf8 is None or u.id_utf8[0].base is not c.id_utf8[0].base:
-            return None
-        e = self._uncertain_join[1]
-        if len(columns) != len(c) + e.size:  # report_all_pairs rows follow
-            return None
-        return (u.id_utf8[0],) + tuple(np.concatenate((x, y[e])) for x, y in zip(c.id_utf8[1:], u.id_utf8[1:]))
-
     @property
-    def _exact_contacts_only(self) -> bool:
-        """Whether the published rows are exactly the scene's contacts (no uncertain pair and no
-        report_all_pairs rows appended)."""
-        return (self.uncertainty is None or len(self.uncertainty) == 0) and not (
-            self.report_all_pairs and len(self.capture) <= ReportAll.MAX_BODIES)
+    def _report_all_rows(self) -> bool:
+        """Whether report_all_pairs appends NO_CONTACT rows for the other pairs."""
+        return self.report_all_pairs and len(self.capture) <= ReportAll.MAX_BODIES
 
     @cached_property
     def _finite_rows(self):
@@ -260,13 +245,26 @@ class ScenePrediction:
 
         uncertainty=False: the layout before the probability fields (replay of old recordings).
         """
-        if uncertainty and self._exact_contacts_only and self.contacts.id_utf8 is not None:
-            # The common case in one compiled pass, bytes equal to the general path's
+        c, u = self.contacts, self.uncertainty
+        if uncertainty and not self._report_all_rows and c.id_utf8 is not None:
+            # The node's cases in one compiled pass, bytes equal to the general path's
             # (tests/test_prediction_cdr.py): no columns built, no id strings touched.
-            data = encode_contact_rows(self.stamp, self.frame_id, float(self.horizon), self.contacts,
-                                       CollisionPrediction.CONTACT, CollisionPrediction.OVERLAPPING)
-            if data is not None:
-                return data
+            joined = None
+            if u is not None and len(u):  # uncertain pairs: their ids must lie in the contacts' blob
+                if u.id_utf8 is None or u.id_utf8[0].base is not c.id_utf8[0].base \
+                        or not isinstance(self._finite_rows, slice):
+                    joined = False
+                else:
+                    found, extra = self._uncertain_join
+                    joined = (found, u.probability, u.probability_bound, u.plausible_ttc, extra, u.id_utf8)
+            if joined is not False:
+                data = encode_contact_rows(self.stamp, self.frame_id, float(self.horizon), c,
+                                           CollisionPrediction.CONTACT, CollisionPrediction.OVERLAPPING,
+                                           joined, CollisionPrediction.NO_CONTACT)
+                if data is not None:
+                    return data
         columns = self.columns
+        # No contact row dropped and none appended: the scene's encoded ids fit the columns.
+        same_rows = isinstance(self._finite_rows, slice) and len(columns) == len(c)
         return encode_prediction_array(self.stamp, self.frame_id, float(self.horizon), columns,
-                                       self._utf8_ids(columns), uncertainty=uncertainty)
+                                       c.id_utf8 if same_rows else None, uncertainty=uncertainty)
