@@ -1177,7 +1177,8 @@ class Scene:
         (never deferred before counts as waiting from now), then the earliest possible contact,
         then id order.  A pair deferred at evaluation s is therefore evaluated within
         ceil(n_s / max_evaluated) evaluations, n_s = the pairs waiting at s (itself included),
-        as long as it stays listed and unscreened (a pair that leaves the list stops waiting).
+        as long as it stays listed and unscreened (a pair that leaves the list stops waiting; a
+        body removed and added again is a new body: its pairs wait from then).
         A pair whose relative inputs are bit for bit those of a pair fully evaluated by the
         previous evaluation takes that answer without counting against the budget.  The order
         depends only on the sequence of scene inputs and calls (no clock): replay, which makes
