@@ -204,6 +204,22 @@ def _covariance_row(C, t, out):
             out[D + r, D + c] = vv
 
 
+@njit(cache=True)
+def _store_covariances(C, slots, cov, rows, nonzero):
+    """C[slots[j]] = cov[rows[j]] and nonzero[j] = whether it has a non-zero entry (an
+    uncertain body), in one pass."""
+    for j in range(slots.shape[0]):
+        out, src = C[slots[j]], cov[rows[j]]
+        any_ = False
+        for r in range(src.shape[0]):
+            for c in range(src.shape[1]):
+                x = src[r, c]
+                out[r, c] = x
+                if x != 0.0:
+                    any_ = True
+        nonzero[j] = any_
+
+
 @njit(cache=True, error_model="numpy")
 def _states_at(P, V, A, C, T, U, slots, t_ns, p, v, c):
     """The stored bodies `slots` moved from their stamps T to t_ns[j] (int64 ns), in one
@@ -528,8 +544,9 @@ class Scene:
             if covariances is None:
                 self._set_uncertain(sl, False)
             else:
-                self._C[sl] = np.asarray(covariances)[src]
-                self._set_uncertain(sl, (self._C[sl] != 0.0).any(axis=(1, 2)))
+                nonzero = np.empty(sl.size, dtype=np.bool_)
+                _store_covariances(self._C, sl, np.ascontiguousarray(covariances, dtype=np.float64), src, nonzero)
+                self._set_uncertain(sl, nonzero)
             self._T[sl] = stamps[src]
             self._recv[sl] = received_ns
             self._recv_floor = min(self._recv_floor, received_ns)
