@@ -3,7 +3,7 @@
 
     .venv/bin/python bench/bench_uncertainty_scene.py [--bodies 1000] [--frames 30] [--sigma 0.2]
                                                       [--velocity-sigma 0.1] [--horizon 5]
-                                                      [--budget 8]
+                                                      [--budget 8] [--cpu-time]
 
 Both runs see the same frames of the same synthetic scene (the node benchmark's density,
 ~333 m^2 per body, every body moved and stamped anew each frame, so every frame is a full
@@ -17,7 +17,10 @@ alike. Timed per frame, node-side work without DDS:
 Prints medians, the ratio covariance/exact (target <= 3x), how much of the covariance run is
 the core's ``uncertain_pairs`` (the per-pair mathematics) and how much the node side (inflated
 broad phase, propagation to R, joining the rows), and how many pairs the uncertain path
-evaluated and reported. --budget is the node's ``uncertain_pair_budget`` (default: the node's
+evaluated and reported. --cpu-time times each step by the thread's CPU time
+(time.thread_time) instead of the wall clock, with numba's threads off (their work would not
+be counted): on a shared machine the wall-clock medians swing with other processes' load,
+the CPU time much less. --budget is the node's ``uncertain_pair_budget`` (default: the node's
 default; 0: every pair gets the full evaluation); the deferred pairs are counted. The node latency with covariance through DDS is
 ``bench/bench_node.py --covariance SIGMA`` (same run, on and off).
 
@@ -32,6 +35,7 @@ the updated body's pairs: Scene.uncertain_pairs keeps every other pair's answer)
 from __future__ import annotations
 
 import argparse
+import contextlib
 import statistics
 import sys
 import time
@@ -39,6 +43,7 @@ import time
 import numpy as np
 
 from circle_collision_ros.core import uncertainty
+from circle_collision_ros.core.parallel_policy import threads_forced
 from circle_collision_ros.demo.demo_scene import SyntheticScene
 from circle_collision_ros.node.parameters import SPECS
 from circle_collision_ros.pipeline.predictor import CollisionPredictor, PredictorConfig
@@ -106,6 +111,33 @@ def stream(n: int, updates: int, sigma: float, velocity_sigma: float, horizon: f
           f"{statistics.median(deferred):.0f}")
 
 
+def run_frames(frames, scene, exact, uncertain, cov, times, core_s, core_per_frame, evaluated, deferred,
+               reported, contacts, clock) -> None:
+    """The timed frames: exact and covariance interleaved frame by frame (see the docstring)."""
+    for k in range(frames + 2):  # two warm-up frames (numba caches, first allocation), not counted
+        stamp = BASE_NS + k * 33_000_000
+        scene.step(0.033)
+        for name, predictor, c in (("exact", exact, None), ("covariance", uncertain, cov)):
+            batch = frame(scene, stamp, c)
+            core_s[0] = 0.0
+            t0 = clock()
+            predictor.receive_batch(batch, stamp)
+            prediction = predictor.predict()
+            t1 = clock()
+            prediction.to_cdr()
+            t2 = clock()
+            if k >= 2:
+                times[f"{name} scene"].append(t1 - t0)
+                times[f"{name} pipeline"].append(t2 - t0)
+                if c is not None:
+                    core_per_frame.append(core_s[0])
+                    u = prediction.uncertainty
+                    evaluated.append(len(u))
+                    deferred.append(u.deferred)
+                    reported.append(len(prediction.columns))
+                    contacts.append(len(prediction.contacts))
+
+
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--bodies", type=int, default=1000)
@@ -116,6 +148,8 @@ def main() -> int:
     parser.add_argument("--budget", type=int, default=None,
                         help="uncertain_pair_budget (default: the node parameter's default; 0: no limit)")
     parser.add_argument("--quick", action="store_true", help="5 frames")
+    parser.add_argument("--cpu-time", action="store_true",
+                        help="time by the thread's CPU time, numba threads off (see the docstring)")
     parser.add_argument("--stream", action="store_true", help="one-body updates (see the docstring)")
     parser.add_argument("--updates", type=int, default=600, help="with --stream")
     opts = parser.parse_args()
@@ -133,45 +167,28 @@ def main() -> int:
     exact, uncertain = CollisionPredictor(config), CollisionPredictor(config)
     cov = covariance_rows(n, opts.sigma, opts.velocity_sigma)
     times = {"exact scene": [], "covariance scene": [], "exact pipeline": [], "covariance pipeline": []}
+    core_per_frame: list[float] = []
+    evaluated, reported, contacts, deferred = [], [], [], []
     core_s = [0.0]
     core_call = uncertainty.uncertain_pairs
+    clock = time.thread_time if opts.cpu_time else time.perf_counter
 
     def timed_core(*args, **kwargs):  # the scene calls it through the module: time the core's share
-        t = time.perf_counter()
+        t = clock()
         try:
             return core_call(*args, **kwargs)
         finally:
-            core_s[0] += time.perf_counter() - t
+            core_s[0] += clock() - t
 
     uncertainty.uncertain_pairs = timed_core
-    core_per_frame = []
-    evaluated, reported, contacts, deferred = [], [], [], []
-    for k in range(frames + 2):  # two warm-up frames (numba caches, first allocation), not counted
-        stamp = BASE_NS + k * 33_000_000
-        scene.step(0.033)
-        for name, predictor, c in (("exact", exact, None), ("covariance", uncertain, cov)):
-            batch = frame(scene, stamp, c)
-            core_s[0] = 0.0
-            t0 = time.perf_counter()
-            predictor.receive_batch(batch, stamp)
-            prediction = predictor.predict()
-            t1 = time.perf_counter()
-            prediction.to_cdr()
-            t2 = time.perf_counter()
-            if k >= 2:
-                times[f"{name} scene"].append(t1 - t0)
-                times[f"{name} pipeline"].append(t2 - t0)
-                if c is not None:
-                    core_per_frame.append(core_s[0])
-                    u = prediction.uncertainty
-                    evaluated.append(len(u))
-                    deferred.append(u.deferred)
-                    reported.append(len(prediction.columns))
-                    contacts.append(len(prediction.contacts))
+    with threads_forced(False) if opts.cpu_time else contextlib.nullcontext():
+        run_frames(frames, scene, exact, uncertain, cov, times, core_s, core_per_frame, evaluated, deferred,
+                   reported, contacts, clock)
     med = {k: statistics.median(v) * 1e3 for k, v in times.items()}
     print(f"{n} bodies, {frames} frames (every body moved and restamped each frame), horizon "
           f"{opts.horizon} s, covariance: position sigma {opts.sigma} m, velocity sigma "
-          f"{opts.velocity_sigma} m/s on every body; uncertain_pair_budget {budget}")
+          f"{opts.velocity_sigma} m/s on every body; uncertain_pair_budget {budget}"
+          + ("; thread CPU time, numba threads off" if opts.cpu_time else ""))
     print("| step | exact ms (median) | covariance ms (median) | ratio | target |")
     print("|---|---:|---:|---:|---:|")
     for step in ("scene", "pipeline"):

@@ -215,3 +215,54 @@ def test_non_finite_contact_row_takes_the_general_path(field, value) -> None:
     rows = list(bad.rows())
     assert len(rows) == len(c) - 1
     assert bad.to_cdr() == reference_encoding(bad.stamp, bad.frame_id, bad.horizon, rows)[0]
+
+
+@pytest.mark.parametrize("seed, n, dim, report_all, frame", [c for c in CASES if c[1] >= 25])
+def test_uncertain_rows_encode_from_the_scenes_ids(seed, n, dim, report_all, frame) -> None:
+    """With covariance on most bodies, the published rows are the contacts then the probable
+    uncertain pairs (NO_CONTACT). Without report_all_pairs rows to_cdr writes them in one
+    compiled pass from the scene's rows and UTF-8 ids (cdr_codec.encode_contact_rows with the
+    uncertain join); the bytes equal the reference writer's (rows() in publication order), the
+    general path's (ScenePrediction.columns + encode_prediction_array), and rclpy's."""
+    states = random_states(n, seed=seed, dimensions=dim, spread=6.0)
+    rng = np.random.default_rng(seed)
+    seen = set()
+    for s in states:
+        s.id = rng.choice(["", "körper_", "b", "x" * 40]) + s.id
+        s.header.frame_id = frame
+        if rng.random() < 0.8:
+            sigma = float(rng.uniform(0.05, 0.6))
+            s.covariance = np.diag([sigma ** 2] * 3 + [(sigma / 2) ** 2] * 3).ravel().tolist()
+    states = [s for s in states if not (s.id in seen or seen.add(s.id))]
+    predictor = CollisionPredictor(PredictorConfig(horizon=5.0, dimensions=dim, report_all_pairs=report_all,
+                                                   frame_id=frame, uncertain_pair_budget=3))
+    predictor.receive_batch(StateBatch.from_messages(states), BASE_NS)
+    prediction = predictor.predict()
+    columns = prediction.columns
+    extra = len(columns) - len(prediction.contacts)
+    assert extra > 0 and (columns.status[len(prediction.contacts):] == CollisionPrediction.NO_CONTACT).all()
+    data = prediction.to_cdr()
+    if not (report_all and n <= 100):
+        u = prediction.uncertainty
+        found, extra = prediction._uncertain_join
+        assert data == encode_contact_rows(
+            prediction.stamp, prediction.frame_id, prediction.horizon, prediction.contacts,
+            CollisionPrediction.CONTACT, CollisionPrediction.OVERLAPPING,
+            (found, u.probability, u.probability_bound, u.plausible_ttc, extra, u.id_utf8),
+            CollisionPrediction.NO_CONTACT)
+    reference, padding = reference_encoding(prediction.stamp, prediction.frame_id, prediction.horizon,
+                                            prediction.rows())
+    assert data == reference
+    assert data == encode_prediction_array(prediction.stamp, prediction.frame_id, prediction.horizon, columns)
+    message = prediction.to_message()
+    theirs = bytearray(serialize_message(message))
+    for k in padding:
+        theirs[k] = 0
+    assert data == bytes(theirs)
+    # the uncertain rows after the contacts (report_all_pairs rows follow them) are ordered by
+    # (plausible time, id_a, id_b)
+    probable = len(prediction.contacts) + prediction._uncertain_join[1].size
+    rows = list(prediction.rows())[len(prediction.contacts):probable]
+    assert len(rows) > 1
+    keys = [(r.plausible_time_to_collision, r.id_a, r.id_b) for r in rows]
+    assert keys == sorted(keys)

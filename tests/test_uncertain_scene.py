@@ -405,26 +405,93 @@ def test_vectorised_covariance_check_decides_as_the_core(m) -> None:
     assert covariance_rejected(S).tolist() == want.tolist()
 
 
-def test_covariance_propagation_is_the_numpy_expression_bitwise() -> None:
-    """scene._propagate_covariance (one compiled pass) gives the bits of the block expression
-    Spp + dt (Spv + Svp) + dt^2 Svv, Spv + dt Svv, Svp + dt Svv, Svv in numpy, signed zeros
-    included (recorded covariance bags replay bit for bit)."""
-    from circle_collision_ros.core.scene import _propagate_covariance
+@pytest.mark.parametrize("dimensions", [2, 3])
+def test_batch_covariance_checks_decide_row_by_row_as_the_core(dimensions) -> None:
+    """state_validation.covariance_checks (one compiled pass over the raw 36 values) gives, row
+    by row, the decision spelled out from the rules: a count other than 0 or 36 is bad; a
+    36-value covariance all zero on the used axes is exact; else a used block with a value of
+    magnitude > MAX_COVARIANCE or refused by core.uncertainty.covariance_problem is bad; a
+    removal is never bad nor uncertain; and it returns the used block itself."""
+    from circle_collision_ros.core.uncertainty import covariance_problem
+    from circle_collision_ros.pipeline.state_batch import covariance_block
+    from circle_collision_ros.pipeline.state_validation import ValueLimits, covariance_checks
+    rng = np.random.default_rng(dimensions)
+    n = 3000
+    A = rng.normal(size=(n, 6, 6))
+    cov = (A @ A.transpose(0, 2, 1) * 10.0 ** rng.integers(-8, 8, (n, 1, 1))).reshape(n, 36)
+    cov[1::11] *= -1.0                                   # negative definite
+    cov[2::11, 1] += 1e-3                                # asymmetric on the used axes
+    cov[3::11, 7 * 2] = np.nan if dimensions == 3 else cov[3::11, 7 * 2]  # z: used in 3-D only
+    cov[4::11, 1] = np.inf
+    cov[5::11] = 0.0
+    cov[6::11, 0] = 2.0 * ValueLimits.MAX_COVARIANCE    # huge
+    cov[7::11] = np.diag([0.04, 0.04, 0.0, 0.01, 0.01, 0.0]).ravel()
+    cov[8::11, 0] = np.nan
+    cov[9::11] = np.where(np.eye(6).ravel() > 0, 0.0, cov[9::11])  # off-diagonal only: indefinite
+    size = np.full(n, 36, dtype=np.int64)
+    size[10::23] = 0
+    size[11::29] = 35
+    cov[size != 36] = np.where(size[size != 36, None] == 0, 0.0, cov[size != 36])
+    remove = np.zeros(n, dtype=bool)
+    remove[::13] = True
+    batch = StateBatch(ids=[f"b{k}" for k in range(n)], frames=["map"] * n, stamp_ns=np.full(n, BASE),
+                       radius=np.ones(n), position=np.zeros((n, 3)), velocity=np.zeros((n, 3)),
+                       acceleration=np.zeros((n, 3)), remove=remove, covariance=cov, covariance_size=size)
+    bad, uncertain, block = covariance_checks(batch, dimensions)
+    want_block = covariance_block(cov, dimensions)
+    assert np.array_equal(block, want_block, equal_nan=True)
+    want_bad, want_uncertain = np.zeros(n, dtype=bool), np.zeros(n, dtype=bool)
+    for k in range(n):
+        if remove[k]:
+            continue
+        if size[k] not in (0, 36):
+            want_bad[k] = True
+            continue
+        b = want_block[k]
+        if size[k] == 0 or not (b != 0.0).any():
+            continue
+        refused = (np.isfinite(b).all() and np.abs(b).max() > ValueLimits.MAX_COVARIANCE) \
+            or covariance_problem(b) is not None
+        want_bad[k], want_uncertain[k] = refused, not refused
+    assert bad.tolist() == want_bad.tolist()
+    assert uncertain.tolist() == want_uncertain.tolist()
+    assert 0 < want_bad.sum() and 0 < want_uncertain.sum() and (~want_bad & ~want_uncertain).sum() > 0
+
+
+def test_state_and_covariance_propagation_is_the_numpy_expression_bitwise() -> None:
+    """scene._states_at (one compiled pass over the stored bodies) gives the bits of the numpy
+    expressions: p + dt (v + (dt/2) a), v + dt a (scene._propagate_ns) and the covariance
+    blocks Spp + dt (Spv + Svp) + dt^2 Svv, Spv + dt Svv, Svp + dt Svv, Svv, zero for exact
+    bodies, signed zeros included (recorded covariance bags replay bit for bit)."""
+    from circle_collision_ros.core.scene import _propagate_ns, _states_at
     rng = np.random.default_rng(3)
+    n = 500
     for D in (2, 3):
-        C = rng.normal(size=(500, 2 * D, 2 * D)) * 10.0 ** rng.integers(-8, 8, (500, 1, 1))
+        P, V, A = (rng.normal(size=(n, D)) * 10.0 ** rng.integers(-3, 4, (n, 1)) for _ in range(3))
+        A[rng.random(A.shape) < 0.3] = -0.0
+        C = rng.normal(size=(n, 2 * D, 2 * D)) * 10.0 ** rng.integers(-8, 8, (n, 1, 1))
         C[rng.random(C.shape) < 0.2] = -0.0
         C[rng.random(C.shape) < 0.2] = 0.0
-        dt_ns = rng.integers(0, 3_000_000_000, 500)
-        dt_ns[::3] = 0
+        T = BASE + rng.integers(0, 3_000_000_000, n)
+        U = rng.random(n) < 0.8
+        slots = rng.permutation(n)[:300]
+        t_ns = T[slots] + rng.integers(0, 3_000_000_000, slots.size)
+        t_ns[::3] = T[slots[::3]]
+        dt_ns = t_ns - T[slots]
         dt = (dt_ns.astype(np.float64) * 1e-9)[:, None, None]
-        pp, pv, vp, vv = C[:, :D, :D], C[:, :D, D:], C[:, D:, :D], C[:, D:, D:]
-        want = np.empty_like(C)
+        c = C[slots]
+        pp, pv, vp, vv = c[:, :D, :D], c[:, :D, D:], c[:, D:, :D], c[:, D:, D:]
+        want = np.empty_like(c)
         want[:, :D, :D] = pp + dt * (pv + vp) + (dt * dt) * vv
         want[:, :D, D:] = pv + dt * vv
         want[:, D:, :D] = vp + dt * vv
         want[:, D:, D:] = vv
-        assert _propagate_covariance(C, dt_ns).tobytes() == want.tobytes()
+        want[~U[slots]] = 0.0
+        want_p, want_v = _propagate_ns(P[slots], V[slots], A[slots], dt_ns)
+        p, v, cov = np.empty((slots.size, D)), np.empty((slots.size, D)), np.empty_like(c)
+        _states_at(P, V, A, C, T, U, slots, t_ns, p, v, cov)
+        assert p.tobytes() == want_p.tobytes() and v.tobytes() == want_v.tobytes()
+        assert cov.tobytes() == want.tobytes()
 
 
 def test_published_rows_from_the_scenes_pair_match_equal_the_id_match() -> None:

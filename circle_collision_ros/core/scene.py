@@ -145,7 +145,8 @@ class SceneUncertainty:
     t_p = R for a tracker array, within ``Scene.UNCERTAIN_LAG_NS`` before R otherwise, see
     ``Scene.uncertain_pairs``). Arrays (K,): id_a (sorts first), id_b, probability (of
     contact within [t_p, t_p + H]), probability_bound, plausible_ttc (s from R, +inf if
-    never).  Pairs of two exact bodies are never listed (the exact path answers them).
+    never).  Rows are in (id_a, id_b) order.  Pairs of two exact bodies are never listed
+    (the exact path answers them).
     """
 
     reference_ns: int
@@ -160,6 +161,8 @@ class SceneUncertainty:
     #: same pair, -1 if none; None when no contacts were given
     contact_rows: np.ndarray | None = None
     matched: SceneContacts | None = None
+    #: The ids as UTF-8 for encoders, as SceneContacts.id_utf8 (None: ids not all str).
+    id_utf8: tuple | None = None
 
     def __len__(self) -> int:
         return int(self.probability.shape[0])
@@ -184,30 +187,57 @@ def _propagate_ns(P, V, A, dt_ns):
     return P + dt * (V + (0.5 * dt) * A), V + dt * A
 
 
-def _propagate_covariance(C, dt_ns):
-    """Joint (position, velocity) covariances (n, 2D, 2D) moved by ``dt_ns``: ``M C M^T``,
-    ``M = [[I, dt I], [0, I]]`` (acceleration is exact, so it adds no uncertainty):
-    ``Spp + dt (Spv + Svp) + dt^2 Svv``, ``Spv + dt Svv``, ``Svp + dt Svv``, ``Svv``, evaluated
-    in that order (one compiled pass, the numpy expression's operations and rounding)."""
-    dt = np.asarray(dt_ns).astype(np.float64) * 1e-9
-    out = np.empty_like(C)
-    _propagate_covariance_rows(np.ascontiguousarray(C, dtype=np.float64), dt, out)
-    return out
+@njit(cache=True, error_model="numpy", inline="always")
+def _covariance_row(C, t, out):
+    """A joint (position, velocity) covariance (2D, 2D) moved by t s into out: ``M C M^T``,
+    ``M = [[I, t I], [0, I]]`` (acceleration is exact, so it adds no uncertainty):
+    ``Spp + t (Spv + Svp) + t^2 Svv``, ``Spv + t Svv``, ``Svp + t Svv``, ``Svv``, evaluated
+    in that order (the numpy block expression's operations and rounding)."""
+    D = C.shape[0] // 2
+    tt = t * t
+    for r in range(D):
+        for c in range(D):
+            vv = C[D + r, D + c]
+            out[r, c] = C[r, c] + t * (C[r, D + c] + C[D + r, c]) + tt * vv
+            out[r, D + c] = C[r, D + c] + t * vv
+            out[D + r, c] = C[D + r, c] + t * vv
+            out[D + r, D + c] = vv
+
+
+@njit(cache=True)
+def _store_covariances(C, slots, cov, rows, nonzero):
+    """C[slots[j]] = cov[rows[j]] and nonzero[j] = whether it has a non-zero entry (an
+    uncertain body), in one pass."""
+    for j in range(slots.shape[0]):
+        out, src = C[slots[j]], cov[rows[j]]
+        any_ = False
+        for r in range(src.shape[0]):
+            for c in range(src.shape[1]):
+                x = src[r, c]
+                out[r, c] = x
+                if x != 0.0:
+                    any_ = True
+        nonzero[j] = any_
 
 
 @njit(cache=True, error_model="numpy")
-def _propagate_covariance_rows(C, dt, out):
-    D = C.shape[1] // 2
-    for i in range(C.shape[0]):
-        t = dt[i]
-        tt = t * t
-        for r in range(D):
-            for c in range(D):
-                vv = C[i, D + r, D + c]
-                out[i, r, c] = C[i, r, c] + t * (C[i, r, D + c] + C[i, D + r, c]) + tt * vv
-                out[i, r, D + c] = C[i, r, D + c] + t * vv
-                out[i, D + r, c] = C[i, D + r, c] + t * vv
-                out[i, D + r, D + c] = vv
+def _states_at(P, V, A, C, T, U, slots, t_ns, p, v, c):
+    """The stored bodies `slots` moved from their stamps T to t_ns[j] (int64 ns), in one
+    compiled pass: p, v as _propagate_ns, c as _covariance_row for an uncertain body
+    (U) and zero for an exact one (its stored covariance may be stale).  The same
+    operations in the same order as those numpy expressions (no fast-math: no
+    contraction into fused multiply-adds), so the same bits."""
+    D = P.shape[1]
+    for j in range(slots.shape[0]):
+        s = slots[j]
+        dt = np.float64(t_ns[j] - T[s]) * 1e-9  # integer difference first (stamps ~1.7e18 ns)
+        for k in range(D):
+            p[j, k] = P[s, k] + dt * (V[s, k] + (0.5 * dt) * A[s, k])
+            v[j, k] = V[s, k] + dt * A[s, k]
+        if U[s]:
+            _covariance_row(C[s], dt, c[j])
+        else:
+            c[j] = 0.0
 
 
 _EMPTY_I = np.empty(0, dtype=np.int64)
@@ -328,13 +358,15 @@ class Scene:
         self._captures = weakref.WeakSet()  # live captures sharing the state arrays
         self._uncertain_cache = None
         self._uncertain_serial = 0     # uncertain_pairs evaluations so far (the budget's clock)
-        self._uncertain_waiting = {}   # (id_a, id_b) -> serial since which the pair waits (deferred)
+        self._uncertain_waiting = _NO_WAITING  # the deferred pairs and since when they wait
         self._uncertain_memo = {}      # core.uncertainty.uncertain_pairs(memo=...): last full evaluations
         self._uncertain_memo_ref = None  # the reference time of those evaluations
         self._pair_answers = None      # _PairAnswers of the last uncertain_pairs call
         self.uncertain_evaluated = 0   # pairs the last uncertain_pairs call gave the core
         self._sv = np.zeros(cap, dtype=np.int64)  # each slot's state serial (bumped per change)
         self._sv_next = 1
+        self._born = np.zeros(cap, dtype=np.int64)  # each slot's body serial (set when a body takes it)
+        self._born_next = 1
 
     # Pair records: one row per pair with a contact within H + S of its t_p, in
     # growable buffers; rows of updated bodies are marked dead (compacted when
@@ -538,8 +570,9 @@ class Scene:
             if covariances is None:
                 self._set_uncertain(sl, False)
             else:
-                self._C[sl] = np.asarray(covariances)[src]
-                self._set_uncertain(sl, (self._C[sl] != 0.0).any(axis=(1, 2)))
+                nonzero = np.empty(sl.size, dtype=np.bool_)
+                _store_covariances(self._C, sl, np.ascontiguousarray(covariances, dtype=np.float64), src, nonzero)
+                self._set_uncertain(sl, nonzero)
             self._T[sl] = stamps[src]
             self._recv[sl] = received_ns
             self._recv_floor = min(self._recv_floor, received_ns)
@@ -685,7 +718,7 @@ class Scene:
             for name, dt in (("_R", np.float64), ("_T", np.int64), ("_Tf", np.float64),
                              ("_recv", np.int64), ("_alive", bool), ("_rank", np.int64),
                              ("_id_start", np.int64), ("_id_len", np.int64), ("_U", bool),
-                             ("_sv", np.int64)):
+                             ("_sv", np.int64), ("_born", np.int64)):
                 grown = np.full(new, -1 if name == "_rank" else 0, dtype=dt)
                 grown[:old] = getattr(self, name)
                 setattr(self, name, grown)
@@ -707,7 +740,10 @@ class Scene:
                 moved[:old] = self._moved
                 self._moved = moved
             self._free = list(range(new - 1, old - 1, -1))
-        return self._free.pop()
+        s = self._free.pop()
+        self._born[s] = self._born_next
+        self._born_next += 1
+        return s
 
     def _add_utf8(self, slots: np.ndarray) -> None:
         """Append the UTF-8 bytes of the ids of new `slots` to the id blob."""
@@ -1134,6 +1170,22 @@ class Scene:
         o = o[np.argsort(ttc[o], kind="stable")]
         return tuple(x[o] for x in rows)
 
+    def _id_utf8(self, A: np.ndarray, B: np.ndarray, id_rows=None) -> tuple | None:
+        """``(blob, start_a, len_a, start_b, len_b)`` of pairs (slots A, B), read-only (the
+        encoders compile for that one kind); None when some id is not a str.  id_rows: the
+        four columns when already gathered."""
+        if not self._utf8_ok:
+            return None
+        if id_rows is None:
+            id_rows = (self._id_start[A], self._id_len[A], self._id_start[B], self._id_len[B])
+        # the blob is appended to in place, but never where published ids lie
+        blob = self._utf8.view()
+        blob.flags.writeable = False
+        for x in id_rows:
+            if x.size:
+                x.flags.writeable = False
+        return (blob,) + tuple(id_rows)
+
     def _publish(self, rows, id_rows=None) -> SceneContacts:
         """id_rows: the rows' ``(start_a, len_a, start_b, len_b)`` in the id blob when already
         gathered (the query kernel does it on its way)."""
@@ -1144,20 +1196,9 @@ class Scene:
             # every later kernel call a new read-only specialisation to compile (~15 s, once)
             if x.size:
                 x.flags.writeable = False
-        utf8 = None
-        if self._utf8_ok:
-            if id_rows is None:
-                id_rows = (self._id_start[A], self._id_len[A], self._id_start[B], self._id_len[B])
-            # read-only like the rows (the encoders compile for that one kind); the blob is
-            # appended to in place, but never where published ids lie
-            blob = self._utf8.view()
-            blob.flags.writeable = False
-            for x in id_rows:
-                if x.size:
-                    x.flags.writeable = False
-            utf8 = (blob,) + tuple(id_rows)
         self._ids_published = True
-        return SceneContacts(self.reference_ns or 0, self._ids, A, B, ttc, cns, over, pt, nm, cs, utf8)
+        return SceneContacts(self.reference_ns or 0, self._ids, A, B, ttc, cns, over, pt, nm, cs,
+                             self._id_utf8(A, B, id_rows))
 
     def full_recomputation(self) -> SceneContacts:
         """The rule applied from scratch to the stored states (caches untouched).
@@ -1205,7 +1246,8 @@ class Scene:
         (never deferred before counts as waiting from now), then the earliest possible contact,
         then id order.  A pair deferred at evaluation s is therefore evaluated within
         ceil(n_s / max_evaluated) evaluations, n_s = the pairs waiting at s (itself included),
-        as long as it stays listed and unscreened (a pair that leaves the list stops waiting).
+        as long as it stays listed and unscreened (a pair that leaves the list stops waiting; a
+        body removed and added again is a new body: its pairs wait from then).
         A pair whose relative inputs are bit for bit those of a pair fully evaluated by the
         previous evaluation takes that answer without counting against the budget.  The order
         depends only on the sequence of scene inputs and calls (no clock): replay, which makes
@@ -1223,14 +1265,14 @@ class Scene:
                          max_evaluated: int | None) -> SceneUncertainty:
         R = self.reference_ns
         if R is None or self._n_uncertain == 0:
-            self._uncertain_waiting = {}  # no pair listed: none waits
+            self._uncertain_waiting = _NO_WAITING  # no pair listed: none waits
             self._pair_answers = None
             return SceneUncertainty(R or 0, _NO_IDS, _NO_IDS, _NO_VALUES, _NO_VALUES, _NO_VALUES)
         from circle_collision_ros.core import uncertainty as unc  # heavy kernels: loaded on first use
         slots = self._sorted_slots()
         I, J, at_R, contact_rows = self._uncertain_listed(slots, R, contacts, unc)
         if I.size == 0:
-            self._uncertain_waiting = {}
+            self._uncertain_waiting = _NO_WAITING
             self._pair_answers = None
             return SceneUncertainty(R, _NO_IDS, _NO_IDS, _NO_VALUES, _NO_VALUES, _NO_VALUES)
         ids = self._ids[slots]
@@ -1240,27 +1282,32 @@ class Scene:
         key = (sa << 32) | sb
         prob, bound, tau = np.empty(I.size), np.empty(I.size), np.empty(I.size)
         hit = np.zeros(I.size, dtype=bool)
+        sv_a, sv_b = self._sv[sa], self._sv[sb]
         old = self._pair_answers
-        if old is not None and old.horizon == self._h and old.threshold == threshold and old.key.size:
-            at = np.minimum(np.searchsorted(old.key, key), old.key.size - 1)
-            hit = ((old.key[at] == key) & (old.state_a[at] == self._sv[sa])
-                   & (old.state_b[at] == self._sv[sb]) & (old.pair_ns[at] == tp))
-            prob[hit], bound[hit], tau[hit] = old.probability[at[hit]], old.bound[at[hit]], old.tau[at[hit]]
+        # a kept answer needs both bodies unchanged since (state serials below old.sv_next):
+        # when every body changed (a tracker array) there is nothing to look up
+        if old is not None and old.horizon == self._h and old.threshold == threshold \
+                and self._sv[slots].min() < old.sv_next:
+            keep = np.flatnonzero(old.answered)
+            keep = keep[np.argsort(old.key[keep], kind="stable")]  # keys are distinct
+            if keep.size:
+                okey = old.key[keep]
+                at = keep[np.minimum(np.searchsorted(okey, key), keep.size - 1)]
+                hit = ((old.key[at] == key) & (old.state_a[at] == sv_a)
+                       & (old.state_b[at] == sv_b) & (old.pair_ns[at] == tp))
+                prob[hit], bound[hit], tau[hit] = old.probability[at[hit]], old.bound[at[hit]], old.tau[at[hit]]
         todo = np.flatnonzero(~hit)
         answered = hit.copy()
         if todo.size:
             deferred = self._evaluate_uncertain(unc, sa[todo], sb[todo], I[todo], J[todo], at_R, tp[todo],
-                                                ida[todo], idb[todo], threshold, max_evaluated)
+                                                key[todo], threshold, max_evaluated)
             prob[todo], bound[todo], tau[todo] = deferred.probability, deferred.bound, deferred.tau
             answered[todo[~deferred.deferred]] = True
         else:
-            self._uncertain_waiting = {}
+            self._uncertain_waiting = _NO_WAITING
             self._uncertain_serial += 1
-        keep = np.flatnonzero(answered)
-        order = keep[np.argsort(key[keep], kind="stable")]
-        self._pair_answers = _PairAnswers(self._h, threshold, key[order], self._sv[sa[order]],
-                                          self._sv[sb[order]], tp[order], prob[order], bound[order],
-                                          tau[order])
+        self._pair_answers = _PairAnswers(self._h, threshold, self._sv_next, key, answered, sv_a, sv_b,
+                                          tp, prob, bound, tau)
         self.uncertain_evaluated = int(todo.size)
         # reported from R: the pair's plausible time counts from its t_p <= R (d = R - t_p);
         # one already reached before R is reported as 0 (plausible now)
@@ -1268,24 +1315,21 @@ class Scene:
         plausible = np.where(np.isnan(tau) | (tau > d), tau - d, 0.0)
         return SceneUncertainty(R, ida, idb, prob, bound, plausible,
                                 int(np.count_nonzero(~answered)) if max_evaluated is not None else 0,
-                                contact_rows, contacts if contact_rows is not None else None)
+                                contact_rows, contacts if contact_rows is not None else None,
+                                self._id_utf8(sa, sb))
 
     def _uncertain_listed(self, slots: np.ndarray, R: int, contacts: SceneContacts | None, unc):
         """``(I, J, at_R, contact_rows)``: local index pairs (I < J, into `slots`, id order) with
         an uncertain body that the broad phase at R over [0, H], radii inflated by
         ``unc.inflation_radius``, cannot rule out, plus the uncertain pairs of `contacts`;
-        at_R = (P, V, C) of `slots` propagated to R (C zero for exact bodies); contact_rows:
+        at_R = (P, V, A, radius, C) of `slots`, propagated to R (C zero for exact bodies); contact_rows:
         each pair's row in `contacts`, -1 if none (None without contacts)."""
-        dtn = R - self._T[slots]
-        P, V = _propagate_ns(self._P[slots], self._V[slots], self._A[slots], dtn)
+        P, V, C = self._states_at(slots, np.full(slots.size, R, dtype=np.int64))
         A, Rad = self._A[slots], self._R[slots]
         u = self._U[slots]
-        if u.all():  # (an exact body's stored covariance may be stale: zero it)
-            C = _propagate_covariance(self._C[slots], dtn)
+        if u.all():
             grow = unc.inflation_radius(C, self._h)
         else:
-            C = np.zeros((slots.size,) + self._C.shape[1:])
-            C[u] = _propagate_covariance(self._C[slots[u]], dtn[u])
             grow = np.zeros(slots.size)
             grow[u] = unc.inflation_radius(C[u], self._h)
         zero = np.zeros(slots.size)
@@ -1310,7 +1354,10 @@ class Scene:
             I, J = np.concatenate([I, ca[m]]), np.concatenate([J, cb[m]])
         # local order is id order: (min, max) puts the id that sorts first in front
         n = np.int64(slots.size)
-        key = np.unique(np.minimum(I, J) * n + np.maximum(I, J))
+        key = np.minimum(I, J) * n + np.maximum(I, J)
+        key.sort()  # then drop repeats (a contact the broad phase listed too): np.unique's result
+        if key.size > 1:
+            key = key[np.concatenate(([True], key[1:] != key[:-1]))]
         rows = None
         if contacts is not None:
             rows = np.full(key.size, -1, dtype=np.int64)
@@ -1320,7 +1367,16 @@ class Scene:
                 at = np.minimum(np.searchsorted(ckey[order], key), order.size - 1)
                 same = ckey[order[at]] == key
                 rows[same] = order[at[same]]
-        return key // n, key % n, (P, V, C), rows
+        return key // n, key % n, (P, V, A, Rad, C), rows
+
+    def _states_at(self, slots: np.ndarray, t_ns: np.ndarray):
+        """(P, V, C) of the bodies `slots` moved to the times t_ns (int64 ns, per body), C zero
+        for exact bodies: see _states_at (module level)."""
+        m = slots.shape[0]
+        D = self._dim
+        P, V, C = np.empty((m, D)), np.empty((m, D)), np.empty((m, 2 * D, 2 * D))
+        _states_at(self._P, self._V, self._A, self._C, self._T, self._U, slots, t_ns, P, V, C)
+        return P, V, C
 
     def _uncertain_pair_times(self, sa: np.ndarray, sb: np.ndarray, R: int) -> np.ndarray:
         """Pair times t_p (ns): the newer stamp of the two if it lies within UNCERTAIN_LAG_NS
@@ -1329,32 +1385,29 @@ class Scene:
         lag = self.UNCERTAIN_LAG_NS
         return np.where(newer > R - lag, newer, R - R % lag)
 
-    def _evaluate_uncertain(self, unc, sa, sb, la, lb, at_R, tp, ida, idb, threshold: float,
+    def _evaluate_uncertain(self, unc, sa, sb, la, lb, at_R, tp, key, threshold: float,
                             max_evaluated: int | None) -> "_Evaluated":
         """``unc.uncertain_pairs`` on these pairs (slots sa, sb; local indices la, lb into
-        at_R, the bodies at R), each at its t_p over [0, H] (screened, within the budget; FIFO
-        bookkeeping of the deferred, see uncertain_pairs)."""
+        at_R, the bodies at R; key = sa << 32 | sb), each at its t_p over [0, H] (screened,
+        within the budget; FIFO bookkeeping of the deferred, see uncertain_pairs)."""
         R = self.reference_ns
         late = np.flatnonzero(tp != R)  # t_p = R: the bodies as propagated for the listing
         states = []
         for s, loc in ((sa, la), (sb, lb)):
-            P, V, C = at_R[0][loc], at_R[1][loc], at_R[2][loc]
-            if late.size:  # the same elementwise operations from the stamp to t_p instead
-                sl, dt = s[late], tp[late] - self._T[s[late]]
-                P[late], V[late] = _propagate_ns(self._P[sl], self._V[sl], self._A[sl], dt)
-                u = self._U[sl]
-                Cl = np.zeros((late.size,) + C.shape[1:])
-                Cl[u] = _propagate_covariance(self._C[sl[u]], dt[u])
-                C[late] = Cl
-            states.append((P, V, self._A[s], self._R[s], C))
+            P, V, A, Rad = _bp.gather_states(loc, *at_R[:4])
+            C = at_R[4][loc]
+            if late.size:  # the same operations from the stamp to t_p instead
+                P[late], V[late], C[late] = self._states_at(s[late], tp[late])
+            states.append((P, V, A, Rad, C))
         serial = self._uncertain_serial
         waiting = self._uncertain_waiting
+        born_a, born_b = self._born[sa], self._born[sb]
         asked = []
 
         def waited_since(rows):  # the rows competing for the budget (called only when over it)
-            keys = list(zip(ida[rows].tolist(), idb[rows].tolist()))
-            asked.append((rows, keys))
-            return np.fromiter((waiting.get(k, serial) for k in keys), np.int64, len(keys))
+            since = waiting.since_of(key[rows], born_a[rows], born_b[rows], serial)
+            asked.append((rows, since))
+            return since
 
         if self._uncertain_memo_ref != R:
             # a new reference time moves most pairs' inputs (their t_p follow the stamps):
@@ -1366,24 +1419,53 @@ class Scene:
                                   memo=self._uncertain_memo)
         deferred = (res.collision_probability_bound == unc.DEFERRED_BOUND
                     if max_evaluated is not None else np.zeros(sa.size, dtype=bool))
-        still = {}
-        for rows, keys in asked:
-            for k, d in zip(keys, deferred[rows].tolist()):
-                if d:
-                    still[k] = waiting.get(k, serial)
-        self._uncertain_waiting = still
+        # the deferred of the rows that competed wait on (since as looked up); the rest stop
+        rows = np.concatenate([r for r, _ in asked]) if asked else _EMPTY_I
+        since = np.concatenate([w for _, w in asked]) if asked else _EMPTY_I
+        still = deferred[rows]
+        rows, since = rows[still], since[still]
+        order = np.argsort(key[rows], kind="stable")  # keys are distinct: any sort gives this order
+        rows = rows[order]
+        self._uncertain_waiting = _Waiting(key[rows], born_a[rows], born_b[rows], since[order])
         self._uncertain_serial = serial + 1
         return _Evaluated(res.collision_probability, res.collision_probability_bound,
                           res.plausible_time, deferred)
 
 
+class _Waiting(NamedTuple):
+    """The pairs the last uncertain evaluation deferred (the budget's FIFO), sorted by key =
+    slot_a << 32 | slot_b, with their bodies' serials (``Scene._born``: a slot another body
+    took since is another pair; a body removed and added again is a new body, its pairs wait
+    from then) and the evaluation serial since which each waits."""
+
+    key: np.ndarray
+    born_a: np.ndarray
+    born_b: np.ndarray
+    since: np.ndarray
+
+    def since_of(self, key: np.ndarray, born_a: np.ndarray, born_b: np.ndarray, default: int) -> np.ndarray:
+        """(n,) int64: since when each pair (key, born_a, born_b) waits; `default` if it does not."""
+        out = np.full(key.size, default, dtype=np.int64)
+        if self.key.size and key.size:
+            at = np.minimum(np.searchsorted(self.key, key), self.key.size - 1)
+            same = (self.key[at] == key) & (self.born_a[at] == born_a) & (self.born_b[at] == born_b)
+            out[same] = self.since[at[same]]
+        return out
+
+
+_NO_WAITING = _Waiting(_EMPTY_I, _EMPTY_I, _EMPTY_I, _EMPTY_I)
+
+
 class _PairAnswers(NamedTuple):
-    """Scene.uncertain_pairs' answers of the last call, per pair (sorted by key = slot_a << 32 |
-    slot_b): valid for a later call while both bodies' states (serials) and t_p are unchanged."""
+    """Scene.uncertain_pairs' answers of the last call, per listed pair (key = slot_a << 32 |
+    slot_b, in listing order; answered: not deferred): valid for a later call while both
+    bodies' states (serials) and t_p are unchanged."""
 
     horizon: float
     threshold: float
+    sv_next: int  # Scene._sv_next then: every state serial of that call is below it
     key: np.ndarray
+    answered: np.ndarray
     state_a: np.ndarray
     state_b: np.ndarray
     pair_ns: np.ndarray

@@ -6,6 +6,7 @@ it is made.
 """
 from __future__ import annotations
 
+import functools
 import math
 from statistics import NormalDist
 
@@ -313,6 +314,7 @@ def row_classes(pa, va, aa, ra, pb, vb, ab, rb, sigma, exact, finite):
         finite[i] = fin
 
 
+@functools.lru_cache(maxsize=16)  # a pure function of (threshold, dof): ~50 tail evaluations, once
 def screen_sigmas(threshold: float, dof: int) -> tuple[float, float]:
     """(k, U): the smallest k (to 1e-12) with U = P(chi^2_dof > k^2) <= threshold / 2,
     dof even; (inf, 0.0) when no k <= 40 qualifies (a threshold below ~1e-300)."""

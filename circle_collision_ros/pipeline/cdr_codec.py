@@ -472,11 +472,17 @@ def encode_prediction_array(stamp: tuple[int, int], frame_id: str, horizon: floa
 
 @njit(cache=True)
 def _encode_contacts(buf, u32, f64, sec, nanosec, frame, horizon, names, start_a, len_a, start_b, len_b,
-                     ttc, contact_ns, overlapping, point, normal, closing, contact, overlap_status):
-    """_encode_predictions of exact contact rows, with the columns derived row by row as
-    prediction_messages.ScenePrediction.columns derives them (status from `overlapping`,
-    point/normal padded with +0.0 to 3-D, probability 1, bound 0, plausible time = ttc).
-    Returns the end position, or -1 (buf partly written) at the first non-finite row.
+                     ttc, contact_ns, overlapping, point, normal, closing, contact, overlap_status,
+                     found, probability, bound, plausible, extra, x_start_a, x_len_a, x_start_b, x_len_b,
+                     no_contact):
+    """_encode_predictions of contact rows then uncertain NO_CONTACT rows, with the columns
+    derived row by row as prediction_messages.ScenePrediction.columns derives them: a contact
+    row's status from `overlapping`, point/normal padded with +0.0 to 3-D, probability,
+    bound and plausible time those of its uncertain row found[k] (row of `probability`,
+    `bound`, `plausible`), or 1, 0, ttc when found is empty or found[k] < 0; then per
+    uncertain row extra[j] (ids at x_start/x_len) a NO_CONTACT row: time +inf, zero contact
+    time and details, that row's probability, bound and plausible time.
+    Returns the end position, or -1 (buf partly written) at the first non-finite contact row.
 
     Positions count from _ORIGIN (p), so the CDR alignments are masks and the word indices
     shifts, and one finiteness test per row: 34 instead of 52 us for the 1,164 rows of
@@ -484,7 +490,7 @@ def _encode_contacts(buf, u32, f64, sec, nanosec, frame, horizon, names, start_a
     (tests/test_prediction_cdr.py)."""
     count = ttc.shape[0]
     D = point.shape[1]
-    p = _put_array_header(buf, u32, f64, sec, nanosec, frame, horizon, count) - _ORIGIN
+    p = _put_array_header(buf, u32, f64, sec, nanosec, frame, horizon, count + extra.shape[0]) - _ORIGIN
     body = buf[_ORIGIN:]
     for k in range(count):
         t = ttc[k]
@@ -515,9 +521,33 @@ def _encode_contacts(buf, u32, f64, sec, nanosec, frame, horizon, names, start_a
             f64[q + j] = point[k, j] if j < D else 0.0
             f64[q + 3 + j] = normal[k, j] if j < D else 0.0
         f64[q + 6] = cs
-        f64[q + 7] = 1.0
-        f64[q + 8] = 0.0
-        f64[q + 9] = t
+        j = found[k] if found.shape[0] else -1
+        if j < 0:
+            f64[q + 7] = 1.0
+            f64[q + 8] = 0.0
+            f64[q + 9] = t
+        else:
+            f64[q + 7] = probability[j]
+            f64[q + 8] = bound[j]
+            f64[q + 9] = plausible[j]
+        p = 8 * (q + 10)
+    for k in range(extra.shape[0]):
+        for start, n in ((x_start_a[k], x_len_a[k]), (x_start_b[k], x_len_b[k])):
+            p = (p + 3) & ~3
+            u32[p >> 2] = n + 1
+            p += 4
+            for j in range(n):
+                body[p + j] = names[start + j]
+            body[p + n] = 0
+            p += n + 1
+        body[p] = no_contact
+        q = ((p + 8) & ~7) >> 3
+        f64[q] = np.inf  # contact time (sec, nanosec) and the details stay the buffer's zeros
+        q += 2
+        j = extra[k]
+        f64[q + 7] = probability[j]
+        f64[q + 8] = bound[j]
+        f64[q + 9] = plausible[j]
         p = 8 * (q + 10)
     return p + _ORIGIN
 
@@ -534,24 +564,49 @@ def _contacts_end(frame_len, len_a, len_b):
     return pos
 
 
+_NONE_I = np.empty(0, dtype=np.int64)
+_NONE_F = np.empty(0)
+_NONE_I.flags.writeable = False
+_NONE_F.flags.writeable = False
+
+
 def encode_contact_rows(stamp: tuple[int, int], frame_id: str, horizon: float, contacts,
-                        contact: int, overlapping: int) -> bytes | None:
-    """The CollisionPredictionArray of exact contacts only (no uncertain or NO_CONTACT rows),
-    straight from a core.scene.SceneContacts with UTF-8 ids: the bytes encode_prediction_array
-    writes for ScenePrediction.columns of it, without building the columns (one compiled pass).
-    contact, overlapping: the status values. None if a row is not finite (the caller then
-    takes the general path, which leaves such rows out)."""
+                        contact: int, overlapping: int, uncertain=None, no_contact: int = 0) -> bytes | None:
+    """The CollisionPredictionArray of the contacts, then (given `uncertain`) uncertain
+    NO_CONTACT rows, straight from a core.scene.SceneContacts with UTF-8 ids: the bytes
+    encode_prediction_array writes for ScenePrediction.columns of it, without building the
+    columns (one compiled pass). contact, overlapping, no_contact: the status values.
+
+    uncertain: None (exact contacts only: probability 1, bound 0, plausible time = ttc) or
+    ``(found, probability, bound, plausible, extra, id_utf8)`` of a core.scene.SceneUncertainty
+    whose ids lie in the contacts' blob: found (K,) each contact's uncertain row (-1: none),
+    the uncertainty's three columns, extra the uncertain rows published after the contacts,
+    in order, and the uncertainty's id_utf8.
+    None if a contact row is not finite (the caller then takes the general path, which leaves
+    such rows out)."""
     if sys.byteorder != "little":
         raise NotImplementedError("the compiled CDR encoder needs a little-endian machine")
-    frame, blob, start_a, len_a, start_b, len_b, ttc, contact_ns, over, point, normal, closing = _readonly(
+    if uncertain is None:
+        found, probability, bound, plausible, extra = _NONE_I, _NONE_F, _NONE_F, _NONE_F, _NONE_I
+        x_ids = (_NONE_I,) * 4
+    else:
+        found, probability, bound, plausible, extra, u_utf8 = uncertain
+        x_ids = tuple(x[extra] for x in u_utf8[1:])
+    (frame, blob, start_a, len_a, start_b, len_b, ttc, contact_ns, over, point, normal, closing, found,
+     probability, bound, plausible, extra, x_start_a, x_len_a, x_start_b, x_len_b) = _readonly(
         np.frombuffer(frame_id.encode(), dtype=np.uint8), *contacts.id_utf8, contacts.ttc,
-        contacts.contact_ns, contacts.overlapping, contacts.point, contacts.normal, contacts.closing_speed)
-    end = int(_contacts_end(frame.shape[0], len_a, len_b))
+        contacts.contact_ns, contacts.overlapping, contacts.point, contacts.normal, contacts.closing_speed,
+        found, probability, bound, plausible, extra, *x_ids)
+    # a NO_CONTACT row has a contact row's layout: the end from all rows' id lengths
+    lens_a, lens_b = _readonly(np.concatenate((len_a, x_len_a)), np.concatenate((len_b, x_len_b))) \
+        if extra.shape[0] else (len_a, len_b)
+    end = int(_contacts_end(frame.shape[0], lens_a, lens_b))
     buf = np.zeros(_ORIGIN + 8 * -(-(end - _ORIGIN) // 8), dtype=np.uint8)
     buf[:_ORIGIN] = np.frombuffer(CDR_LE + b"\x00\x00", dtype=np.uint8)
     body = buf[_ORIGIN:]
     if _encode_contacts(buf, body.view(np.uint32), body.view(np.float64), int(stamp[0]), int(stamp[1]),
                         frame, float(horizon), blob, start_a, len_a, start_b, len_b, ttc, contact_ns, over,
-                        point, normal, closing, contact, overlapping) < 0:
+                        point, normal, closing, contact, overlapping, found, probability, bound, plausible,
+                        extra, x_start_a, x_len_a, x_start_b, x_len_b, no_contact) < 0:
         return None
     return buf[:end].tobytes()

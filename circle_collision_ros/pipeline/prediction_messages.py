@@ -1,8 +1,12 @@
 """A scene's prediction as published: rows, message objects, or CDR bytes.
 
 One column builder (`ScenePrediction.columns`) feeds the row view and message
-builder (service, markers, tests) and the compiled CDR encoder (the node's
-publications), so they can never disagree.
+builder (service, markers, tests) and the compiled CDR encoder. The node's
+publications (contacts, then the probable uncertain pairs: every case but
+report_all_pairs rows and non-finite contacts) take a one-pass encoder from the
+scene's rows instead (cdr_codec.encode_contact_rows, joined to the uncertain rows
+by the same `_uncertain_join`); tests/test_prediction_cdr.py proves its bytes equal
+the columns path's.
 
 Guarantee: nothing published is NaN. Contacts carry finite times and details;
 NO_CONTACT entries carry time +inf and zeros elsewhere, as the message
@@ -141,30 +145,15 @@ class ScenePrediction:
 
         u = self.uncertainty
         if u is not None and len(u):
-            if u.matched is c and u.contact_rows is not None:  # the scene matched the pairs
-                found = np.full(len(c), -1, dtype=np.int64)
-                paired = np.flatnonzero(u.contact_rows >= 0)
-                found[u.contact_rows[paired]] = paired
-                found = found[k]
-            else:
-                row = {pair: j for j, pair in enumerate(zip(u.id_a.tolist(), u.id_b.tolist()))}
-                found = np.array([row.get(pair, -1) for pair in zip(id_a, id_b)], dtype=np.int64).reshape(n)
+            found, e = self._uncertain_join
             has = found >= 0
             parts["probability"][0][has] = u.probability[found[has]]
             parts["bound"][0][has] = u.probability_bound[found[has]]
             parts["plausible"][0] = plausible = ttc.copy()
             plausible[has] = u.plausible_ttc[found[has]]
-            # Uncertain pairs whose mean paths miss within the horizon, listed when probable.
-            extra = np.ones(len(u), dtype=bool)
-            extra[found[has]] = False
-            extra &= (u.probability >= self.probability_threshold) & np.isfinite(u.probability) \
-                & np.isfinite(u.probability_bound)
-            e = np.flatnonzero(extra)
-            keys = list(zip(u.plausible_ttc[e].tolist(), u.id_a[e].tolist(), u.id_b[e].tolist()))
-            e = e[np.array(sorted(range(e.size), key=keys.__getitem__), dtype=np.int64)]
             no_contact_rows(u.id_a[e].tolist(), u.id_b[e].tolist(), u.probability[e], u.probability_bound[e],
                             u.plausible_ttc[e])
-        if self.report_all_pairs and len(self.capture) <= ReportAll.MAX_BODIES:
+        if self._report_all_rows:
             ids = self.capture.ids()
             rank = {b: r for r, b in enumerate(ids)}
             pairs = set(zip(map(rank.__getitem__, id_a), map(rank.__getitem__, id_b)))
@@ -179,12 +168,36 @@ class ScenePrediction:
                                  col["normal"], f64(col["closing"]), f64(col["probability"]), f64(col["bound"]),
                                  f64(col["plausible"]))
 
+    @cached_property
+    def _uncertain_join(self) -> tuple[np.ndarray, np.ndarray]:
+        """(found, extra): for each published contact row, its row in `uncertainty` (-1: none);
+        the uncertainty rows published after the contacts (uncertain pairs whose mean paths miss
+        within the horizon, listed when probable), in publication order."""
+        c, u = self.contacts, self.uncertainty
+        k = self._finite_rows
+        if u.matched is c and u.contact_rows is not None:  # the scene matched the pairs
+            found = np.full(len(c), -1, dtype=np.int64)
+            paired = np.flatnonzero(u.contact_rows >= 0)
+            found[u.contact_rows[paired]] = paired
+            found = found[k]
+        else:
+            row = {pair: j for j, pair in enumerate(zip(u.id_a.tolist(), u.id_b.tolist()))}
+            found = np.array([row.get(pair, -1) for pair in zip(c.id_a[k].tolist(), c.id_b[k].tolist())],
+                             dtype=np.int64)
+        extra = np.ones(len(u), dtype=bool)
+        extra[found[found >= 0]] = False
+        extra &= (u.probability >= self.probability_threshold) & np.isfinite(u.probability) \
+            & np.isfinite(u.probability_bound)
+        e = np.flatnonzero(extra)
+        # by (plausible time, id_a, id_b): the rows are in (id_a, id_b) order (SceneUncertainty),
+        # so a stable sort on the time alone (no NaN here: a row with a finite probability has
+        # a time or +inf; -0.0 and 0.0 tie, as they compare equal)
+        return found, e[np.argsort(u.plausible_ttc[e], kind="stable")]
+
     @property
-    def _exact_contacts_only(self) -> bool:
-        """Whether the published rows are exactly the scene's contacts (no uncertain pair and no
-        report_all_pairs rows appended)."""
-        return (self.uncertainty is None or len(self.uncertainty) == 0) and not (
-            self.report_all_pairs and len(self.capture) <= ReportAll.MAX_BODIES)
+    def _report_all_rows(self) -> bool:
+        """Whether report_all_pairs appends NO_CONTACT rows for the other pairs."""
+        return self.report_all_pairs and len(self.capture) <= ReportAll.MAX_BODIES
 
     @cached_property
     def _finite_rows(self):
@@ -232,15 +245,26 @@ class ScenePrediction:
 
         uncertainty=False: the layout before the probability fields (replay of old recordings).
         """
-        if uncertainty and self._exact_contacts_only and self.contacts.id_utf8 is not None:
-            # The common case in one compiled pass, bytes equal to the general path's
+        c, u = self.contacts, self.uncertainty
+        if uncertainty and not self._report_all_rows and c.id_utf8 is not None:
+            # The node's cases in one compiled pass, bytes equal to the general path's
             # (tests/test_prediction_cdr.py): no columns built, no id strings touched.
-            data = encode_contact_rows(self.stamp, self.frame_id, float(self.horizon), self.contacts,
-                                       CollisionPrediction.CONTACT, CollisionPrediction.OVERLAPPING)
-            if data is not None:
-                return data
+            joined = None
+            if u is not None and len(u):  # uncertain pairs: their ids must lie in the contacts' blob
+                if u.id_utf8 is None or u.id_utf8[0].base is not c.id_utf8[0].base \
+                        or not isinstance(self._finite_rows, slice):
+                    joined = False
+                else:
+                    found, extra = self._uncertain_join
+                    joined = (found, u.probability, u.probability_bound, u.plausible_ttc, extra, u.id_utf8)
+            if joined is not False:
+                data = encode_contact_rows(self.stamp, self.frame_id, float(self.horizon), c,
+                                           CollisionPrediction.CONTACT, CollisionPrediction.OVERLAPPING,
+                                           joined, CollisionPrediction.NO_CONTACT)
+                if data is not None:
+                    return data
         columns = self.columns
         # No contact row dropped and none appended: the scene's encoded ids fit the columns.
-        same_rows = isinstance(self._finite_rows, slice) and len(columns) == len(self.contacts)
+        same_rows = isinstance(self._finite_rows, slice) and len(columns) == len(c)
         return encode_prediction_array(self.stamp, self.frame_id, float(self.horizon), columns,
-                                       self.contacts.id_utf8 if same_rows else None, uncertainty=uncertainty)
+                                       c.id_utf8 if same_rows else None, uncertainty=uncertainty)

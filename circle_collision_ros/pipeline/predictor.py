@@ -27,7 +27,7 @@ from circle_collision_ros.core.scene import Scene, SceneSnapshot
 from circle_collision_ros.core.uncertainty import load_fallback_kernels
 from circle_collision_ros.pipeline.cdr_codec import decode_states, encode_state, encode_state_array
 from circle_collision_ros.pipeline.prediction_messages import ScenePrediction
-from circle_collision_ros.pipeline.state_batch import StateBatch, covariance_block
+from circle_collision_ros.pipeline.state_batch import StateBatch
 from circle_collision_ros.pipeline.state_validation import Rejection, check_batch
 
 
@@ -224,14 +224,16 @@ class CollisionPredictor:
                 return report
             batch = batch.select(good)
             uncertain = check.uncertain[good] if check.uncertain is not None else None
+            block = check.covariance[good] if check.covariance is not None else None
         else:  # every row (the usual message): no copies
             good = None
             uncertain = check.uncertain
+            block = check.covariance
         if not self.frame_id:
             self.frame_id = check.frame_id  # adopt the first frame seen
         covariances = None  # exact states: the scene's exact path alone
         if uncertain is not None and uncertain.any():
-            covariances = covariance_block(batch.covariance, self.config.dimensions)
+            covariances = block
         merged = self._scene.merge(batch.ids, batch.stamp_ns, batch.position, batch.velocity,
                                    batch.acceleration, batch.radius, batch.remove,
                                    now_ns if now_ns is not None else 0, covariances)

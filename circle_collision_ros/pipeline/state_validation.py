@@ -17,7 +17,7 @@ from numba import njit
 
 from circle_collision_ros.core.uncertainty import COV_PSD_RTOL, COV_SYMMETRY_RTOL, covariance_problem
 from circle_collision_ros.pipeline.cdr_codec import COVARIANCE_SIZE
-from circle_collision_ros.pipeline.state_batch import StateBatch, covariance_block
+from circle_collision_ros.pipeline.state_batch import USED_COVARIANCE_AXES, StateBatch, covariance_block
 
 
 class StampLimits:
@@ -62,47 +62,90 @@ def covariance_rejected(blocks: np.ndarray) -> np.ndarray:
     out = np.empty(n, dtype=np.bool_)
     decompose = np.empty(n, dtype=np.bool_)
     _covariance_screen(blocks, COV_SYMMETRY_RTOL, out, decompose)
+    _psd_rejected(blocks, decompose, out)
+    return out
+
+
+def _psd_rejected(blocks: np.ndarray, decompose: np.ndarray, rejected: np.ndarray) -> None:
+    """rejected[k] = the PSD test with eigenvalues, for the blocks k with decompose[k]."""
     k = np.flatnonzero(decompose)
     if k.size:
         c = blocks[k]
         lam = np.linalg.eigvalsh(0.5 * (c + c.transpose(0, 2, 1)))
-        out[k] = lam[:, 0] < -COV_PSD_RTOL * np.maximum(np.abs(lam[:, 0]), np.abs(lam[:, -1]))
-    return out
+        rejected[k] = lam[:, 0] < -COV_PSD_RTOL * np.maximum(np.abs(lam[:, 0]), np.abs(lam[:, -1]))
+
+
+@njit(cache=True)
+def _screen_block(c, sym_rtol):
+    """(rejected, decompose) of one (m, m) block: rejected if not finite or (scale > 0 and)
+    asymmetric beyond sym_rtol x scale; else decompose = whether the PSD test needs
+    eigenvalues (scale > 0 and the symmetrised diagonal does not dominate)."""
+    m = c.shape[0]
+    finite = True
+    scale = 0.0
+    asym = 0.0
+    for r in range(m):
+        for q in range(m):
+            x = c[r, q]
+            if not math.isfinite(x):
+                finite = False
+            scale = max(scale, abs(x))
+            asym = max(asym, abs(x - c[q, r]))
+    if not finite:
+        return True, False
+    if scale > 0.0 and asym > sym_rtol * scale:
+        return True, False
+    if scale == 0.0:
+        return False, False
+    for r in range(m):
+        off = 0.0
+        for q in range(m):
+            if q != r:
+                off += abs(0.5 * (c[r, q] + c[q, r]))
+        if c[r, r] < off:
+            return False, True
+    return False, False
 
 
 @njit(cache=True)
 def _covariance_screen(blocks, sym_rtol, rejected, decompose):
-    """Per block: rejected if not finite or (scale > 0 and) asymmetric beyond sym_rtol x
-    scale; else decompose = whether the PSD test needs eigenvalues (scale > 0 and the
-    symmetrised diagonal does not dominate)."""
-    m = blocks.shape[1]
+    """_screen_block of every block."""
     for i in range(blocks.shape[0]):
-        c = blocks[i]
+        rejected[i], decompose[i] = _screen_block(blocks[i], sym_rtol)
+
+
+@njit(cache=True)
+def _covariance_rows(cov, size, remove, axes, max_abs, sym_rtol, block, given, bad, flagged, decompose):
+    """covariance_checks' pass over the (n, 36) row-major 6x6 covariances, one row at a time:
+    block[i] = the rows/columns `axes` of row i; given[i] = 36 values and the block not all
+    zero (a NaN is not zero); bad[i] = a count other than 0 or 36, or (given, not a removal)
+    a finite block whose largest |value| exceeds max_abs; flagged[i] / decompose[i] (given,
+    not a removal, not bad) = _screen_block's rejected / decompose (a non-finite block is
+    flagged: the core's check words and confirms it)."""
+    m = axes.shape[0]
+    for i in range(cov.shape[0]):
+        nonzero = False
         finite = True
-        scale = 0.0
-        asym = 0.0
+        largest = 0.0
         for r in range(m):
             for q in range(m):
-                x = c[r, q]
+                x = cov[i, 6 * axes[r] + axes[q]]  # row-major 6x6
+                block[i, r, q] = x
+                if x != 0.0:
+                    nonzero = True
                 if not math.isfinite(x):
                     finite = False
-                scale = max(scale, abs(x))
-                asym = max(asym, abs(x - c[q, r]))
+                largest = max(largest, abs(x))
+        given[i] = size[i] == COVARIANCE_SIZE and nonzero
+        bad[i] = size[i] != 0 and size[i] != COVARIANCE_SIZE
+        flagged[i] = False
         decompose[i] = False
-        if not finite:
-            rejected[i] = True
+        if not given[i] or remove[i]:
             continue
-        rejected[i] = scale > 0.0 and asym > sym_rtol * scale
-        if rejected[i] or scale == 0.0:
+        if finite and largest > max_abs:
+            bad[i] = True
             continue
-        for r in range(m):
-            off = 0.0
-            for q in range(m):
-                if q != r:
-                    off += abs(0.5 * (c[r, q] + c[q, r]))
-            if c[r, r] < off:
-                decompose[i] = True
-                break
+        flagged[i], decompose[i] = _screen_block(block[i], sym_rtol)
 
 
 @dataclass(frozen=True)
@@ -122,6 +165,8 @@ class BatchCheck:
     rejections: list[Rejection]
     frame_id: str
     uncertain: np.ndarray | None = None  # (N,) bool: good states with a non-zero covariance
+    #: (N, 2D, 2D) the used rows/columns of each state's covariance (None: the batch has none)
+    covariance: np.ndarray | None = None
 
 
 _VECTORS = ("position", "velocity", "acceleration")
@@ -134,30 +179,33 @@ class StampHint:
             " (ros2 topic pub: header: {stamp: now})")
 
 
-def covariance_checks(batch: StateBatch, dimensions: int) -> tuple[np.ndarray, np.ndarray]:
-    """(bad, uncertain): per state, whether its covariance is unusable, and whether it is usable
-    and not all zero on the used axes (a zero or absent covariance is an exact state).
+def covariance_checks(batch: StateBatch, dimensions: int
+                      ) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+    """(bad, uncertain, block): per state, whether its covariance is unusable, whether it is
+    usable and not all zero on the used axes (a zero or absent covariance is an exact state),
+    and the (n, 2D, 2D) block of the used axes (state_batch.covariance_block; None without
+    covariances).
 
     Only the rows and columns a `dimensions`-D scene uses are checked (x, y, vx, vy in 2-D).
-    The rule and tolerances are the core's (core.uncertainty.covariance_problem), applied
-    vectorised here (covariance_rejected); the reason of a bad row is that function's text.
+    The rule and tolerances are the core's (core.uncertainty.covariance_problem), applied in
+    one compiled pass here (_covariance_rows, covariance_rejected's tests); the reason of a
+    bad row is that function's text.
     """
     n = len(batch)
     if batch.covariance is None:
-        return np.zeros(n, dtype=bool), np.zeros(n, dtype=bool)
-    size_bad = (batch.covariance_size != 0) & (batch.covariance_size != COVARIANCE_SIZE)
-    block = covariance_block(batch.covariance, dimensions)
-    given = (batch.covariance_size == COVARIANCE_SIZE) & (block != 0.0).any(axis=(1, 2))
-    bad = size_bad.copy()
-    rows = np.flatnonzero(given & ~batch.remove)
-    if rows.size:
-        huge = np.abs(block[rows]).max(axis=(1, 2)) > ValueLimits.MAX_COVARIANCE  # NaN: not here
-        bad[rows[huge]] = True
-        rows = rows[~huge]
-        flagged = rows[covariance_rejected(block[rows])]
-        # the core's own check decides (and words) each refusal: no row refused without its reason
-        bad[flagged] = [covariance_problem(block[k]) is not None for k in flagged.tolist()]
-    return bad & ~batch.remove, given & ~bad & ~batch.remove
+        return np.zeros(n, dtype=bool), np.zeros(n, dtype=bool), None
+    axes = np.array(USED_COVARIANCE_AXES[dimensions], dtype=np.int64)
+    block = np.empty((n, axes.size, axes.size))
+    given, bad, flagged, decompose = (np.empty(n, dtype=np.bool_) for _ in range(4))
+    _covariance_rows(np.ascontiguousarray(batch.covariance, dtype=np.float64),
+                     np.ascontiguousarray(batch.covariance_size, dtype=np.int64),
+                     np.ascontiguousarray(batch.remove, dtype=np.bool_), axes,
+                     ValueLimits.MAX_COVARIANCE, COV_SYMMETRY_RTOL, block, given, bad, flagged, decompose)
+    _psd_rejected(block, decompose, flagged)
+    # the core's own check decides (and words) each refusal: no row refused without its reason
+    rows = np.flatnonzero(flagged)
+    bad[rows] = [covariance_problem(block[k]) is not None for k in rows.tolist()]
+    return bad & ~batch.remove, given & ~bad & ~batch.remove, block
 
 
 def _covariance_reason(batch: StateBatch, k: int, dimensions: int) -> str | None:
@@ -277,7 +325,7 @@ def check_batch(batch: StateBatch, *, frame_id: str, now_ns: int | None,
     finite = (np.abs(batch.radius) <= limit) & (np.abs(batch.position) <= limit).all(axis=1) \
         & (np.abs(batch.velocity) <= limit).all(axis=1) \
         & (np.abs(batch.acceleration) <= limit).all(axis=1)
-    covariance_bad, uncertain = covariance_checks(batch, dimensions)
+    covariance_bad, uncertain, block = covariance_checks(batch, dimensions)
     geometry_bad = ~batch.remove & (~finite | (batch.radius < 0.0)) | covariance_bad
     stamp_bad = batch.stamp_ns <= 0
     if now_ns is not None:
@@ -292,4 +340,4 @@ def check_batch(batch: StateBatch, *, frame_id: str, now_ns: int | None,
     rejections = [Rejection(int(k), batch.ids[k], _reasons(batch, int(k), frame_id, now_ns, bool(dup[k]),
                                                            dimensions))
                   for k in np.flatnonzero(bad)]
-    return BatchCheck(~bad, rejections, frame_id, uncertain & ~bad)
+    return BatchCheck(~bad, rejections, frame_id, uncertain & ~bad, block)

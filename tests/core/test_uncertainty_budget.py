@@ -142,3 +142,37 @@ def test_scene_reuses_pairs_a_change_elsewhere_leaves_alone() -> None:
     done0 = {k for k, x in rows0.items() if x[1] != DEFERRED_BOUND}
     assert all(rows1[k] == rows0[k] for k in done0)
     assert after.deferred == before.deferred - m > 0
+
+
+def test_a_body_removed_and_added_again_is_a_new_body_for_the_budget() -> None:
+    """The budget's FIFO keys a waiting pair on its two bodies (slots and body serials): when
+    a body of a deferred pair is removed and added again (same id) before the next evaluation,
+    the pair waits from then, as a new pair does, instead of keeping its place in the queue."""
+    ids = ["a", "b", "c"]
+    p = np.array([[0.0, 0.0], [1.5, 0.0], [-2.5, 0.0]])  # (a, b) nearer than (a, c); (b, c) far
+    v = np.zeros((3, 2))
+    r = np.full(3, 0.5)
+    cov = np.tile(np.diag([0.09, 0.09, 0.01, 0.01]), (3, 1, 1))
+    _, U = screen_sigmas(THR, 4)
+
+    def kinds(u):
+        return {k: "deferred" if e == DEFERRED_BOUND else ("screened" if e == U else "evaluated")
+                for k, (_, e, _) in _rows(u).items()}
+
+    runs = {}
+    for readd in (False, True):
+        scene = Scene(H, 2)
+        _feed(scene, ids, p, v, r, cov, BASE)
+        first = kinds(scene.uncertain_pairs(THR, scene.predictions(), max_evaluated=1))
+        stamp = BASE + 50_000_000
+        if readd:
+            scene.merge(["c"], [stamp], np.zeros((1, 2)), np.zeros((1, 2)), np.zeros((1, 2)), [0.0], [True], stamp)
+            stamp += 1
+        _feed(scene, ids, p + 1e-3, v, r, cov, stamp)  # everything moved: nothing reused
+        runs[readd] = first, kinds(scene.uncertain_pairs(THR, scene.predictions(), max_evaluated=1))
+    for first, _ in runs.values():
+        assert first == {("a", "b"): "evaluated", ("a", "c"): "deferred", ("b", "c"): "screened"}
+    # kept: (a, c) waited longest and is served; re-added: every listed pair is new, and the
+    # earliest possible contact, (a, b)'s, goes first again
+    assert runs[False][1][("a", "c")] == "evaluated" and runs[False][1][("a", "b")] == "deferred"
+    assert runs[True][1][("a", "b")] == "evaluated" and runs[True][1][("a", "c")] == "deferred"
