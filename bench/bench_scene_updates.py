@@ -17,8 +17,9 @@ Printed figures (same run, so ratios are comparable on a busy machine):
    (Scene.full_recomputation, the rule from scratch) -- checked bit-identical in a
    separate pass of updates, and the update right after each recomputation timed
    as "after 10+ ms of other work": the recomputation evicts the caches, and the
-   updates after it run up to ~3x slower for a few updates (this is why the checks
-   are not interleaved with pass 1: they had raised its median by ~30-80 %);
+   updates after it run up to ~3x slower for ~8 updates (this is why the checks
+   are not interleaved with pass 1: measured in the same minutes, a recomputation
+   after every 10th update raised the median from 0.19 to 0.22-0.26 ms);
 3. a whole N-body CircleStateArray (every body moves, newer stamp): the
    full-scene path the scene chooses by itself;
 4. the epoch roll (every slack = horizon/4 of stamp time every pair is
