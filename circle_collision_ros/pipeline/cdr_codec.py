@@ -470,6 +470,21 @@ def encode_prediction_array(stamp: tuple[int, int], frame_id: str, horizon: floa
     return buf[:end].tobytes()
 
 
+@njit(cache=True, inline="always")
+def _put_two_names(u32, body, names, p, start_a, len_a, start_b, len_b):
+    """id_a and id_b as CDR strings (length with the NUL, bytes, NUL) from `names` at position
+    p (counted from _ORIGIN, so 4-alignment is a mask); the position after them."""
+    for start, n in ((start_a, len_a), (start_b, len_b)):
+        p = (p + 3) & ~3
+        u32[p >> 2] = n + 1
+        p += 4
+        for j in range(n):
+            body[p + j] = names[start + j]
+        body[p + n] = 0
+        p += n + 1
+    return p
+
+
 @njit(cache=True)
 def _encode_contacts(buf, u32, f64, sec, nanosec, frame, horizon, names, start_a, len_a, start_b, len_b,
                      ttc, contact_ns, overlapping, point, normal, closing, contact, overlap_status,
@@ -501,14 +516,7 @@ def _encode_contacts(buf, u32, f64, sec, nanosec, frame, horizon, names, start_a
             zero += point[k, j] * 0.0 + normal[k, j] * 0.0
         if zero != 0.0:
             return -1
-        for start, n in ((start_a[k], len_a[k]), (start_b[k], len_b[k])):
-            p = (p + 3) & ~3
-            u32[p >> 2] = n + 1
-            p += 4
-            for j in range(n):
-                body[p + j] = names[start + j]
-            body[p + n] = 0
-            p += n + 1
+        p = _put_two_names(u32, body, names, p, start_a[k], len_a[k], start_b[k], len_b[k])
         body[p] = overlap_status if overlapping[k] else contact
         q = ((p + 8) & ~7) >> 3  # the float64 word of time_to_collision
         f64[q] = t
@@ -532,14 +540,7 @@ def _encode_contacts(buf, u32, f64, sec, nanosec, frame, horizon, names, start_a
             f64[q + 9] = plausible[j]
         p = 8 * (q + 10)
     for k in range(extra.shape[0]):
-        for start, n in ((x_start_a[k], x_len_a[k]), (x_start_b[k], x_len_b[k])):
-            p = (p + 3) & ~3
-            u32[p >> 2] = n + 1
-            p += 4
-            for j in range(n):
-                body[p + j] = names[start + j]
-            body[p + n] = 0
-            p += n + 1
+        p = _put_two_names(u32, body, names, p, x_start_a[k], x_len_a[k], x_start_b[k], x_len_b[k])
         body[p] = no_contact
         q = ((p + 8) & ~7) >> 3
         f64[q] = np.inf  # contact time (sec, nanosec) and the details stay the buffer's zeros
