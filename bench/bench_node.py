@@ -550,7 +550,10 @@ def run_one_body_updates(bodies: int, rate: float, seconds: float, sigma: float 
         scene = SyntheticScene(bodies, size=float(np.sqrt(bodies * 333.0)), dimensions=2, seed=bodies)
         array_pub.publish(scene_bytes(scene, time.time_ns(), sigma))
         deadline = time.monotonic() + 30
-        while int(run.diagnostics.get("bodies", "0")) < bodies and time.monotonic() < deadline:
+        while time.monotonic() < deadline:  # the node reports its scene size on /diagnostics (1 Hz)
+            with run.lock:
+                if int(run.diagnostics.get("bodies", "0")) >= bodies:
+                    break
             time.sleep(0.1)
         data, pos_at = _single_state_template(time.time_ns(), sigma)
         id_at = bytes(data).index(b"b00000")
