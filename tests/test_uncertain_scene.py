@@ -459,11 +459,11 @@ def test_batch_covariance_checks_decide_row_by_row_as_the_core(dimensions) -> No
 
 
 def test_state_and_covariance_propagation_is_the_numpy_expression_bitwise() -> None:
-    """scene._states_at (one compiled pass over the stored bodies) gives the bits of the numpy
+    """scene._states_at_rows (one compiled pass over the stored bodies) gives the bits of the numpy
     expressions: p + dt (v + (dt/2) a), v + dt a (scene._propagate_ns) and the covariance
     blocks Spp + dt (Spv + Svp) + dt^2 Svv, Spv + dt Svv, Svp + dt Svv, Svv, zero for exact
     bodies, signed zeros included (recorded covariance bags replay bit for bit)."""
-    from circle_collision_ros.core.scene import _propagate_ns, _states_at
+    from circle_collision_ros.core.scene import _propagate_ns, _states_at_rows
     rng = np.random.default_rng(3)
     n = 500
     for D in (2, 3):
@@ -489,7 +489,7 @@ def test_state_and_covariance_propagation_is_the_numpy_expression_bitwise() -> N
         want[~U[slots]] = 0.0
         want_p, want_v = _propagate_ns(P[slots], V[slots], A[slots], dt_ns)
         p, v, cov = np.empty((slots.size, D)), np.empty((slots.size, D)), np.empty_like(c)
-        _states_at(P, V, A, C, T, U, slots, t_ns, p, v, cov)
+        _states_at_rows(P, V, A, C, T, U, slots, t_ns, p, v, cov)
         assert p.tobytes() == want_p.tobytes() and v.tobytes() == want_v.tobytes()
         assert cov.tobytes() == want.tobytes()
 

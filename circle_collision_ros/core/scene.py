@@ -221,7 +221,7 @@ def _store_covariances(C, slots, cov, rows, nonzero):
 
 
 @njit(cache=True, error_model="numpy")
-def _states_at(P, V, A, C, T, U, slots, t_ns, p, v, c):
+def _states_at_rows(P, V, A, C, T, U, slots, t_ns, p, v, c):
     """The stored bodies `slots` moved from their stamps T to t_ns[j] (int64 ns), in one
     compiled pass: p, v as _propagate_ns, c as _covariance_row for an uncertain body
     (U) and zero for an exact one (its stored covariance may be stale).  The same
@@ -1371,11 +1371,11 @@ class Scene:
 
     def _states_at(self, slots: np.ndarray, t_ns: np.ndarray):
         """(P, V, C) of the bodies `slots` moved to the times t_ns (int64 ns, per body), C zero
-        for exact bodies: see _states_at (module level)."""
+        for exact bodies: see _states_at_rows."""
         m = slots.shape[0]
         D = self._dim
         P, V, C = np.empty((m, D)), np.empty((m, D)), np.empty((m, 2 * D, 2 * D))
-        _states_at(self._P, self._V, self._A, self._C, self._T, self._U, slots, t_ns, P, V, C)
+        _states_at_rows(self._P, self._V, self._A, self._C, self._T, self._U, slots, t_ns, P, V, C)
         return P, V, C
 
     def _uncertain_pair_times(self, sa: np.ndarray, sb: np.ndarray, R: int) -> np.ndarray:

@@ -249,15 +249,15 @@ class ScenePrediction:
         if uncertainty and not self._report_all_rows and c.id_utf8 is not None:
             # The node's cases in one compiled pass, bytes equal to the general path's
             # (tests/test_prediction_cdr.py): no columns built, no id strings touched.
-            joined = None
-            if u is not None and len(u):  # uncertain pairs: their ids must lie in the contacts' blob
-                if u.id_utf8 is None or u.id_utf8[0].base is not c.id_utf8[0].base \
-                        or not isinstance(self._finite_rows, slice):
-                    joined = False
-                else:
+            uncertain = u is not None and len(u) > 0
+            # uncertain rows join only when their ids lie in the contacts' blob and no contact
+            # row was dropped (then the columns path below)
+            if not uncertain or (u.id_utf8 is not None and u.id_utf8[0].base is c.id_utf8[0].base
+                                 and isinstance(self._finite_rows, slice)):
+                joined = None
+                if uncertain:
                     found, extra = self._uncertain_join
                     joined = (found, u.probability, u.probability_bound, u.plausible_ttc, extra, u.id_utf8)
-            if joined is not False:
                 data = encode_contact_rows(self.stamp, self.frame_id, float(self.horizon), c,
                                            CollisionPrediction.CONTACT, CollisionPrediction.OVERLAPPING,
                                            joined, CollisionPrediction.NO_CONTACT)
