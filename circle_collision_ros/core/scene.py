@@ -1282,25 +1282,28 @@ class Scene:
         key = (sa << 32) | sb
         prob, bound, tau = np.empty(I.size), np.empty(I.size), np.empty(I.size)
         hit = np.zeros(I.size, dtype=bool)
+        # where the last call deferred the pair with these same inputs: its screening
+        # tube's first time (the deferred answer's time), so the core skips the screen
+        screened_first = np.full(I.size, np.nan)
         sv_a, sv_b = self._sv[sa], self._sv[sb]
         old = self._pair_answers
         # a kept answer needs both bodies unchanged since (state serials below old.sv_next):
         # when every body changed (a tracker array) there is nothing to look up
         if old is not None and old.horizon == self._h and old.threshold == threshold \
-                and self._sv[slots].min() < old.sv_next:
-            keep = np.flatnonzero(old.answered)
-            keep = keep[np.argsort(old.key[keep], kind="stable")]  # keys are distinct
-            if keep.size:
-                okey = old.key[keep]
-                at = keep[np.minimum(np.searchsorted(okey, key), keep.size - 1)]
-                hit = ((old.key[at] == key) & (old.state_a[at] == sv_a)
-                       & (old.state_b[at] == sv_b) & (old.pair_ns[at] == tp))
-                prob[hit], bound[hit], tau[hit] = old.probability[at[hit]], old.bound[at[hit]], old.tau[at[hit]]
+                and self._sv[slots].min() < old.sv_next and old.key.size:
+            keep = np.argsort(old.key, kind="stable")  # keys are distinct
+            at = keep[np.minimum(np.searchsorted(old.key[keep], key), keep.size - 1)]
+            same = ((old.key[at] == key) & (old.state_a[at] == sv_a)
+                    & (old.state_b[at] == sv_b) & (old.pair_ns[at] == tp))
+            hit = same & old.answered[at]
+            prob[hit], bound[hit], tau[hit] = old.probability[at[hit]], old.bound[at[hit]], old.tau[at[hit]]
+            waited = same & ~old.answered[at]
+            screened_first[waited] = old.tau[at[waited]]
         todo = np.flatnonzero(~hit)
         answered = hit.copy()
         if todo.size:
             deferred = self._evaluate_uncertain(unc, sa[todo], sb[todo], I[todo], J[todo], at_R, tp[todo],
-                                                key[todo], threshold, max_evaluated)
+                                                key[todo], threshold, max_evaluated, screened_first[todo])
             prob[todo], bound[todo], tau[todo] = deferred.probability, deferred.bound, deferred.tau
             answered[todo[~deferred.deferred]] = True
         else:
@@ -1386,10 +1389,11 @@ class Scene:
         return np.where(newer > R - lag, newer, R - R % lag)
 
     def _evaluate_uncertain(self, unc, sa, sb, la, lb, at_R, tp, key, threshold: float,
-                            max_evaluated: int | None) -> "_Evaluated":
+                            max_evaluated: int | None, screened_first: np.ndarray) -> "_Evaluated":
         """``unc.uncertain_pairs`` on these pairs (slots sa, sb; local indices la, lb into
         at_R, the bodies at R; key = sa << 32 | sb), each at its t_p over [0, H] (screened,
-        within the budget; FIFO bookkeeping of the deferred, see uncertain_pairs)."""
+        within the budget; FIFO bookkeeping of the deferred, see uncertain_pairs);
+        screened_first: as ``unc.uncertain_pairs`` takes it (NaN: screen the pair)."""
         R = self.reference_ns
         late = np.flatnonzero(tp != R)  # t_p = R: the bodies as propagated for the listing
         states = []
@@ -1416,7 +1420,7 @@ class Scene:
             self._uncertain_memo_ref = R
         res = unc.uncertain_pairs(*states[0], *states[1], self._h, threshold, screen=True,
                                   max_evaluated=max_evaluated, priority=waited_since,
-                                  memo=self._uncertain_memo)
+                                  memo=self._uncertain_memo, screened_first=screened_first)
         deferred = (res.collision_probability_bound == unc.DEFERRED_BOUND
                     if max_evaluated is not None else np.zeros(sa.size, dtype=bool))
         # the deferred of the rows that competed wait on (since as looked up); the rest stop

@@ -104,7 +104,8 @@ def uncertain_pairs(pa, va, aa, ra, cov_a, pb, vb, ab, rb, cov_b,
                     horizon: float, threshold: float, *, screen: bool = False,
                     max_evaluated: int | None = None,
                     priority: Callable[[np.ndarray], np.ndarray] | None = None,
-                    memo: dict | None = None) -> UncertainPairs:
+                    memo: dict | None = None,
+                    screened_first: np.ndarray | None = None) -> UncertainPairs:
     """Collision probability, its bound and the earliest plausible contact of n pairs.
 
     pa, va, aa, pb, vb, ab: (n, D) float64, D in {2, 3} [m, m/s, m/s^2];
@@ -136,6 +137,13 @@ def uncertain_pairs(pa, va, aa, ra, cov_a, pb, vb, ab, rb, cov_b,
     (ascending); returns an integer per row, smaller first (then t_first, then
     row order).  The scene passes how long each pair has waited (FIFO, see
     ``Scene.uncertain_pairs``).
+
+    screened_first (with screen=True): (n,) float64, NaN where unknown; elsewhere
+    the t_first of an earlier call's screening of the row's bitwise same inputs
+    (H and threshold included) that did not clear it, e.g. the plausible time
+    that call reported for the row it deferred.  Such rows skip the screen (its
+    outcome is a function of those inputs: the same answer, without the
+    tube walk); the scene passes its waiting pairs whose bodies did not change.
 
     memo: a dict the caller keeps between calls.  A row whose relative inputs
     (dp, dv, da, R, Sigma after the sign canonicalisation, with H and the
@@ -194,8 +202,18 @@ def uncertain_pairs(pa, va, aa, ra, cov_a, pb, vb, ab, rb, cov_b,
             k, tail = 40.0, 0.0
         clear = np.zeros(todo.size, dtype=np.bool_)
         t_first = np.empty(todo.size)
+        unknown = np.ones(todo.size, dtype=np.bool_)
+        if screened_first is not None:
+            known_first = np.asarray(screened_first, dtype=np.float64)[todo]
+            unknown = np.isnan(known_first)
+            t_first[~unknown] = known_first[~unknown]
         # relative state as below (the tube test is exactly symmetric under X -> -X)
-        screen_rows_at(pa, va, aa, ra, pb, vb, ab, rb, sigma, todo, H, k, clear, t_first)
+        if unknown.all():
+            screen_rows_at(pa, va, aa, ra, pb, vb, ab, rb, sigma, todo, H, k, clear, t_first)
+        elif unknown.any():
+            c, f = np.zeros(int(unknown.sum()), dtype=np.bool_), np.empty(int(unknown.sum()))
+            screen_rows_at(pa, va, aa, ra, pb, vb, ab, rb, sigma, todo[unknown], H, k, c, f)
+            clear[unknown], t_first[unknown] = c, f
         if tail > 0.0:
             done = todo[clear]
             prob[done], bound[done], tpl[done] = 0.0, tail, np.inf

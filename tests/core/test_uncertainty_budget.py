@@ -12,7 +12,10 @@ Guarantees proved here:
 * reuse: a row whose relative inputs equal, bit for bit, those of a row fully evaluated by
   the previous call takes that answer bit for bit without counting against the budget, in
   the core (``uncertain_pairs(memo=...)``) and in the scene (a change elsewhere at the same
-  reference time).
+  reference time);
+* a pair that waits with unchanged inputs is not screened again (``screened_first``): the
+  screen runs only on the other rows, and every answer is bit for bit the one that screening
+  all rows gives, in the core and in a per-body stream through the scene.
 """
 from __future__ import annotations
 
@@ -20,6 +23,7 @@ import math
 
 import numpy as np
 
+from circle_collision_ros.core import uncertainty
 from circle_collision_ros.core.scene import Scene
 from circle_collision_ros.core.uncertainty import DEFERRED_BOUND, deferred_count, uncertain_pairs
 from circle_collision_ros.core.uncertainty_kernels import screen_sigmas
@@ -176,3 +180,69 @@ def test_a_body_removed_and_added_again_is_a_new_body_for_the_budget() -> None:
     # earliest possible contact, (a, b)'s, goes first again
     assert runs[False][1][("a", "c")] == "evaluated" and runs[False][1][("a", "b")] == "deferred"
     assert runs[True][1][("a", "b")] == "evaluated" and runs[True][1][("a", "c")] == "deferred"
+
+
+def _screened_rows(monkeypatch) -> list:
+    """Record the rows each screen_rows_at call of core.uncertainty screens."""
+    seen: list = []
+    real = uncertainty.screen_rows_at
+
+    def recording(*args):
+        seen.append(np.array(args[9]))
+        return real(*args)
+
+    monkeypatch.setattr(uncertainty, "screen_rows_at", recording)
+    return seen
+
+
+def test_waiting_rows_with_known_screening_skip_the_screen(monkeypatch) -> None:
+    rng = np.random.default_rng(9)
+    n = 30
+    pa = rng.uniform(-1.5, 1.5, (n, 2))
+    va = rng.uniform(-1.0, 1.0, (n, 2))
+    zero = np.zeros((n, 2))
+    r = np.full(n, 0.3)
+    cov = np.tile(np.diag([0.04, 0.04, 0.01, 0.01]), (n, 1, 1))
+    args = (pa, va, zero, r, cov, zero, zero, zero, r, cov)
+    first = uncertain_pairs(*args, H, THR, screen=True, max_evaluated=3)
+    waiting = first.collision_probability_bound == DEFERRED_BOUND
+    assert waiting.sum() > 5
+    known = np.where(waiting, first.plausible_time, np.nan)
+    seen = _screened_rows(monkeypatch)
+    plain = uncertain_pairs(*args, H, THR, screen=True, max_evaluated=3)
+    skipped = uncertain_pairs(*args, H, THR, screen=True, max_evaluated=3, screened_first=known)
+    assert np.array_equal(seen[0], np.arange(n))
+    assert np.array_equal(seen[1], np.flatnonzero(~waiting))  # only the rows not known to wait
+    for a, b in zip(plain, skipped):
+        assert np.array_equal(a, b, equal_nan=True)
+
+
+def test_scene_does_not_screen_waiting_pairs_again(monkeypatch) -> None:
+    """A per-body stream: one body moves per update, the others' pairs wait with unchanged
+    inputs; each update screens only the moved body's pairs (and those whose pair time moved),
+    with every answer bit for bit that of a scene that screens every pair."""
+    ids, p, v, r, cov = _crowd(16, seed=4)
+    scenes = [Scene(H, 2), Scene(H, 2)]
+    for scene in scenes:
+        _feed(scene, ids, p, v, r, cov, BASE)
+        scene.uncertain_pairs(THR, scene.predictions(), max_evaluated=2)
+    seen = _screened_rows(monkeypatch)
+    rng = np.random.default_rng(1)
+    screened = []
+    for step in range(1, 12):
+        k = int(rng.integers(len(ids)))
+        stamp = BASE + step * 1_000_000
+        results = []
+        for s_i, scene in enumerate(scenes):
+            scene.merge([ids[k]], np.array([stamp], dtype=np.int64), p[k:k + 1] + 1e-3 * step, v[k:k + 1],
+                        np.zeros((1, 2)), r[k:k + 1], np.zeros(1, dtype=bool), stamp, covariances=cov[k:k + 1])
+            old = scene._pair_answers
+            if s_i == 1 and old is not None:  # forget the waiting pairs' screening: screen them again
+                scene._pair_answers = old._replace(tau=np.where(old.answered, old.tau, np.nan))
+            before = len(seen)
+            results.append(_rows(scene.uncertain_pairs(THR, scene.predictions(), max_evaluated=2)))
+            screened.append((s_i, sum(x.size for x in seen[before:])))
+        assert results[0] == results[1]
+    kept = [c for s_i, c in screened if s_i == 0]
+    forgot = [c for s_i, c in screened if s_i == 1]
+    assert sum(kept) < 0.5 * sum(forgot)
