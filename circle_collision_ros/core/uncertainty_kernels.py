@@ -14,6 +14,7 @@ import numpy as np
 from numba import njit
 
 from circle_collision_ros.core.entry_rate import BROAD_K2, entry_rate_gauss3, entry_rate_integral
+from circle_collision_ros.core.line_sampling import line_factor, line_replicates
 from circle_collision_ros.core.narrow_phase import _ttc_kernel_h
 from circle_collision_ros.core.overlap_probability import eig_sym, overlap_probability, overlap_probability_2d
 from circle_collision_ros.core.quadrature import push_halves
@@ -54,6 +55,10 @@ QMC_T = 4.1
 QMC_CV_POINTS = 128
 QMC_CV_TARGET = 2e-3  # ~4 standard errors: an error ~5e-4, a third of 1e5-sample MC's at P ~ 0.5
 _QMC_SEED = 18_2026
+# Line sampling of straight 3-D pairs (core.line_sampling): QMC_LINE_POINTS points
+# per replicate, all QMC_POINTS when QMC_T standard errors exceed QMC_LINE_TARGET
+QMC_LINE_POINTS = 128
+QMC_LINE_TARGET = 2e-3
 
 
 def _normal_table(dim: int) -> np.ndarray:
@@ -834,7 +839,8 @@ def _first_crossing(dp, dv, da, R, Sigma, pa, pb, j, a0, p_start, thr, dt, cache
 # _pair_kernel's out: probability, bound, plausible time, then for the RQMC
 # fallback (needs_qmc = 1.0) the bracket [lo, hi] the RQMC mean is clipped to
 # (1.0: on the contact indicator; 2.0: on the over-count of an accelerating pair,
-# _OUT_HI then is the computed upper = P0 + E[entries] and _OUT_ERR its bound)
+# _OUT_HI then is the computed upper = P0 + E[entries] and _OUT_ERR its bound;
+# 3.0: line sampling of a straight 3-D pair, core.line_sampling)
 _OUT_P, _OUT_BOUND, _OUT_TPL, _OUT_QMC, _OUT_LO, _OUT_HI, _OUT_ERR = 0, 1, 2, 3, 4, 5, 6
 
 
@@ -859,6 +865,9 @@ def _pair_kernel(dp, dv, da, R, Sigma, H, thr, out):
         return
     st = np.zeros(2)
     acc = np.zeros(2)
+    # straight 3-D pairs: the probability by line sampling (finish_row), not by
+    # the Rice panels, so the walk does not get them for free
+    sampled = _line_sampled(dp, dv, da, Sigma)
     p0 = _prob_at(dp, dv, da, R, Sigma, 0.0, st)
     dt = PLAUSIBLE_RTOL * H
     pa = np.empty(_PANELS * cnt + 1)
@@ -886,7 +895,7 @@ def _pair_kernel(dp, dv, da, R, Sigma, H, thr, out):
                 found = True
                 break
             r = _first_crossing(dp, dv, da, R, Sigma, pa, pb, j, a0, p_start, thr, dt, cache, acc, st,
-                                t_inside > H)
+                                t_inside > H and not sampled)
             if st[_ST_DEGENERATE] != 0.0:
                 found = True
                 break
@@ -908,6 +917,13 @@ def _pair_kernel(dp, dv, da, R, Sigma, H, thr, out):
     if cnt == 0:
         out[_OUT_P] = 0.0
         out[_OUT_BOUND] = TUBE_TAIL
+        return
+    if sampled:
+        # line sampling: unbiased, no tube truncation; clipped below by the
+        # largest instantaneous probability seen
+        out[_OUT_QMC] = 3.0
+        out[_OUT_LO] = st[_ST_PMAX] - _P0_ERR
+        out[_OUT_HI] = 1.0
         return
     total = 0.0
     err = 0.0
@@ -945,6 +961,19 @@ def _pair_kernel(dp, dv, da, R, Sigma, H, thr, out):
 
 
 OUT_SIZE = 7
+
+
+@njit(cache=True, error_model="numpy")
+def _line_sampled(dp, dv, da, Sigma):
+    """True for the pairs whose probability is computed by line sampling: 3-D,
+    straight (da = 0: the contact set of dp is the capsule), and a non-zero
+    conditional standard deviation along the sampling direction."""
+    if dp.shape[0] != 3:
+        return False
+    for k in range(3):
+        if da[k] != 0.0:
+            return False
+    return line_factor(dp, dv, Sigma)[4]
 
 
 @njit(cache=True, error_model="numpy")
@@ -1006,6 +1035,20 @@ def finish_row(dp, dv, da, R, Sigma, H, out):
         upper = float(out[_OUT_HI])
         p = min(1.0, max(0.0, min(max(upper - float(est.mean()), float(out[_OUT_LO])), upper)))
         return p, stat + float(out[_OUT_ERR]), float(out[_OUT_TPL])
+    if out[_OUT_QMC] == 3.0:
+        # straight 3-D: line sampling; QMC_LINE_POINTS per replicate first, all
+        # QMC_POINTS when the statistical bound would exceed QMC_LINE_TARGET
+        G, mu, e, s, _ = line_factor(dp, dv, np.ascontiguousarray(Sigma))
+        Z = normal_table(5)
+        est = np.empty(QMC_REPLICATES)
+        for m in (QMC_LINE_POINTS, QMC_POINTS):
+            line_replicates(G, mu, e, s, float(R), float(H), Z, m, est)
+            se = float(est.std(ddof=1) / math.sqrt(QMC_REPLICATES))
+            stat = max(QMC_T * se, 3.0 / (QMC_REPLICATES * m))
+            if stat <= QMC_LINE_TARGET:
+                break
+        p = min(1.0, max(0.0, max(float(est.mean()), float(out[_OUT_LO]))))
+        return p, stat, float(out[_OUT_TPL])
     mean, se = qmc_probability(dp, dv, da, R, Sigma, H, normal_table(2 * D))
     n = QMC_REPLICATES * QMC_POINTS
     p = min(1.0, max(0.0, min(max(mean, float(out[_OUT_LO])), float(out[_OUT_HI]))))
