@@ -246,13 +246,13 @@ def capsule_interval(c0, c1, c2, e0, e1, e2, v0, v1, v2, R, H):
 
 
 @njit(cache=True, error_model="numpy")
-def line_replicates(G, mu, e, s, R, H, Z, m, est):
-    """est[r] = mean over the first m points of replicate r of Z (r, M, >= 5
-    standard normals) of P(contact | z) = Phi(hi / s) - Phi(lo / s), the
-    capsule interval of the line through the point's (c, v) along e."""
+def line_replicates(G, mu, e, s, R, H, Z, m0, m1, tot):
+    """tot[r] += the sum over the points m0 <= i < m1 of replicate r of Z (r, M,
+    >= 5 standard normals) of P(contact | z) = Phi(hi / s) - Phi(lo / s), with
+    [lo, hi] the capsule interval of the line through the point's (c, v) along e."""
     for r in range(Z.shape[0]):
-        tot = 0.0
-        for i in range(m):
+        acc = 0.0
+        for i in range(m0, m1):
             c0 = mu[0]
             c1 = mu[1]
             c2 = mu[2]
@@ -269,5 +269,5 @@ def line_replicates(G, mu, e, s, R, H, Z, m, est):
                 v2 += G[5, j] * z
             lo, hi = capsule_interval(c0, c1, c2, e[0], e[1], e[2], v0, v1, v2, R, H)
             if lo <= hi:
-                tot += interval_mass(lo, hi, 0.0, s)
-        est[r] = tot / m
+                acc += interval_mass(lo, hi, 0.0, s)
+        tot[r] += acc

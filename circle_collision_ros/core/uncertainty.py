@@ -291,4 +291,4 @@ def load_fallback_kernels(dimensions: int) -> None:
     overcount_replicates(z + 1.5, z, z + 0.1, 1.0, 1.0, factor(cov), Z, 1, np.empty(Z.shape[0]))
     if dimensions == 3:
         G, mu, e, s, _ = line_factor(z + 1.5, z + 1.0, cov)
-        line_replicates(G, mu, e, s, 1.0, 1.0, normal_table(5), 1, np.empty(Z.shape[0]))
+        line_replicates(G, mu, e, s, 1.0, 1.0, normal_table(5), 0, 1, np.zeros(Z.shape[0]))

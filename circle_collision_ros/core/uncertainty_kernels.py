@@ -16,7 +16,8 @@ from numba import njit
 from circle_collision_ros.core.entry_rate import BROAD_K2, entry_rate_gauss3, entry_rate_integral
 from circle_collision_ros.core.line_sampling import line_factor, line_replicates
 from circle_collision_ros.core.narrow_phase import _ttc_kernel_h
-from circle_collision_ros.core.overlap_probability import eig_sym, overlap_probability, overlap_probability_2d
+from circle_collision_ros.core.overlap_probability import (BALL_ERR_PER_TOL, eig_sym, overlap_probability,
+                                                           overlap_probability_2d, overlap_probability_tol)
 from circle_collision_ros.core.quadrature import push_halves
 from circle_collision_ros.core.sobol import scrambled_directions, sobol_points
 
@@ -557,11 +558,25 @@ def _panels(leaves, cnt, t_end, pa, pb):
 # Per-pair scratch of the compiled orchestration (float64 array st):
 _ST_PMAX = 0  # largest instantaneous probability computed (a lower bound of P(contact))
 _ST_DEGENERATE = 1  # 1.0 once S(t) was degenerate at a quadrature node: the Rice values are unusable
+_ST_PTOL = 2  # 3-D quadrature tolerance of the pair's instantaneous probabilities (0.0: the standard)
+_ST_PERR = 3  # stated error of one of them (_P0_ERR at the standard tolerance)
+_ST_SIZE = 4
+# Straight 3-D pairs (line sampling) use the instantaneous probability only in the
+# plausible-time walk, where it is compared with the threshold: tolerance
+# _WALK_TOL_REL x threshold per piece and level (stated error 8e-7 x threshold,
+# far inside the certificate's margins), which halves its cost
+_WALK_TOL_REL = 1e-7
 
 
 @njit(cache=True, error_model="numpy")
 def _prob_at(dp, dv, da, R, Sigma, t, st):
-    p = instant_probability(dp, dv, da, R, Sigma, t)
+    if st[_ST_PTOL] > 0.0:
+        g = np.empty(3)
+        for k in range(3):
+            g[k] = dp[k] + t * (dv[k] + 0.5 * t * da[k])
+        p = overlap_probability_tol(g, S_at(Sigma, t), R, st[_ST_PTOL])
+    else:
+        p = instant_probability(dp, dv, da, R, Sigma, t)
     if p > st[_ST_PMAX]:
         st[_ST_PMAX] = p
     return p
@@ -731,6 +746,7 @@ def _first_crossing(dp, dv, da, R, Sigma, pa, pb, j, a0, p_start, thr, dt, cache
     anyway: t_inside > H) tries the certificate first, which proves the whole
     panel clear without P(b)."""
     b = pb[j]
+    perr = st[_ST_PERR]  # error of one instantaneous probability
     lo = a0
     plo = p_start
     hi = math.inf
@@ -778,14 +794,14 @@ def _first_crossing(dp, dv, da, R, Sigma, pa, pb, j, a0, p_start, thr, dt, cache
                 return math.inf
             # entry-rate model of the step that the certificate would still pass
             rate = (v + e) / width
-            certified = plo + v + e + _P0_ERR < thr
+            certified = plo + v + e + perr < thr
             if certified:  # no crossing in [lo, c]
                 if c == b:
                     return math.inf
                 if pc < 0.0:
                     pc = _prob_at(dp, dv, da, R, Sigma, c, st)
-                if pc > plo + v + e + 2.0 * _P0_ERR:
-                    # P(c) <= P(lo) + int nu+ is a theorem (each P within _P0_ERR), so the 3-point rule
+                if pc > plo + v + e + 2.0 * perr:
+                    # P(c) <= P(lo) + int nu+ is a theorem (each P within perr), so the 3-point rule
                     # under-estimated the integral (a step across a steep rise of
                     # nu+): the step proves nothing; retry a shorter one
                     step = 0.25 * (c - lo)
@@ -796,7 +812,7 @@ def _first_crossing(dp, dv, da, R, Sigma, pa, pb, j, a0, p_start, thr, dt, cache
                 plo = pc
                 step = 2.0 * step if hi == math.inf else math.inf
                 if rate > 0.0:
-                    step = min(step, 0.9 * (thr - plo - _P0_ERR) / rate)
+                    step = min(step, 0.9 * (thr - plo - perr) / rate)
             else:
                 if pc < 0.0:
                     pc = _prob_at(dp, dv, da, R, Sigma, c, st)
@@ -804,7 +820,7 @@ def _first_crossing(dp, dv, da, R, Sigma, pa, pb, j, a0, p_start, thr, dt, cache
                     over = max(over, 0.25)
                     step = 0.5 * (c - lo)
                     if rate > 0.0:
-                        step = min(step, 0.9 * (thr - plo - _P0_ERR) / rate)
+                        step = min(step, 0.9 * (thr - plo - perr) / rate)
                     c = lo + max(step, 0.0)
                     continue
         if not certified:  # P(c) >= thr: c is the new hi
@@ -863,12 +879,22 @@ def _pair_kernel(dp, dv, da, R, Sigma, H, thr, out):
             out[_OUT_P] = 0.0
             out[_OUT_TPL] = math.inf
         return
-    st = np.zeros(2)
+    st = np.zeros(_ST_SIZE)
+    st[_ST_PERR] = _P0_ERR
     acc = np.zeros(2)
     # straight 3-D pairs: the probability by line sampling (finish_row), not by
-    # the Rice panels, so the walk does not get them for free
+    # the Rice panels, so the walk does not get them for free; their
+    # instantaneous probabilities serve the walk only (looser tolerance)
     sampled = _line_sampled(dp, dv, da, Sigma)
-    p0 = _prob_at(dp, dv, da, R, Sigma, 0.0, st)
+    if sampled:
+        st[_ST_PTOL] = max(_WALK_TOL_REL * thr, 1e-10)
+        st[_ST_PERR] = BALL_ERR_PER_TOL * st[_ST_PTOL]
+    if sampled and instant_bound(dp, dv, da, R, Sigma, 0.0, 0.0) < thr:
+        # P(0) < thr is certified and only the walk would use P(0) (as its start
+        # value, computed below if the walk starts at 0)
+        p0 = -1.0
+    else:
+        p0 = _prob_at(dp, dv, da, R, Sigma, 0.0, st)
     dt = PLAUSIBLE_RTOL * H
     pa = np.empty(_PANELS * cnt + 1)
     pb = np.empty(_PANELS * cnt + 1)
@@ -889,7 +915,7 @@ def _pair_kernel(dp, dv, da, R, Sigma, H, thr, out):
             a0 = _clear_prefix(dp, dv, da, R, Sigma, pa[j], pb[j], thr)
             if a0 >= pb[j]:
                 continue
-            p_start = p0 if a0 == 0.0 else _prob_at(dp, dv, da, R, Sigma, a0, st)
+            p_start = p0 if (a0 == 0.0 and p0 >= 0.0) else _prob_at(dp, dv, da, R, Sigma, a0, st)
             if p_start >= thr:
                 tpl = a0
                 found = True
@@ -922,7 +948,7 @@ def _pair_kernel(dp, dv, da, R, Sigma, H, thr, out):
         # line sampling: unbiased, no tube truncation; clipped below by the
         # largest instantaneous probability seen
         out[_OUT_QMC] = 3.0
-        out[_OUT_LO] = st[_ST_PMAX] - _P0_ERR
+        out[_OUT_LO] = st[_ST_PMAX] - st[_ST_PERR]
         out[_OUT_HI] = 1.0
         return
     total = 0.0
@@ -1040,9 +1066,13 @@ def finish_row(dp, dv, da, R, Sigma, H, out):
         # QMC_POINTS when the statistical bound would exceed QMC_LINE_TARGET
         G, mu, e, s, _ = line_factor(dp, dv, np.ascontiguousarray(Sigma))
         Z = normal_table(5)
-        est = np.empty(QMC_REPLICATES)
+        tot = np.zeros(QMC_REPLICATES)
+        m0 = 0
         for m in (QMC_LINE_POINTS, QMC_POINTS):
-            line_replicates(G, mu, e, s, float(R), float(H), Z, m, est)
+            # the first m points of each replicate (the earlier stage's are reused)
+            line_replicates(G, mu, e, s, float(R), float(H), Z, m0, m, tot)
+            m0 = m
+            est = tot / m
             se = float(est.std(ddof=1) / math.sqrt(QMC_REPLICATES))
             stat = max(QMC_T * se, 3.0 / (QMC_REPLICATES * m))
             if stat <= QMC_LINE_TARGET:
