@@ -57,7 +57,8 @@ QMC_CV_POINTS = 128
 QMC_CV_TARGET = 2e-3  # ~4 standard errors: an error ~5e-4, a third of 1e5-sample MC's at P ~ 0.5
 _QMC_SEED = 18_2026
 # Line sampling of straight 3-D pairs (core.line_sampling): QMC_LINE_POINTS points
-# per replicate, all QMC_POINTS when QMC_T standard errors exceed QMC_LINE_TARGET
+# per replicate, then twice as many, then all QMC_POINTS while QMC_T standard errors
+# exceed QMC_LINE_TARGET (each stage adds points to the previous one's)
 QMC_LINE_POINTS = 128
 QMC_LINE_TARGET = 2e-3
 
@@ -1062,14 +1063,14 @@ def finish_row(dp, dv, da, R, Sigma, H, out):
         p = min(1.0, max(0.0, min(max(upper - float(est.mean()), float(out[_OUT_LO])), upper)))
         return p, stat + float(out[_OUT_ERR]), float(out[_OUT_TPL])
     if out[_OUT_QMC] == 3.0:
-        # straight 3-D: line sampling; QMC_LINE_POINTS per replicate first, all
-        # QMC_POINTS when the statistical bound would exceed QMC_LINE_TARGET
+        # straight 3-D: line sampling; QMC_LINE_POINTS per replicate first, more
+        # (up to QMC_POINTS) while the statistical bound exceeds QMC_LINE_TARGET
         G, mu, e, s, _ = line_factor(dp, dv, np.ascontiguousarray(Sigma))
         Z = normal_table(5)
         tot = np.zeros(QMC_REPLICATES)
         m0 = 0
-        for m in (QMC_LINE_POINTS, QMC_POINTS):
-            # the first m points of each replicate (the earlier stage's are reused)
+        for m in (QMC_LINE_POINTS, 2 * QMC_LINE_POINTS, QMC_POINTS):
+            # the first m points of each replicate (the earlier stages' are reused)
             line_replicates(G, mu, e, s, float(R), float(H), Z, m0, m, tot)
             m0 = m
             est = tot / m
