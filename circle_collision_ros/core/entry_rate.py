@@ -39,9 +39,9 @@ import math
 import numpy as np
 from numba import njit
 
-from circle_collision_ros.core.quadrature import make_adaptive
+from circle_collision_ros.core.quadrature import G7_WEIGHTS, K15_NODES, K15_WEIGHTS, make_adaptive, make_adaptive_nested
 
-__all__ = ["entry_rate_integral", "DEGENERATE_RATIO"]
+__all__ = ["entry_rate_integral", "entry_rate_k15", "entry_rate_gauss3", "DEGENERATE_RATIO"]
 
 DEGENERATE_RATIO = 1e-12
 _RS2 = 1.0 / math.sqrt(2.0)
@@ -221,18 +221,11 @@ def _arc_half_angle(R, gn, rho2):
 
 
 @njit(cache=True, error_model="numpy")
-def _q_at(R, phi, g0, g1, a00, a01, a11):
-    """Mahalanobis q(x) of the circle point x = R (cos, sin)(phi)."""
-    d0 = R * math.cos(phi) - g0
-    d1 = R * math.sin(phi) - g1
-    return a00 * d0 * d0 + a01 * d0 * d1 + a11 * d1 * d1
-
-
-@njit(cache=True, error_model="numpy")
 def nu_plus_2d(dp, dv, da, R, Sigma, t, tol, acc, cap):
-    """nu+(t) in 2-D over the tube's arc; acc[0] = max inner error estimate
-    seen, acc[1] = 1 when S(t) is degenerate.  The state at t as in _state,
-    in scalars (this runs at every t node of every pair)."""
+    """nu+(t) in 2-D over the tube's arc; acc[2] = this value's error
+    estimate (the arc rule's), acc[1] = 1 when S(t) is degenerate.  The state
+    at t as in _state, in scalars (this runs at every t node of every pair)."""
+    acc[2] = 0.0
     g0 = dp[0] + t * (dv[0] + 0.5 * t * da[0])
     g1 = dp[1] + t * (dv[1] + 0.5 * t * da[1])
     gd0 = dv[0] + t * da[0]
@@ -278,12 +271,25 @@ def nu_plus_2d(dp, dv, da, R, Sigma, t, tol, acc, cap):
     # to paths outside the tube (already counted in the tail).  A scan of
     # _SCAN + 1 points finds that window (one scan step of margin each side)
     # and the local minima of q (the density's peaks: panel ends).
+    # The scan's directions by rotation (one cos/sin pair per scan instead of
+    # one per point: this runs at every nu+ node).  The accumulated rounding
+    # (~17 ulps) only moves q by ~1e-15 relative: it can flip a scan point's
+    # membership of the window only within that of k^2, and the window keeps
+    # one scan step of margin each side.
     qs = np.empty(_SCAN + 1)
     jmin = 0
+    step = 2.0 * alpha / _SCAN
+    cr = math.cos(phig - alpha)
+    sr = math.sin(phig - alpha)
+    cd = math.cos(step)
+    sd = math.sin(step)
     for j in range(_SCAN + 1):
-        qs[j] = _q_at(R, phig + (-alpha + 2.0 * alpha * j / _SCAN), g0, g1, a00, a01s, a11)
+        d0 = R * cr - g0
+        d1 = R * sr - g1
+        qs[j] = a00 * d0 * d0 + a01s * d0 * d1 + a11 * d1 * d1
         if qs[j] < qs[jmin]:
             jmin = j
+        cr, sr = cr * cd - sr * sd, sr * cd + cr * sd
     j0 = _SCAN
     j1 = 0
     for j in range(_SCAN + 1):
@@ -312,7 +318,7 @@ def nu_plus_2d(dp, dv, da, R, Sigma, t, tol, acc, cap):
             total += v
             err += e
             start = end
-    acc[0] = max(acc[0], err)
+    acc[2] = err
     return total
 
 
@@ -359,7 +365,10 @@ _cap_adaptive = make_adaptive(_cap_integrand)
 
 @njit(cache=True, error_model="numpy")
 def nu_plus_3d(dp, dv, da, R, Sigma, t, tol, acc, cap):
-    """nu+(t) in 3-D over the tube's cap (same conventions as nu_plus_2d)."""
+    """nu+(t) in 3-D over the tube's cap (same conventions as nu_plus_2d; the
+    error estimate in acc[2] is the polar rule's plus the polar width times
+    the largest azimuthal estimate; acc[0] is scratch)."""
+    acc[2] = 0.0
     g, gd, A, norm, K, Vc, rho2, degenerate = _state(dp, dv, da, Sigma, t)
     if degenerate:
         acc[1] = 1.0
@@ -389,8 +398,9 @@ def nu_plus_3d(dp, dv, da, R, Sigma, t, tol, acc, cap):
     e2[2] = u[0] * e1[1] - u[1] * e1[0]
     inner_tol = tol / (2.0 * math.pi * R * R + 1e-300)
     prm = (R, u, e1, e2, g, gd, A, norm, K, Vc, inner_tol, acc, cap)
+    acc[0] = 0.0  # the largest ring error (times R^2 sin theta) of this cap
     v, e = _cap_adaptive(prm, 0.0, alpha, tol)
-    acc[0] = max(acc[0], e)
+    acc[2] = e + alpha * acc[0]
     return v
 
 
@@ -408,17 +418,33 @@ def _nu_3d(t, prm):
     return nu_plus_3d(prm[0], prm[1], prm[2], prm[3], prm[4], t, prm[5], prm[6], prm[7] - prm[8] * t)
 
 
-_t_adaptive_2d = make_adaptive(_nu_2d)
-_t_adaptive_3d = make_adaptive(_nu_3d)
+@njit(cache=True, error_model="numpy")
+def _nu_error(prm):
+    """The error estimate of the latest nu+ value (acc[2])."""
+    return prm[6][2]
+
+
+_t_adaptive_2d = make_adaptive_nested(_nu_2d, _nu_error)
+_t_adaptive_3d = make_adaptive_nested(_nu_3d, _nu_error)
+
+# Each nu+ value's own (arc/cap) rule accepts at INNER_TOL_FACTOR * tol / (tb - ta).
+# Safe for the stated bound because the bound adds the t-rule's weighted sum of
+# the nu+ estimates actually made, not that tolerance: the worst case adds
+# INNER_TOL_FACTOR * tol, but an inner estimate exceeds its share only near
+# the peak of nu+ (the arc rule's |K15 - G7| is ~1e-4 of the value there), so
+# the sum stays well below tol (test_uncertainty_horizon checks the bound).
+# 1 (the old share) split a quarter of the arc pieces of the benchmark's pairs.
+INNER_TOL_FACTOR = 4.0
 
 
 @njit(cache=True, error_model="numpy")
 def entry_rate_integral(dp, dv, da, R, Sigma, ta, tb, tol, acc, slow_H=-1.0):
     """(int_ta^tb nu+ dt over the tube's arc/cap, error estimate).
 
-    acc (2,) float64 scratch: acc[1] is set to 1 if S(t) was degenerate at a
+    acc (3,) float64 scratch: acc[1] is set to 1 if S(t) was degenerate at a
     node (the value is then not usable).  The error estimate is the t-rule's
-    |K15 - G7| sum plus (tb - ta) times the largest inner estimate.
+    |K15 - G7| sum plus its weighted sum of the nodes' own (arc/cap) estimates
+    (``quadrature.make_adaptive_nested``).
 
     slow_H >= 0: instead of entries, the expected number of *slow exits*:
     exits at t with outward radial speed <= |da| (slow_H - t) / 2.  The
@@ -427,8 +453,7 @@ def entry_rate_integral(dp, dv, da, R, Sigma, ta, tb, tol, acc, slow_H=-1.0):
     rho' >= 0) a re-entry at t3 <= slow_H needs rho'(t2) <= |da| (t3 - t2)/2:
     every re-entry within [0, slow_H] follows its own slow exit, and
     P(contact) >= P0 + E[entries] - E[slow exits]."""
-    acc[0] = 0.0
-    inner_tol = tol / max(tb - ta, 1e-300)
+    inner_tol = INNER_TOL_FACTOR * tol / max(tb - ta, 1e-300)
     if slow_H >= 0.0:
         an = 0.0
         for k in range(da.shape[0]):
@@ -438,10 +463,38 @@ def entry_rate_integral(dp, dv, da, R, Sigma, ta, tb, tol, acc, slow_H=-1.0):
     else:
         prm = (dp, dv, da, R, Sigma, inner_tol, acc, -1.0, 0.0)
     if dp.shape[0] == 2:
-        v, e = _t_adaptive_2d(prm, ta, tb, tol)
+        v, e, inner = _t_adaptive_2d(prm, ta, tb, tol)
     else:
-        v, e = _t_adaptive_3d(prm, ta, tb, tol)
-    return v, e + (tb - ta) * acc[0]
+        v, e, inner = _t_adaptive_3d(prm, ta, tb, tol)
+    return v, e + inner
+
+
+@njit(cache=True, error_model="numpy")
+def entry_rate_k15(dp, dv, da, R, Sigma, ta, tb, tol, acc, f):
+    """(K15 of nu+ over [ta, tb], |K15 - G7|, K15 of the nodes' own
+    estimates, the largest of those): the first panel of
+    ``entry_rate_integral`` (the same nodes and tolerances), with the 15
+    values kept in f (nodes ta + (tb - ta)(1 + K15_NODES) / 2, ascending) for
+    ``quadrature.subinterval_integral``."""
+    h = 0.5 * (tb - ta)
+    c = ta + h
+    itol = INNER_TOL_FACTOR * tol / max(tb - ta, 1e-300)
+    k = 0.0
+    g = 0.0
+    ie = 0.0
+    ie_max = 0.0
+    for i in range(15):
+        t = c + h * K15_NODES[i]
+        if dp.shape[0] == 2:
+            v = nu_plus_2d(dp, dv, da, R, Sigma, t, itol, acc, -1.0)
+        else:
+            v = nu_plus_3d(dp, dv, da, R, Sigma, t, itol, acc, -1.0)
+        f[i] = v
+        k += K15_WEIGHTS[i] * v
+        g += G7_WEIGHTS[i] * v
+        ie += K15_WEIGHTS[i] * acc[2]
+        ie_max = max(ie_max, acc[2])
+    return k * h, abs((k - g) * h), ie * h, ie_max
 
 
 @njit(cache=True, error_model="numpy")
@@ -449,21 +502,25 @@ def entry_rate_gauss3(dp, dv, da, R, Sigma, ta, tb, tol, acc):
     """(int_ta^tb nu+ dt by the 3-point Gauss rule, error estimate) for short
     intervals (the plausible-time search): the estimate is |G3 - midpoint
     rule| (the midpoint is G3's centre node, so no extra evaluation; for a
-    smooth nu+ a large over-estimate of G3's error) plus (tb - ta) times the
-    largest inner estimate.  acc as in ``entry_rate_integral``."""
-    acc[0] = 0.0
+    smooth nu+ a large over-estimate of G3's error) plus the G3-weighted sum
+    of the nodes' own estimates.  acc as in ``entry_rate_integral``."""
     h = 0.5 * (tb - ta)
     c = ta + h
     x = h * math.sqrt(0.6)
-    itol = tol / max(tb - ta, 1e-300)
+    itol = INNER_TOL_FACTOR * tol / max(tb - ta, 1e-300)
     if dp.shape[0] == 2:
         f0 = nu_plus_2d(dp, dv, da, R, Sigma, c - x, itol, acc, -1.0)
+        e0 = acc[2]
         f1 = nu_plus_2d(dp, dv, da, R, Sigma, c, itol, acc, -1.0)
+        e1 = acc[2]
         f2 = nu_plus_2d(dp, dv, da, R, Sigma, c + x, itol, acc, -1.0)
     else:
         f0 = nu_plus_3d(dp, dv, da, R, Sigma, c - x, itol, acc, -1.0)
+        e0 = acc[2]
         f1 = nu_plus_3d(dp, dv, da, R, Sigma, c, itol, acc, -1.0)
+        e1 = acc[2]
         f2 = nu_plus_3d(dp, dv, da, R, Sigma, c + x, itol, acc, -1.0)
+    e2 = acc[2]
     g3 = h * (5.0 * f0 + 8.0 * f1 + 5.0 * f2) / 9.0
     g1 = 2.0 * h * f1
-    return g3, abs(g3 - g1) + (tb - ta) * acc[0]
+    return g3, abs(g3 - g1) + h * (5.0 * e0 + 8.0 * e1 + 5.0 * e2) / 9.0

@@ -11,6 +11,14 @@ feature much narrower than a panel that no node of the panel sees is not
 detected by any such rule: callers place panels so that every peak of the
 integrand lies at a panel end (see overlap_probability, entry_rate).
 
+``make_adaptive_nested(fn, last_inner)(prm, a, b, tol)`` is the same rule for an
+integrand that is itself an integral: ``last_inner(prm)`` returns the error
+estimate of fn's latest evaluation, and the rule returns ``(value, err,
+inner)`` with inner = the accepted panels' Kronrod-weighted sum of those
+estimates (the outer rule applied to the inner errors: all 15 weights are
+positive, so this is the integral of the inner error as K15 sees it, not
+the width times its largest value).
+
 Deterministic: the panel order is fixed (depth first, left to right) and no
 state is kept between calls.  ``fn`` is any ``@njit`` function.
 """
@@ -19,7 +27,8 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-__all__ = ["make_adaptive", "push_halves", "MAX_DEPTH"]
+__all__ = ["make_adaptive", "make_adaptive_nested", "push_halves", "MAX_DEPTH", "K15_NODES", "K15_WEIGHTS",
+           "G7_WEIGHTS", "subinterval_integral"]
 
 # QUADPACK's dqk15 abscissae and weights (tests/core/test_uncertainty_quadrature.py
 # checks them against mpmath's Gauss-Legendre nodes and polynomial exactness).
@@ -35,6 +44,32 @@ _WG = np.array([0.129484966168869693270611432679082, 0.2797053914892766679014677
                 0.381830050505118944950369775488975, 0.417959183673469387755102040816327])
 
 MAX_DEPTH = 40
+
+# The same rule as 15 nodes in ascending order on [-1, 1] (G7's weights zero at
+# the Kronrod-only nodes), for callers that keep the values (``panel_k15``).
+K15_NODES = np.concatenate((-_XGK[:7], [0.0], _XGK[6::-1]))
+K15_WEIGHTS = np.concatenate((_WGK[:7], [_WGK[7]], _WGK[6::-1]))
+G7_WEIGHTS = np.zeros(15)
+G7_WEIGHTS[1:7:2] = _WG[:3]
+G7_WEIGHTS[7] = _WG[3]
+G7_WEIGHTS[9:15:2] = _WG[2::-1]
+
+
+def _legendre_table(x: np.ndarray, n: int) -> np.ndarray:
+    """(len(x), n): P_k(x_i), k < n (three-term recurrence)."""
+    P = np.empty((x.size, n))
+    P[:, 0] = 1.0
+    if n > 1:
+        P[:, 1] = x
+    for k in range(1, n - 1):
+        P[:, k + 1] = ((2 * k + 1) * x * P[:, k] - k * P[:, k - 1]) / (k + 1)
+    return P
+
+
+# Legendre coefficients of the polynomial interpolating the 15 values (degree
+# 14): K15's nodes are close to Chebyshev-distributed, so the solve is well
+# conditioned (cond 6.4); tests/core/test_uncertainty_quadrature.py checks it.
+K15_TO_LEGENDRE = np.linalg.inv(_legendre_table(K15_NODES, 15))
 _STACK = MAX_DEPTH + 2
 
 
@@ -52,6 +87,47 @@ def push_halves(sa, sb, sd, top, a, m, b, d):
     return top + 2
 
 
+def _make_driver(rule):
+    """The adaptive loop over ``rule(prm, a, b) -> (value, err, inner)``."""
+
+    @njit(cache=True, error_model="numpy")
+    def adaptive(prm, a, b, tol):
+        if not (b > a):
+            return 0.0, 0.0, 0.0
+        # the whole interval first, without the stack: most calls end here, and
+        # the three stack arrays (allocated below) cost more than the rule itself
+        # on the innermost levels; the same panels in the same order either way
+        val, e, ie = rule(prm, a, b)
+        m = 0.5 * (a + b)
+        if not (e > tol) or not (a < m < b):
+            return val, e, ie
+        width = b - a
+        sa = np.empty(_STACK)
+        sb = np.empty(_STACK)
+        sd = np.empty(_STACK, dtype=np.int64)
+        top = push_halves(sa, sb, sd, 0, a, m, b, 0)
+        total = 0.0
+        err = 0.0
+        inner = 0.0
+        while top > 0:
+            top -= 1
+            pa = sa[top]
+            pb = sb[top]
+            d = sd[top]
+            val, e, ie = rule(prm, pa, pb)
+            m = 0.5 * (pa + pb)
+            # (a NaN estimate is accepted: never split without end)
+            if not (e > tol * ((pb - pa) / width)) or d >= MAX_DEPTH or not (pa < m < pb):
+                total += val
+                err += e
+                inner += ie
+            else:
+                top = push_halves(sa, sb, sd, top, pa, m, pb, d)
+        return total, err, inner
+
+    return adaptive
+
+
 def make_adaptive(fn):
     """``adaptive(prm, a, b, tol) -> (integral, error estimate)`` of
     ``fn(x, prm)`` over [a, b] (a <= b), see the module doc.
@@ -61,7 +137,7 @@ def make_adaptive(fn):
 
     @njit(cache=True, error_model="numpy")
     def gk15(prm, a, b):
-        """(K15, |K15 - G7|) of fn over [a, b]."""
+        """(K15, |K15 - G7|, 0) of fn over [a, b]."""
         c = 0.5 * (a + b)
         h = 0.5 * (b - a)
         fc = fn(c, prm)
@@ -73,39 +149,84 @@ def make_adaptive(fn):
             k += _WGK[j] * s
             if j % 2 == 1:
                 g += _WG[j // 2] * s
-        return k * h, abs((k - g) * h)
+        return k * h, abs((k - g) * h), 0.0
+
+    driver = _make_driver(gk15)
 
     @njit(cache=True, error_model="numpy")
     def adaptive(prm, a, b, tol):
-        if not (b > a):
-            return 0.0, 0.0
-        # the whole interval first, without the stack: most calls end here, and
-        # the three stack arrays (allocated below) cost more than the rule itself
-        # on the innermost levels; the same panels in the same order either way
-        val, e = gk15(prm, a, b)
-        m = 0.5 * (a + b)
-        if not (e > tol) or not (a < m < b):
-            return val, e
-        width = b - a
-        sa = np.empty(_STACK)
-        sb = np.empty(_STACK)
-        sd = np.empty(_STACK, dtype=np.int64)
-        top = push_halves(sa, sb, sd, 0, a, m, b, 0)
-        total = 0.0
-        err = 0.0
-        while top > 0:
-            top -= 1
-            pa = sa[top]
-            pb = sb[top]
-            d = sd[top]
-            val, e = gk15(prm, pa, pb)
-            m = 0.5 * (pa + pb)
-            # (a NaN estimate is accepted: never split without end)
-            if not (e > tol * ((pb - pa) / width)) or d >= MAX_DEPTH or not (pa < m < pb):
-                total += val
-                err += e
-            else:
-                top = push_halves(sa, sb, sd, top, pa, m, pb, d)
-        return total, err
+        v, e, _ = driver(prm, a, b, tol)
+        return v, e
 
     return adaptive
+
+
+def make_adaptive_nested(fn, last_inner):
+    """``adaptive(prm, a, b, tol) -> (integral, error estimate, weighted inner
+    error)`` of ``fn(x, prm)``, an integrand whose own error estimate
+    ``last_inner(prm)`` reads after each evaluation (module doc)."""
+
+    @njit(cache=True, error_model="numpy")
+    def gk15(prm, a, b):
+        """(K15, |K15 - G7|, K15 of the inner errors) of fn over [a, b]."""
+        c = 0.5 * (a + b)
+        h = 0.5 * (b - a)
+        fc = fn(c, prm)
+        ie = last_inner(prm) * _WGK[7]
+        k = fc * _WGK[7]
+        g = fc * _WG[3]
+        for j in range(7):
+            dx = h * _XGK[j]
+            f1 = fn(c - dx, prm)
+            e1 = last_inner(prm)
+            f2 = fn(c + dx, prm)
+            e2 = last_inner(prm)
+            s = f1 + f2
+            k += _WGK[j] * s
+            ie += _WGK[j] * (e1 + e2)
+            if j % 2 == 1:
+                g += _WG[j // 2] * s
+        return k * h, abs((k - g) * h), ie * h
+
+    return _make_driver(gk15)
+
+
+@njit(cache=True, error_model="numpy")
+def _legendre_antiderivative(coef, x):
+    """int_{-1}^{x} sum_k coef[k] P_k (int P_0 = x + 1; int P_k = (P_{k+1} - P_{k-1}) / (2k + 1))."""
+    n = coef.shape[0]
+    p_prev = 1.0  # P_0
+    p = x  # P_1
+    total = coef[0] * (x + 1.0)
+    for k in range(1, n):
+        p_next = ((2 * k + 1) * x * p - k * p_prev) / (k + 1)  # P_{k+1}
+        total += coef[k] * (p_next - p_prev) / (2 * k + 1)
+        p_prev = p
+        p = p_next
+    return total
+
+
+@njit(cache=True, error_model="numpy")
+def subinterval_integral(f, xl, xr):
+    """(integral over [xl, xr] of the degree-14 polynomial p15 through the 15
+    values f at K15_NODES, an error estimate) for -1 <= xl <= xr <= 1
+    (unit-interval coordinates: multiply both by the half-width).  Over
+    [-1, 1] the value is K15 of f.
+
+    The estimate is (xr - xl) * sum of |c_k| over p15's last four Legendre
+    coefficients (k = 11..14): the spectral tail, as Chebfun judges a
+    truncation (|P_k| <= 1, so a series whose coefficients keep decaying
+    geometrically beyond k = 14 with ratio below ~0.75 differs from p15 by less
+    than that sum anywhere).  A heuristic like |K15 - G7| (a function that p15
+    does not resolve shows as a large tail), far above the true error on
+    smooth integrands; the interpolant of the 7 Gauss values would not do
+    (its pointwise error is orders of magnitude above G7's quadrature error)."""
+    c = np.zeros(15)
+    for k in range(15):
+        a = 0.0
+        for i in range(15):
+            a += K15_TO_LEGENDRE[k, i] * f[i]
+        c[k] = a
+    value = _legendre_antiderivative(c, xr) - _legendre_antiderivative(c, xl)
+    tail = abs(c[11]) + abs(c[12]) + abs(c[13]) + abs(c[14])
+    return value, (xr - xl) * tail

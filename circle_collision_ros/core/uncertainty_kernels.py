@@ -13,12 +13,12 @@ from statistics import NormalDist
 import numpy as np
 from numba import njit
 
-from circle_collision_ros.core.entry_rate import BROAD_K2, entry_rate_gauss3, entry_rate_integral
+from circle_collision_ros.core.entry_rate import BROAD_K2, entry_rate_gauss3, entry_rate_integral, entry_rate_k15
 from circle_collision_ros.core.line_sampling import line_factor, line_replicates
 from circle_collision_ros.core.narrow_phase import _ttc_kernel_h
 from circle_collision_ros.core.overlap_probability import (BALL_ERR_PER_TOL, eig_sym, overlap_probability,
                                                            overlap_probability_2d, overlap_probability_tol)
-from circle_collision_ros.core.quadrature import push_halves
+from circle_collision_ros.core.quadrature import push_halves, subinterval_integral
 from circle_collision_ros.core.sobol import scrambled_directions, sobol_points
 
 __all__ = ["BROAD_PHASE_SIGMAS", "TUBE_TAIL", "chi2_tail_even", "S_at", "max_sigma_over",
@@ -583,9 +583,33 @@ def _prob_at(dp, dv, da, R, Sigma, t, st):
     return p
 
 
+# The per-pair cache of panel integrals (one row per panel): computed flag,
+# value, error estimate; then, when the panel's single K15 was accepted (no
+# split), a flag, the largest of the nodes' own (arc/cap) error estimates and
+# the 15 values of nu+ at the panel's K15 nodes (the walk's short steps
+# integrate their interpolant instead of evaluating nu+ again).
+_C_DONE, _C_VALUE, _C_ERR, _C_NODES_OK, _C_INNER_MAX, _C_NODES = 0, 1, 2, 3, 4, 5
+CACHE_COLUMNS = _C_NODES + 15
+
+
 @njit(cache=True, error_model="numpy")
-def _rice_short(dp, dv, da, R, Sigma, a, b, acc, st):
-    """Entry-rate integral over a short interval (3-point Gauss) and its error estimate."""
+def _rice_short(dp, dv, da, R, Sigma, a, b, pa, pb, j, cache, plo, thr, acc, st):
+    """Entry-rate integral over a short interval [a, b] of panel j and its error
+    estimate: from the panel's kept nu+ values where they certify the step
+    (plo + value + estimate + P's error < thr: no new nu+ evaluation), else by
+    the 3-point Gauss rule."""
+    if cache[j, _C_NODES_OK] != 0.0:
+        h = 0.5 * (pb[j] - pa[j])
+        m = pa[j] + h
+        xl = min(max((a - m) / h, -1.0), 1.0)
+        xr = min(max((b - m) / h, -1.0), 1.0)
+        v, e = subinterval_integral(cache[j, _C_NODES:], xl, xr)
+        v = max(v * h, 0.0)  # nu+ >= 0: a negative interpolant integral is rounding or ringing
+        # the nodes' own estimates as the adaptive rule of entry_rate_integral
+        # counted them before it weighted them: width times the largest
+        e = e * h + (b - a) * cache[j, _C_INNER_MAX]
+        if plo + v + e + st[_ST_PERR] < thr:
+            return v, e
     acc[1] = 0.0
     v, e = entry_rate_gauss3(dp, dv, da, R, Sigma, a, b, _RICE_TOL, acc)
     if acc[1] != 0.0:
@@ -596,16 +620,30 @@ def _rice_short(dp, dv, da, R, Sigma, a, b, acc, st):
 @njit(cache=True, error_model="numpy")
 def _rice_panel(dp, dv, da, R, Sigma, pa, pb, j, cache, acc, st):
     """Entry-rate integral over panel j and its error estimate, computed once
-    per pair (cache[j] = (done, value, error))."""
-    if cache[j, 0] == 0.0:
+    per pair (cache row j, see CACHE_COLUMNS).  The same panels as
+    ``entry_rate_integral`` over [pa[j], pb[j]]: its whole-interval K15 first
+    (values kept), else its two halves with half the tolerance each, which is
+    where the adaptive rule goes next."""
+    if cache[j, _C_DONE] == 0.0:
         acc[1] = 0.0
-        v, e = entry_rate_integral(dp, dv, da, R, Sigma, pa[j], pb[j], _RICE_TOL, acc, -1.0)
+        v, e, inner, inner_max = entry_rate_k15(dp, dv, da, R, Sigma, pa[j], pb[j], _RICE_TOL, acc,
+                                                cache[j, _C_NODES:])
+        if not (e > _RICE_TOL):  # (a NaN estimate is accepted, as by the adaptive rule)
+            cache[j, _C_NODES_OK] = 1.0
+            cache[j, _C_INNER_MAX] = inner_max
+            e += inner
+        else:
+            m = 0.5 * (pa[j] + pb[j])
+            v, e = entry_rate_integral(dp, dv, da, R, Sigma, pa[j], m, 0.5 * _RICE_TOL, acc, -1.0)
+            v2, e2 = entry_rate_integral(dp, dv, da, R, Sigma, m, pb[j], 0.5 * _RICE_TOL, acc, -1.0)
+            v += v2
+            e += e2
         if acc[1] != 0.0:
             st[_ST_DEGENERATE] = 1.0
-        cache[j, 0] = 1.0
-        cache[j, 1] = v
-        cache[j, 2] = e
-    return cache[j, 1], cache[j, 2]
+        cache[j, _C_DONE] = 1.0
+        cache[j, _C_VALUE] = v
+        cache[j, _C_ERR] = e
+    return cache[j, _C_VALUE], cache[j, _C_ERR]
 
 
 _SEARCH_STEPS = 64  # certified steps per panel before the conservative exit
@@ -789,7 +827,7 @@ def _first_crossing(dp, dv, da, R, Sigma, pa, pb, j, a0, p_start, thr, dt, cache
                 v, e = _rice_panel(dp, dv, da, R, Sigma, pa, pb, j, cache, acc, st)
                 width = b - pa[j]
             else:
-                v, e = _rice_short(dp, dv, da, R, Sigma, lo, c, acc, st)
+                v, e = _rice_short(dp, dv, da, R, Sigma, lo, c, pa, pb, j, cache, plo, thr, acc, st)
                 width = c - lo
             if st[_ST_DEGENERATE] != 0.0:
                 return math.inf
@@ -882,7 +920,7 @@ def _pair_kernel(dp, dv, da, R, Sigma, H, thr, out):
         return
     st = np.zeros(_ST_SIZE)
     st[_ST_PERR] = _P0_ERR
-    acc = np.zeros(2)
+    acc = np.zeros(3)  # entry_rate's scratch
     # straight 3-D pairs: the probability by line sampling (finish_row), not by
     # the Rice panels, so the walk does not get them for free; their
     # instantaneous probabilities serve the walk only (looser tolerance)
@@ -902,7 +940,7 @@ def _pair_kernel(dp, dv, da, R, Sigma, H, thr, out):
     # the walk's panels end at t_inside; the Rice integral below runs only
     # when t_inside is +inf, where they are the full panels (cache shared)
     npan = _panels(leaves, cnt, t_inside, pa, pb)
-    cache = np.zeros((npan + 1, 3))
+    cache = np.zeros((npan + 1, CACHE_COLUMNS))
 
     # plausible time: certified walk over the ambiguous panels before t_inside
     tpl = math.inf
