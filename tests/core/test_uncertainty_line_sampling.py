@@ -189,7 +189,10 @@ def test_plausible_time_of_line_sampled_pairs_is_the_first_crossing():
         if math.isfinite(t_star):
             found += 1
             # at t*: above the threshold, or (the conservative exit) within the
-            # certificate's resolution below it (the walk's probabilities carry a
-            # stated error of 8e-7 x threshold)
-            assert P(t_star) >= thr - 1e-6
+            # certificate's resolution below it: the Rice integral of the step
+            # [t*, t* + 1e-6 H] plus its estimate plus twice the probabilities'
+            # stated error (8e-7 x threshold here): 1.2e-6 at threshold 0.1 on
+            # one of these pairs (the 1e-9 probabilities of the 2-D test give
+            # < 1e-6 there)
+            assert P(t_star) >= thr - 2e-6
     assert found >= 4
