@@ -40,11 +40,15 @@ from numba import njit
 
 from circle_collision_ros.core.quadrature import make_adaptive
 
-__all__ = ["overlap_probability", "overlap_probability_2d", "interval_mass", "disc_probability", "ball_probability",
-           "WINDOW_SIGMAS"]
+__all__ = ["overlap_probability", "overlap_probability_2d", "overlap_probability_tol", "interval_mass",
+           "disc_probability", "disc_probability_tol", "ball_probability", "ball_probability_tol", "WINDOW_SIGMAS",
+           "BALL_ERR_PER_TOL"]
 
 WINDOW_SIGMAS = 9.0  # integration window [-9, 9] sigma of each integrated component
 _TOL = 1e-10  # |K15 - G7| tolerance per 1-D integral (absolute, on a probability)
+# a 3-D probability at tolerance tol per piece is within BALL_ERR_PER_TOL * tol (by the
+# estimates): 4 pieces per level, two levels; at _TOL: 8e-10 <= 1e-9
+BALL_ERR_PER_TOL = 8.0
 _RS2 = 1.0 / math.sqrt(2.0)
 _RS2PI = 1.0 / math.sqrt(2.0 * math.pi)
 
@@ -63,7 +67,7 @@ def interval_mass(lo, hi, m, s):
 
 
 # ---- the narrow-direction integral, shared by 2-D and 3-D -------------------
-# prm = (kind, R, ehi0, elo0, s1, uend, m2, s2, m3, s3)
+# prm = (kind, R, ehi0, elo0, s1, uend, m2, s2, m3, s3, tol)
 #   x = m1 + s1 u; R - x = ehi0 - s1 u; R + x = elo0 + s1 u
 #   kind 0: plain u; kind 1: u = uend - v^2 (upper end at x = R);
 #   kind 2: u = uend + v^2 (lower end at x = -R)
@@ -101,23 +105,24 @@ def _make_narrow(inner):
     adaptive = make_adaptive(integrand)
 
     @njit(cache=True, error_model="numpy")
-    def piece(R, ehi0, elo0, s1, ua, ub, lo_edge, hi_edge, m2, s2, m3, s3):
+    def piece(R, ehi0, elo0, s1, ua, ub, lo_edge, hi_edge, m2, s2, m3, s3, tol):
         """(value, err) over u in [ua, ub]; hi_edge: ub is x = R, lo_edge: ua
         is x = -R (never both: the caller splits the window)."""
         if not (ub > ua):
             return 0.0, 0.0
         if hi_edge:  # u = ub - v^2, v in [0, sqrt(ub - ua)]
-            prm = (1.0, R, ehi0, elo0, s1, ub, m2, s2, m3, s3)
-            return adaptive(prm, 0.0, math.sqrt(ub - ua), _TOL)
+            prm = (1.0, R, ehi0, elo0, s1, ub, m2, s2, m3, s3, tol)
+            return adaptive(prm, 0.0, math.sqrt(ub - ua), tol)
         if lo_edge:
-            prm = (2.0, R, ehi0, elo0, s1, ua, m2, s2, m3, s3)
-            return adaptive(prm, 0.0, math.sqrt(ub - ua), _TOL)
-        prm = (0.0, R, ehi0, elo0, s1, 0.0, m2, s2, m3, s3)
-        return adaptive(prm, ua, ub, _TOL)
+            prm = (2.0, R, ehi0, elo0, s1, ua, m2, s2, m3, s3, tol)
+            return adaptive(prm, 0.0, math.sqrt(ub - ua), tol)
+        prm = (0.0, R, ehi0, elo0, s1, 0.0, m2, s2, m3, s3, tol)
+        return adaptive(prm, ua, ub, tol)
 
     @njit(cache=True, error_model="numpy")
-    def narrow(R, m1, s1, m2, s2, m3, s3):
-        """(value, err): integral over the narrow component y1 ~ N(m1, s1^2), s1 > 0."""
+    def narrow(R, m1, s1, m2, s2, m3, s3, tol):
+        """(value, err): integral over the narrow component y1 ~ N(m1, s1^2), s1 > 0,
+        each piece to ``tol`` (the inner factor gets the same tolerance)."""
         ehi0 = R - m1
         elo0 = R + m1
         ua = -WINDOW_SIGMAS
@@ -132,16 +137,26 @@ def _make_narrow(inner):
             lo_edge = True
         if not (ub > ua):
             return 0.0, 0.0
+        if s3 >= 0.0 and tol > _TOL and 9.0 * s2 * s2 >= R * s1:
+            # the 3-D outer level at a looser tolerance than the proven _TOL (the
+            # plausible-time walk's): here the inner factor F(w(x)) = G(R^2 - x^2)
+            # is smooth up to the edges (a disc probability is a smooth function
+            # of w^2: no sqrt singularity); its one sharp feature, G's rise over
+            # w <~ 3 s2, i.e. x within ~4.5 s2^2 / R of an edge, is at least half
+            # a sigma of u wide when 9 s2^2 >= R s1, which the plain rule
+            # resolves: no substitution pieces (half the inner evaluations)
+            lo_edge = False
+            hi_edge = False
         c = 0.0 if (ua < 0.0 < ub) else 0.5 * (ua + ub)
         # the substitution only on a short piece at an edge (at most 1 sigma):
         # it removes the sqrt singularity there, while the density's bump
         # stays in plain u where it is smooth
         ca = ua + min(1.0, 0.5 * (c - ua)) if lo_edge else ua
         cb = ub - min(1.0, 0.5 * (ub - c)) if hi_edge else ub
-        v0, e0 = piece(R, ehi0, elo0, s1, ua, ca, lo_edge, False, m2, s2, m3, s3)
-        v1, e1 = piece(R, ehi0, elo0, s1, ca, c, False, False, m2, s2, m3, s3)
-        v2, e2 = piece(R, ehi0, elo0, s1, c, cb, False, False, m2, s2, m3, s3)
-        v3, e3 = piece(R, ehi0, elo0, s1, cb, ub, False, hi_edge, m2, s2, m3, s3)
+        v0, e0 = piece(R, ehi0, elo0, s1, ua, ca, lo_edge, False, m2, s2, m3, s3, tol)
+        v1, e1 = piece(R, ehi0, elo0, s1, ca, c, False, False, m2, s2, m3, s3, tol)
+        v2, e2 = piece(R, ehi0, elo0, s1, c, cb, False, False, m2, s2, m3, s3, tol)
+        v3, e3 = piece(R, ehi0, elo0, s1, cb, ub, False, hi_edge, m2, s2, m3, s3, tol)
         return (v0 + v1) + (v2 + v3), (e0 + e1) + (e2 + e3)
 
     return narrow
@@ -159,6 +174,12 @@ _narrow2 = _make_narrow(_segment_factor)
 @njit(cache=True, error_model="numpy")
 def disc_probability(R, m1, s1, m2, s2):
     """P(y1^2 + y2^2 <= R^2) for independent y_i ~ N(m_i, s_i^2), s_i >= 0."""
+    return disc_probability_tol(R, m1, s1, m2, s2, _TOL)
+
+
+@njit(cache=True, error_model="numpy")
+def disc_probability_tol(R, m1, s1, m2, s2, tol):
+    """disc_probability with the quadrature tolerance ``tol`` per piece."""
     if s1 > s2:
         m1, s1, m2, s2 = m2, s2, m1, s1
     if not (R > 0.0):
@@ -171,14 +192,14 @@ def disc_probability(R, m1, s1, m2, s2):
             return 0.0
         w = math.sqrt(e)
         return interval_mass(-w, w, m2, s2)
-    v, _ = _narrow2(R, m1, s1, m2, s2, 0.0, -1.0)
+    v, _ = _narrow2(R, m1, s1, m2, s2, 0.0, -1.0, tol)
     return min(1.0, max(0.0, v))
 
 
 @njit(cache=True, error_model="numpy")
 def _disc_factor(w, prm):
     """3-D inner factor: the disc probability of (y2, y3) with radius w."""
-    return disc_probability(w, prm[6], prm[7], prm[8], prm[9])
+    return disc_probability_tol(w, prm[6], prm[7], prm[8], prm[9], prm[10])
 
 
 _narrow3 = _make_narrow(_disc_factor)
@@ -187,6 +208,14 @@ _narrow3 = _make_narrow(_disc_factor)
 @njit(cache=True, error_model="numpy")
 def ball_probability(R, m1, s1, m2, s2, m3, s3):
     """P(|y| <= R) for independent y_i ~ N(m_i, s_i^2), s_i >= 0 (3-D)."""
+    return ball_probability_tol(R, m1, s1, m2, s2, m3, s3, _TOL)
+
+
+@njit(cache=True, error_model="numpy")
+def ball_probability_tol(R, m1, s1, m2, s2, m3, s3, tol):
+    """ball_probability with the quadrature tolerance ``tol`` per piece and level:
+    the stated error is <= BALL_ERR_PER_TOL * tol (4 pieces per level, each within
+    tol, the inner level's errors weighted by a density of total mass <= 1)."""
     # sort so that s1 <= s2 <= s3
     if s1 > s2:
         m1, s1, m2, s2 = m2, s2, m1, s1
@@ -200,8 +229,8 @@ def ball_probability(R, m1, s1, m2, s2, m3, s3):
         e = (R - m1) * (R + m1)
         if not (e > 0.0):
             return 0.0
-        return disc_probability(math.sqrt(e), m2, s2, m3, s3)
-    v, _ = _narrow3(R, m1, s1, m2, s2, m3, s3)
+        return disc_probability_tol(math.sqrt(e), m2, s2, m3, s3, tol)
+    v, _ = _narrow3(R, m1, s1, m2, s2, m3, s3, tol)
     return min(1.0, max(0.0, v))
 
 
@@ -291,6 +320,13 @@ def overlap_probability(mean, S, R):
     """P(|X| <= R) for X ~ N(mean, S) in 2-D or 3-D (mean (D,), S (D, D) PSD).
 
     1e-9 absolute (tests/core/test_uncertainty_overlap.py)."""
+    return overlap_probability_tol(mean, S, R, _TOL)
+
+
+@njit(cache=True, error_model="numpy")
+def overlap_probability_tol(mean, S, R, tol):
+    """overlap_probability with the 3-D quadrature tolerance ``tol`` per piece and
+    level (stated error <= BALL_ERR_PER_TOL * tol; the 2-D case always at _TOL)."""
     D = mean.shape[0]
     if D == 2:
         return overlap_probability_2d(mean[0], mean[1], S[0, 0], 0.5 * (S[0, 1] + S[1, 0]), S[1, 1], R)
@@ -299,5 +335,5 @@ def overlap_probability(mean, S, R):
     for j in range(D):
         for k in range(D):
             mu[j] += Q[k, j] * mean[k]
-    return ball_probability(R, mu[0], math.sqrt(lam[0]), mu[1], math.sqrt(lam[1]),
-                            mu[2], math.sqrt(lam[2]))
+    return ball_probability_tol(R, mu[0], math.sqrt(lam[0]), mu[1], math.sqrt(lam[1]),
+                                mu[2], math.sqrt(lam[2]), tol)

@@ -29,6 +29,7 @@ from typing import NamedTuple
 
 import numpy as np
 
+from circle_collision_ros.core.line_sampling import line_factor, line_replicates
 from circle_collision_ros.core.narrow_phase import time_to_collision
 from circle_collision_ros.core.uncertainty_kernels import (
     BROAD_PHASE_SIGMAS,
@@ -296,7 +297,8 @@ def inflation_radius(cov, horizon: float) -> np.ndarray:
 
 def load_fallback_kernels(dimensions: int) -> None:
     """Compile (or load from numba's cache) the RQMC kernels for `dimensions`: the contact
-    indicator's (degenerate covariances) and the over-count's (accelerating pairs).
+    indicator's (degenerate covariances), the over-count's (accelerating pairs) and, in
+    3-D, line sampling's (straight pairs).
 
     A warm-up scene may reach neither; called directly, a node's first such pair waits
     for no compile."""
@@ -305,3 +307,6 @@ def load_fallback_kernels(dimensions: int) -> None:
     Z = normal_table(2 * dimensions)
     qmc_probability(z + 1.5, z, z + 0.1, 1.0, cov, 1.0, Z)
     overcount_replicates(z + 1.5, z, z + 0.1, 1.0, 1.0, factor(cov), Z, 1, np.empty(Z.shape[0]))
+    if dimensions == 3:
+        G, mu, e, s, _ = line_factor(z + 1.5, z + 1.0, cov)
+        line_replicates(G, mu, e, s, 1.0, 1.0, normal_table(5), 0, 1, np.zeros(Z.shape[0]))
