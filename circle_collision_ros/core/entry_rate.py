@@ -60,27 +60,6 @@ def _pos_part_mean(m, s):
 
 
 @njit(cache=True, error_model="numpy")
-def _slow_exit_mean(m, s, c):
-    """E[Y 1{0 < Y <= c}] for Y ~ N(m, s^2), c >= 0 (outward speeds of exits
-    slow enough to allow a re-entry, see ``entry_rate_integral``)."""
-    if not (s > 0.0):
-        return m if (0.0 < m <= c) else 0.0
-    a = -m / s
-    b = (c - m) / s
-    mass = 0.5 * (math.erfc(a * _RS2) - math.erfc(b * _RS2))
-    return max(m * mass + s * _RS2PI * (math.exp(-0.5 * a * a) - math.exp(-0.5 * b * b)), 0.0)
-
-
-@njit(cache=True, error_model="numpy")
-def _rate(m, s, cap):
-    """The conditional rate factor: entries E[(-Y)^+] (cap < 0) or slow exits
-    E[Y 1{0 < Y <= cap}] (cap >= 0)."""
-    if cap < 0.0:
-        return _pos_part_mean(m, s)
-    return _slow_exit_mean(m, s, cap)
-
-
-@njit(cache=True, error_model="numpy")
 def _inv(S):
     """(inverse, determinant) of a symmetric 2x2 or 3x3 matrix (adjugate)."""
     D = S.shape[0]
@@ -152,7 +131,7 @@ def _state(dp, dv, da, Sigma, t):
 
 
 @njit(cache=True, error_model="numpy")
-def _surface_integrand(n0, n1, n2, R, g, gd, A, norm, K, Vc, cap):
+def _surface_integrand(n0, n1, n2, R, g, gd, A, norm, K, Vc):
     """f_t(x) E[(-n.Xdot)^+ | X = x] at the sphere point x = R n, n = (n0, n1, n2):
     scalar code (no temporaries: this is the innermost loop of the 3-D cap)."""
     d0 = R * n0 - g[0]
@@ -172,7 +151,7 @@ def _surface_integrand(n0, n1, n2, R, g, gd, A, norm, K, Vc, cap):
         s2 += ni * Vn
     if not (q < 1400.0):
         return 0.0
-    return norm * math.exp(-0.5 * q) * _rate(m, math.sqrt(max(s2, 0.0)), cap)
+    return norm * math.exp(-0.5 * q) * _pos_part_mean(m, math.sqrt(max(s2, 0.0)))
 
 
 # ---- 2-D: the arc integral at one t ---------------------------------------------
@@ -181,7 +160,7 @@ def _surface_integrand(n0, n1, n2, R, g, gd, A, norm, K, Vc, cap):
 _P_R, _P_PHIG, _P_G0, _P_G1, _P_GD0, _P_GD1 = 0, 1, 2, 3, 4, 5
 _P_A00, _P_A01, _P_A11, _P_NORM = 6, 7, 8, 9  # _P_A01: A[0, 1] + A[1, 0]
 _P_K00, _P_K01, _P_K10, _P_K11 = 10, 11, 12, 13
-_P_V00, _P_V01, _P_V11, _P_CAP = 14, 15, 16, 17  # _P_V01: Vc[0, 1] + Vc[1, 0]
+_P_V00, _P_V01, _P_V11 = 14, 15, 16  # _P_V01: Vc[0, 1] + Vc[1, 0]
 
 
 @njit(cache=True, error_model="numpy")
@@ -200,7 +179,7 @@ def _arc_integrand(psi, prm):
     m = (n0 * (prm[_P_GD0] + prm[_P_K00] * d0 + prm[_P_K01] * d1)
          + n1 * (prm[_P_GD1] + prm[_P_K10] * d0 + prm[_P_K11] * d1))
     s2 = prm[_P_V00] * n0 * n0 + prm[_P_V01] * n0 * n1 + prm[_P_V11] * n1 * n1
-    return R * prm[_P_NORM] * math.exp(-0.5 * q) * _rate(m, math.sqrt(max(s2, 0.0)), prm[_P_CAP])
+    return R * prm[_P_NORM] * math.exp(-0.5 * q) * _pos_part_mean(m, math.sqrt(max(s2, 0.0)))
 
 
 _arc_adaptive = make_adaptive(_arc_integrand)
@@ -221,7 +200,7 @@ def _arc_half_angle(R, gn, rho2):
 
 
 @njit(cache=True, error_model="numpy")
-def nu_plus_2d(dp, dv, da, R, Sigma, t, tol, acc, cap):
+def nu_plus_2d(dp, dv, da, R, Sigma, t, tol, acc):
     """nu+(t) in 2-D over the tube's arc; acc[2] = this value's error
     estimate (the arc rule's), acc[1] = 1 when S(t) is degenerate.  The state
     at t as in _state, in scalars (this runs at every t node of every pair)."""
@@ -306,7 +285,7 @@ def nu_plus_2d(dp, dv, da, R, Sigma, t, tol, acc, cap):
         if qs[j] <= qs[j - 1] and qs[j] < qs[j + 1]:
             npieces += 1
     prm = (R, phig, g0, g1, gd0, gd1, a00, a01s, a11, norm, k00, k01, k10, k11,
-           v00, v01 + v10, v11, cap)
+           v00, v01 + v10, v11)
     ptol = tol / npieces
     total = 0.0
     err = 0.0
@@ -323,7 +302,7 @@ def nu_plus_2d(dp, dv, da, R, Sigma, t, tol, acc, cap):
 
 
 # ---- 3-D: the cap integral at one t ---------------------------------------------
-# prm = (R, theta, u, e1, e2, g, gd, A, norm, K, Vc, cap)
+# prm = (R, theta, u, e1, e2, g, gd, A, norm, K, Vc)
 
 
 @njit(cache=True, error_model="numpy")
@@ -340,7 +319,7 @@ def _ring_integrand(psi, prm):
     n0 = ct * u[0] + st * (cp * e1[0] + sp * e2[0])
     n1 = ct * u[1] + st * (cp * e1[1] + sp * e2[1])
     n2 = ct * u[2] + st * (cp * e1[2] + sp * e2[2])
-    return _surface_integrand(n0, n1, n2, R, prm[5], prm[6], prm[7], prm[8], prm[9], prm[10], prm[11])
+    return _surface_integrand(n0, n1, n2, R, prm[5], prm[6], prm[7], prm[8], prm[9], prm[10])
 
 
 _ring_adaptive = make_adaptive(_ring_integrand)
@@ -350,7 +329,7 @@ _ring_adaptive = make_adaptive(_ring_integrand)
 def _cap_integrand(th, prm):
     """R^2 sin(theta) * ring integral at polar angle theta."""
     R = prm[0]
-    p2 = (R, th, prm[1], prm[2], prm[3], prm[4], prm[5], prm[6], prm[7], prm[8], prm[9], prm[12])
+    p2 = (R, th, prm[1], prm[2], prm[3], prm[4], prm[5], prm[6], prm[7], prm[8], prm[9])
     tol = prm[10]
     v1, e1 = _ring_adaptive(p2, 0.0, math.pi, tol)
     v2, e2 = _ring_adaptive(p2, math.pi, 2.0 * math.pi, tol)
@@ -364,7 +343,7 @@ _cap_adaptive = make_adaptive(_cap_integrand)
 
 
 @njit(cache=True, error_model="numpy")
-def nu_plus_3d(dp, dv, da, R, Sigma, t, tol, acc, cap):
+def nu_plus_3d(dp, dv, da, R, Sigma, t, tol, acc):
     """nu+(t) in 3-D over the tube's cap (same conventions as nu_plus_2d; the
     error estimate in acc[2] is the polar rule's plus the polar width times
     the largest azimuthal estimate; acc[0] is scratch)."""
@@ -397,7 +376,7 @@ def nu_plus_3d(dp, dv, da, R, Sigma, t, tol, acc, cap):
     e2[1] = u[2] * e1[0] - u[0] * e1[2]
     e2[2] = u[0] * e1[1] - u[1] * e1[0]
     inner_tol = tol / (2.0 * math.pi * R * R + 1e-300)
-    prm = (R, u, e1, e2, g, gd, A, norm, K, Vc, inner_tol, acc, cap)
+    prm = (R, u, e1, e2, g, gd, A, norm, K, Vc, inner_tol, acc)
     acc[0] = 0.0  # the largest ring error (times R^2 sin theta) of this cap
     v, e = _cap_adaptive(prm, 0.0, alpha, tol)
     acc[2] = e + alpha * acc[0]
@@ -405,17 +384,17 @@ def nu_plus_3d(dp, dv, da, R, Sigma, t, tol, acc, cap):
 
 
 # ---- the t integral ------------------------------------------------------------
-# prm = (dp, dv, da, R, Sigma, inner_tol, acc, cap0, cap1): cap(t) = cap0 - cap1 t
+# prm = (dp, dv, da, R, Sigma, inner_tol, acc)
 
 
 @njit(cache=True, error_model="numpy")
 def _nu_2d(t, prm):
-    return nu_plus_2d(prm[0], prm[1], prm[2], prm[3], prm[4], t, prm[5], prm[6], prm[7] - prm[8] * t)
+    return nu_plus_2d(prm[0], prm[1], prm[2], prm[3], prm[4], t, prm[5], prm[6])
 
 
 @njit(cache=True, error_model="numpy")
 def _nu_3d(t, prm):
-    return nu_plus_3d(prm[0], prm[1], prm[2], prm[3], prm[4], t, prm[5], prm[6], prm[7] - prm[8] * t)
+    return nu_plus_3d(prm[0], prm[1], prm[2], prm[3], prm[4], t, prm[5], prm[6])
 
 
 @njit(cache=True, error_model="numpy")
@@ -438,30 +417,14 @@ INNER_TOL_FACTOR = 4.0
 
 
 @njit(cache=True, error_model="numpy")
-def entry_rate_integral(dp, dv, da, R, Sigma, ta, tb, tol, acc, slow_H=-1.0):
+def entry_rate_integral(dp, dv, da, R, Sigma, ta, tb, tol, acc):
     """(int_ta^tb nu+ dt over the tube's arc/cap, error estimate).
 
     acc (3,) float64 scratch: acc[1] is set to 1 if S(t) was degenerate at a
     node (the value is then not usable).  The error estimate is the t-rule's
     |K15 - G7| sum plus its weighted sum of the nodes' own (arc/cap) estimates
-    (``quadrature.make_adaptive_nested``).
-
-    slow_H >= 0: instead of entries, the expected number of *slow exits*:
-    exits at t with outward radial speed <= |da| (slow_H - t) / 2.  The
-    radial distance rho = |X| of any path has rho'' = (|Xdot|^2 -
-    (n.Xdot)^2) / rho + n.da >= -|da|, so after an exit at t2 (rho = R,
-    rho' >= 0) a re-entry at t3 <= slow_H needs rho'(t2) <= |da| (t3 - t2)/2:
-    every re-entry within [0, slow_H] follows its own slow exit, and
-    P(contact) >= P0 + E[entries] - E[slow exits]."""
-    inner_tol = INNER_TOL_FACTOR * tol / max(tb - ta, 1e-300)
-    if slow_H >= 0.0:
-        an = 0.0
-        for k in range(da.shape[0]):
-            an += da[k] * da[k]
-        half = 0.5 * math.sqrt(an)
-        prm = (dp, dv, da, R, Sigma, inner_tol, acc, half * slow_H, half)
-    else:
-        prm = (dp, dv, da, R, Sigma, inner_tol, acc, -1.0, 0.0)
+    (``quadrature.make_adaptive_nested``)."""
+    prm = (dp, dv, da, R, Sigma, INNER_TOL_FACTOR * tol / max(tb - ta, 1e-300), acc)
     if dp.shape[0] == 2:
         v, e, inner = _t_adaptive_2d(prm, ta, tb, tol)
     else:
@@ -486,9 +449,9 @@ def entry_rate_k15(dp, dv, da, R, Sigma, ta, tb, tol, acc, f):
     for i in range(15):
         t = c + h * K15_NODES[i]
         if dp.shape[0] == 2:
-            v = nu_plus_2d(dp, dv, da, R, Sigma, t, itol, acc, -1.0)
+            v = nu_plus_2d(dp, dv, da, R, Sigma, t, itol, acc)
         else:
-            v = nu_plus_3d(dp, dv, da, R, Sigma, t, itol, acc, -1.0)
+            v = nu_plus_3d(dp, dv, da, R, Sigma, t, itol, acc)
         f[i] = v
         k += K15_WEIGHTS[i] * v
         g += G7_WEIGHTS[i] * v
@@ -509,17 +472,17 @@ def entry_rate_gauss3(dp, dv, da, R, Sigma, ta, tb, tol, acc):
     x = h * math.sqrt(0.6)
     itol = INNER_TOL_FACTOR * tol / max(tb - ta, 1e-300)
     if dp.shape[0] == 2:
-        f0 = nu_plus_2d(dp, dv, da, R, Sigma, c - x, itol, acc, -1.0)
+        f0 = nu_plus_2d(dp, dv, da, R, Sigma, c - x, itol, acc)
         e0 = acc[2]
-        f1 = nu_plus_2d(dp, dv, da, R, Sigma, c, itol, acc, -1.0)
+        f1 = nu_plus_2d(dp, dv, da, R, Sigma, c, itol, acc)
         e1 = acc[2]
-        f2 = nu_plus_2d(dp, dv, da, R, Sigma, c + x, itol, acc, -1.0)
+        f2 = nu_plus_2d(dp, dv, da, R, Sigma, c + x, itol, acc)
     else:
-        f0 = nu_plus_3d(dp, dv, da, R, Sigma, c - x, itol, acc, -1.0)
+        f0 = nu_plus_3d(dp, dv, da, R, Sigma, c - x, itol, acc)
         e0 = acc[2]
-        f1 = nu_plus_3d(dp, dv, da, R, Sigma, c, itol, acc, -1.0)
+        f1 = nu_plus_3d(dp, dv, da, R, Sigma, c, itol, acc)
         e1 = acc[2]
-        f2 = nu_plus_3d(dp, dv, da, R, Sigma, c + x, itol, acc, -1.0)
+        f2 = nu_plus_3d(dp, dv, da, R, Sigma, c + x, itol, acc)
     e2 = acc[2]
     g3 = h * (5.0 * f0 + 8.0 * f1 + 5.0 * f2) / 9.0
     g1 = 2.0 * h * f1

@@ -634,8 +634,8 @@ def _rice_panel(dp, dv, da, R, Sigma, pa, pb, j, cache, acc, st):
             e += inner
         else:
             m = 0.5 * (pa[j] + pb[j])
-            v, e = entry_rate_integral(dp, dv, da, R, Sigma, pa[j], m, 0.5 * _RICE_TOL, acc, -1.0)
-            v2, e2 = entry_rate_integral(dp, dv, da, R, Sigma, m, pb[j], 0.5 * _RICE_TOL, acc, -1.0)
+            v, e = entry_rate_integral(dp, dv, da, R, Sigma, pa[j], m, 0.5 * _RICE_TOL, acc)
+            v2, e2 = entry_rate_integral(dp, dv, da, R, Sigma, m, pb[j], 0.5 * _RICE_TOL, acc)
             v += v2
             e += e2
         if acc[1] != 0.0:
