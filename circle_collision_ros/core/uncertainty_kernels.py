@@ -1015,6 +1015,16 @@ def _pair_kernel(dp, dv, da, R, Sigma, H, thr, out):
         # per-path over-count O (overcount_replicates), whose mean the RQMC
         # estimates with far less variance than that of the contact indicator
         # (O is 0 but for the few paths that exit and come back)
+        # a tube path crosses the sphere only within the ambiguous intervals (sorted:
+        # the tube walk visits [0, H] left to right), so an exit, the maximum
+        # of f after it and the re-entry all lie within their hull
+        if _no_reentry(dp, dv, da, Sigma, leaves[0, 0], leaves[cnt - 1, 1], BROAD_PHASE_SIGMAS):
+            # no path of the tube can come back (O = 0 on it): upper is P but
+            # for the tail paths, each off by at most 2 (<= 3 counted, contact
+            # 0 or 1), which the 2 TUBE_TAIL of the bound covers
+            out[_OUT_P] = min(1.0, max(0.0, upper))
+            out[_OUT_BOUND] = err + _P0_ERR + 2 * TUBE_TAIL
+            return
         out[_OUT_QMC] = 2.0
         out[_OUT_LO] = st[_ST_PMAX] - _P0_ERR
         out[_OUT_HI] = upper
@@ -1026,6 +1036,58 @@ def _pair_kernel(dp, dv, da, R, Sigma, H, thr, out):
 
 
 OUT_SIZE = 7
+
+_REENTRY_PIECES = 16  # pieces of the interval for _no_reentry's bounds
+
+
+@njit(cache=True, error_model="numpy")
+def _no_reentry(dp, dv, da, Sigma, t0, t1, k):
+    """True when no path of the k-sigma tube has a local maximum of f = |X|^2 - R^2
+    in [t0, t1] (a certificate; False says nothing): with every sphere crossing of
+    a tube path inside [t0, t1], none can exit the ball and come back.
+
+    A re-entry needs a local maximum of f = |X|^2 - R^2 inside (0, H), impossible
+    where f'' = 2 (|Xdot|^2 + X.da) > 0, i.e. where |Xdot|^2 > |X| |da|.  On the
+    tube (|z| <= k) |X(t)| <= |g(t)| + k sqrt(lambda_max(S(t))) and |Xdot(t)| >=
+    |gd(t)| - k sqrt(lambda_max(Svv)) (the velocity deviation is constant:
+    acceleration is exact), so checking (min |gd| - k sv)^2 > (max |g| + k sx) |da|
+    on each of _REENTRY_PIECES pieces of [t0, t1] with rigorous piece bounds
+    (_mean_range, max_sigma_over, the segment distance of the linear gd) certifies
+    f'' > 0 for every tube path.  Typical of moving bodies with modest
+    accelerations: the over-count RQMC is then not needed."""
+    D = dp.shape[0]
+    an = 0.0
+    for i in range(D):
+        an += da[i] * da[i]
+    an = math.sqrt(an)
+    if an == 0.0:
+        return True
+    Svv = np.empty((D, D))
+    for i in range(D):
+        for j in range(D):
+            Svv[i, j] = Sigma[D + i, D + j]
+    lam, _ = eig_sym(Svv)
+    sv = k * math.sqrt(lam[D - 1] * (1.0 + 1e-9))
+    for q in range(_REENTRY_PIECES):
+        ta = t0 + (t1 - t0) * q / _REENTRY_PIECES
+        tb = t1 if q == _REENTRY_PIECES - 1 else t0 + (t1 - t0) * (q + 1) / _REENTRY_PIECES
+        # min |gd| over [ta, tb]: gd = dv + da t is a segment; its point nearest 0
+        dot = 0.0
+        for i in range(D):
+            dot += dv[i] * da[i]
+        ts = min(max(-dot / (an * an), ta), tb)
+        g2 = 0.0
+        for i in range(D):
+            c = dv[i] + da[i] * ts
+            g2 += c * c
+        speed = math.sqrt(g2) * (1.0 - 1e-12) - sv  # (1e-12: the rounding of ts and of the sum)
+        if not (speed > 0.0):
+            return False
+        _, gmax = _mean_range(dp, dv, da, ta, tb)
+        reach = gmax + k * max_sigma_over(Sigma, ta, tb)
+        if not (speed * speed > reach * an * (1.0 + 1e-12)):
+            return False
+    return True
 
 
 @njit(cache=True, error_model="numpy")
