@@ -41,7 +41,7 @@ from numba import njit
 
 from circle_collision_ros.core.quadrature import G7_WEIGHTS, K15_NODES, K15_WEIGHTS, make_adaptive, make_adaptive_nested
 
-__all__ = ["entry_rate_integral", "entry_rate_k15", "entry_rate_gauss3", "DEGENERATE_RATIO"]
+__all__ = ["entry_rate_integral", "entry_rate_k15", "entry_rate_gauss3", "mat_mul", "DEGENERATE_RATIO"]
 
 DEGENERATE_RATIO = 1e-12
 _RS2 = 1.0 / math.sqrt(2.0)
@@ -88,8 +88,8 @@ def _inv(S):
 
 
 @njit(cache=True, error_model="numpy")
-def _mat_mul(X, Y):
-    """X Y for small square matrices."""
+def mat_mul(X, Y):
+    """X Y for small square matrices (explicit loops: numba's @ needs scipy's BLAS)."""
     D = X.shape[0]
     out = np.zeros((D, D))
     for i in range(D):
@@ -124,8 +124,8 @@ def _state(dp, dv, da, Sigma, t):
     degenerate = not (det > DEGENERATE_RATIO * (tr / D) ** D) or not (tr > 0.0)
     norm = 1.0 / ((2.0 * math.pi) ** (0.5 * D) * math.sqrt(abs(det))) if not degenerate else 0.0
     # K = C^T A; Vc = Svv - C^T A C (explicit loops: numba's @ needs scipy's BLAS)
-    K = _mat_mul(C.T, A)
-    Vc = Svv - _mat_mul(K, C)
+    K = mat_mul(C.T, A)
+    Vc = Svv - mat_mul(K, C)
     rho2 = BROAD_K2 * tr
     return g, gd, A, norm, K, Vc, rho2, degenerate
 

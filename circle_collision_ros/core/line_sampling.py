@@ -38,6 +38,7 @@ import math
 import numpy as np
 from numba import njit
 
+from circle_collision_ros.core.entry_rate import mat_mul
 from circle_collision_ros.core.overlap_probability import eig_sym, interval_mass
 
 __all__ = ["line_factor", "line_replicates", "capsule_interval"]
@@ -77,19 +78,12 @@ def _rotated_factor(M, Q):
     """The semi-definite factor of the covariance of (dv, Q^T dp), M being that of
     (dv, dp): with Q's columns (f1, f2, e), dp.e is last, so its pivot is its
     conditional standard deviation given everything else."""
-    M2 = np.empty((6, 6))
-    for i in range(6):
-        for j in range(6):
-            acc = 0.0
-            for k in range(6):
-                tik = (1.0 if k == i else 0.0) if i < 3 else (Q[k - 3, i - 3] if k >= 3 else 0.0)
-                if tik == 0.0:
-                    continue
-                for l in range(6):
-                    tjl = (1.0 if l == j else 0.0) if j < 3 else (Q[l - 3, j - 3] if l >= 3 else 0.0)
-                    acc += tik * M[k, l] * tjl
-            M2[i, j] = acc
-    return _psd_cholesky(M2)
+    T = np.zeros((6, 6))  # (dv, dp) -> (dv, Q^T dp)
+    for i in range(3):
+        T[i, i] = 1.0
+        for j in range(3):
+            T[3 + i, 3 + j] = Q[j, i]
+    return _psd_cholesky(mat_mul(mat_mul(T, M), T.T.copy()))
 
 
 @njit(cache=True, error_model="numpy")
@@ -121,17 +115,7 @@ def line_factor(dp, dv, Sigma):
         for i in range(3):
             for j in range(3):
                 P[i, j] -= u[i] * u[j]
-        PC = np.zeros((3, 3))
-        for i in range(3):
-            for j in range(3):
-                for k in range(3):
-                    PC[i, j] += P[i, k] * C[k, j]
-        for i in range(3):
-            for j in range(3):
-                acc = 0.0
-                for k in range(3):
-                    acc += PC[i, k] * P[k, j]
-                Cp[i, j] = acc
+        Cp = mat_mul(mat_mul(P, C), P)
     lam, Q = eig_sym(Cp)
     if not (lam[2] > 0.0):
         lam, Q = eig_sym(C)

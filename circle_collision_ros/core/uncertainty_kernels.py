@@ -516,6 +516,13 @@ def overcount_replicates(dp, dv, da, R, H, L, Z, m, est):
 @njit(cache=True, error_model="numpy")
 def instant_probability(dp, dv, da, R, Sigma, t):
     """P(|X(t)| <= R) (1e-9 absolute, see overlap_probability)."""
+    return instant_probability_tol(dp, dv, da, R, Sigma, t, 0.0)
+
+
+@njit(cache=True, error_model="numpy")
+def instant_probability_tol(dp, dv, da, R, Sigma, t, tol):
+    """instant_probability with the 3-D quadrature tolerance ``tol`` per piece and
+    level (0.0: the standard one; see overlap_probability_tol)."""
     D = dp.shape[0]
     if D == 2:  # scalars, as S_at
         s00 = Sigma[0, 0] + t * (Sigma[0, 2] + Sigma[2, 0]) + t * t * Sigma[2, 2]
@@ -528,6 +535,8 @@ def instant_probability(dp, dv, da, R, Sigma, t):
     g = np.empty(D)
     for k in range(D):
         g[k] = dp[k] + t * (dv[k] + 0.5 * t * da[k])
+    if tol > 0.0:
+        return overlap_probability_tol(g, S_at(Sigma, t), R, tol)
     return overlap_probability(g, S_at(Sigma, t), R)
 
 
@@ -571,13 +580,7 @@ _WALK_TOL_REL = 1e-7
 
 @njit(cache=True, error_model="numpy")
 def _prob_at(dp, dv, da, R, Sigma, t, st):
-    if st[_ST_PTOL] > 0.0:
-        g = np.empty(3)
-        for k in range(3):
-            g[k] = dp[k] + t * (dv[k] + 0.5 * t * da[k])
-        p = overlap_probability_tol(g, S_at(Sigma, t), R, st[_ST_PTOL])
-    else:
-        p = instant_probability(dp, dv, da, R, Sigma, t)
+    p = instant_probability_tol(dp, dv, da, R, Sigma, t, st[_ST_PTOL])
     if p > st[_ST_PMAX]:
         st[_ST_PMAX] = p
     return p
