@@ -835,6 +835,19 @@ def _first_crossing(dp, dv, da, R, Sigma, pa, pb, j, a0, p_start, thr, dt, cache
             if not (lo + dt < hi and lo + dt <= b) or probed == lo:
                 return lo
             probed = lo
+            if st[_ST_PTOL] > 0.0 and dp.shape[0] == 2:
+                # the end game at the standard tolerance: the looser 2-D
+                # probabilities' stated error is comparable with the Rice
+                # integral over one dt, so the certificate of [lo, lo + dt]
+                # would fail on it (a conservative exit a few 1e-7 below thr
+                # where the 1e-9 ones bracket the crossing).  P(lo) is
+                # recomputed (it only starts the next certificate: the invariant
+                # on [a, lo] stands); the rest of the pair's walk keeps the
+                # standard tolerance (a cheap 2-D evaluation: 3-D keeps its own)
+                st[_ST_PTOL] = 0.0
+                st[_ST_PERR] = _P0_ERR
+                perr = _P0_ERR
+                plo = _prob_at(dp, dv, da, R, Sigma, lo, st)
             c = lo + dt
             pc = _prob_at(dp, dv, da, R, Sigma, c, st)
             if pc >= thr:
@@ -960,6 +973,9 @@ def _pair_kernel(dp, dv, da, R, Sigma, H, thr, out):
         # probability, stays at the standard tolerance (below)
         st[_ST_PTOL] = max(min(_WALK_TOL_2D_REL * thr, _WALK_TOL_2D), 1e-10)
         st[_ST_PERR] = max(DISC_ERR_PER_TOL * st[_ST_PTOL], _P0_ERR)
+    # the largest error of any probability in st[_ST_PMAX] (the walk may switch
+    # to the standard tolerance at its end, _first_crossing)
+    pmax_err = st[_ST_PERR]
     if sampled and instant_bound(dp, dv, da, R, Sigma, 0.0, 0.0) < thr:
         # P(0) < thr is certified and only the walk would use P(0) (as its start
         # value, computed below if the walk starts at 0)
@@ -1024,7 +1040,7 @@ def _pair_kernel(dp, dv, da, R, Sigma, H, thr, out):
         # line sampling: unbiased, no tube truncation; clipped below by the
         # largest instantaneous probability seen
         out[_OUT_QMC] = 3.0
-        out[_OUT_LO] = st[_ST_PMAX] - st[_ST_PERR]
+        out[_OUT_LO] = st[_ST_PMAX] - pmax_err
         out[_OUT_HI] = 1.0
         return
     total = 0.0
@@ -1063,12 +1079,12 @@ def _pair_kernel(dp, dv, da, R, Sigma, H, thr, out):
             out[_OUT_BOUND] = err + _P0_ERR + 2 * TUBE_TAIL
             return
         out[_OUT_QMC] = 2.0
-        out[_OUT_LO] = st[_ST_PMAX] - st[_ST_PERR]
+        out[_OUT_LO] = st[_ST_PMAX] - pmax_err
         out[_OUT_HI] = upper
         out[_OUT_ERR] = err + _P0_ERR + 2 * TUBE_TAIL
         return
     out[_OUT_QMC] = 1.0
-    out[_OUT_LO] = st[_ST_PMAX] - st[_ST_PERR]
+    out[_OUT_LO] = st[_ST_PMAX] - pmax_err
     out[_OUT_HI] = 1.0 if degenerate else upper + err + _P0_ERR + 2 * TUBE_TAIL
 
 
