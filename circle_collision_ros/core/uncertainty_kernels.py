@@ -556,6 +556,7 @@ def instant_probability_tol(dp, dv, da, R, Sigma, t, tol):
 _PANELS = 2
 _RICE_TOL = 1e-3  # quadrature tolerance of the entry-rate integral per panel
 _P0_ERR = 1e-9  # error of one instantaneous probability (overlap_probability)
+_P0_SKIP = 1e-12  # P(0) is taken as 0 where instant_bound certifies it below this
 PLAUSIBLE_RTOL = 1e-6  # the plausible time's bracket width, relative to H
 
 
@@ -982,6 +983,11 @@ def _pair_kernel(dp, dv, da, R, Sigma, H, thr, out):
         p0 = -1.0
     elif sampled:
         p0 = _prob_at(dp, dv, da, R, Sigma, 0.0, st)
+    elif instant_bound(dp, dv, da, R, Sigma, 0.0, 0.0) <= _P0_SKIP:
+        # P(0) <= 1e-12 is certified without quadrature (bodies that start
+        # apart): 0 is within the _P0_ERR = 1e-9 that the bound already states
+        # for P(0), and within the walk's st[_ST_PERR] (>= 1e-9) as its start
+        p0 = 0.0
     else:
         # P(0) is part of the reported probability (upper = P0 + the Rice
         # integral, with _P0_ERR in the bound): always the standard tolerance
