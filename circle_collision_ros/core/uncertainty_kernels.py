@@ -1021,17 +1021,32 @@ def _pair_kernel(dp, dv, da, R, Sigma, H, thr, out):
         # a tube path crosses the sphere only within the ambiguous intervals (sorted:
         # the tube walk visits [0, H] left to right), so an exit, the maximum
         # of f after it and the re-entry all lie within their hull
-        if _no_reentry(dp, dv, da, Sigma, leaves[0, 0], leaves[cnt - 1, 1], BROAD_PHASE_SIGMAS):
+        t0, t1 = leaves[0, 0], leaves[cnt - 1, 1]
+        if _no_reentry(dp, dv, da, Sigma, t0, t1, BROAD_PHASE_SIGMAS):
             # no path of the tube can come back (O = 0 on it): upper is P but
             # for the tail paths, each off by at most 2 (<= 3 counted, contact
             # 0 or 1), which the 2 TUBE_TAIL of the bound covers
             out[_OUT_P] = min(1.0, max(0.0, upper))
             out[_OUT_BOUND] = err + _P0_ERR + 2 * TUBE_TAIL
             return
+        # the bracket [lo, hi] of P without sampling: P >= every instantaneous
+        # probability (st[_ST_PMAX], each within _P0_ERR); P <= upper + its bound;
+        # and where a narrower tube (k' sigmas) is certified, O = 0 on it and
+        # O <= 2 off it: E[O] <= 2 P(chi^2_2D > k'^2) (_overcount_tail)
+        slack = err + _P0_ERR + 2 * TUBE_TAIL
+        hi = upper + slack
+        lo = max(st[_ST_PMAX] - _P0_ERR, upper - slack - _overcount_tail(dp, dv, da, Sigma, t0, t1))
+        if lo <= hi and 0.5 * (hi - lo) <= BRACKET_HALF_WIDTH + slack:
+            # no wider than the tightest bound the RQMC could state (its floor + the
+            # same slack): the midpoint, bounded without sampling
+            mid = 0.5 * (lo + hi)
+            out[_OUT_P] = min(1.0, max(0.0, mid))
+            out[_OUT_BOUND] = 0.5 * (hi - lo)
+            return
         out[_OUT_QMC] = 2.0
-        out[_OUT_LO] = st[_ST_PMAX] - _P0_ERR
+        out[_OUT_LO] = lo
         out[_OUT_HI] = upper
-        out[_OUT_ERR] = err + _P0_ERR + 2 * TUBE_TAIL
+        out[_OUT_ERR] = slack
         return
     out[_OUT_QMC] = 1.0
     out[_OUT_LO] = st[_ST_PMAX] - _P0_ERR
@@ -1091,6 +1106,31 @@ def _no_reentry(dp, dv, da, Sigma, t0, t1, k):
         if not (speed * speed > reach * an * (1.0 + 1e-12)):
             return False
     return True
+
+
+# The narrower tubes _overcount_tail tries (sigmas), widest first: 2 P(chi^2_4 > k'^2)
+# = 5.8e-7, 1.0e-4, 8.9e-4 in 2-D (chi^2_6: 5.5e-6, 6.8e-4, 5.0e-3); narrower ones
+# would cost more than the bracket below can carry
+REENTRY_SIGMAS = (6.0, 5.0, 4.5)
+# An uncertified accelerating pair is answered by its bracket when the bracket's
+# half-width is at most the smallest bound the over-count RQMC can state: U's
+# slack plus 3 / (QMC_REPLICATES * QMC_CV_POINTS) = 1.5e-3 (the rule of three at
+# its first stage); never a looser answer than the sampling would give
+BRACKET_HALF_WIDTH = 3.0 / (QMC_REPLICATES * QMC_CV_POINTS)
+_REENTRY_TAILS = np.array([[2.0 * chi2_tail_even(k * k, 2 * D) for k in REENTRY_SIGMAS] for D in (2, 3)])
+
+
+@njit(cache=True, error_model="numpy")
+def _overcount_tail(dp, dv, da, Sigma, t0, t1):
+    """An upper bound of E[O], the over-count of an accelerating pair whose tube
+    paths cross the sphere only within [t0, t1] (1.0: none found): 2 P(chi^2_2D >
+    k'^2) for the widest k' of REENTRY_SIGMAS that ``_no_reentry`` certifies (no
+    path of the k'-tube comes back: O = 0 there; O <= 2 on every path)."""
+    row = dp.shape[0] - 2
+    for j in range(len(REENTRY_SIGMAS)):
+        if _no_reentry(dp, dv, da, Sigma, t0, t1, REENTRY_SIGMAS[j]):
+            return _REENTRY_TAILS[row, j]
+    return 1.0
 
 
 @njit(cache=True, error_model="numpy")
