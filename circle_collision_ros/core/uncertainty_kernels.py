@@ -1030,12 +1030,12 @@ def _pair_kernel(dp, dv, da, R, Sigma, H, thr, out):
             out[_OUT_BOUND] = err + _P0_ERR + 2 * TUBE_TAIL
             return
         # the bracket [lo, hi] of P without sampling: P >= every instantaneous
-        # probability (st[_ST_PMAX], each within _P0_ERR); P <= upper + its bound;
+        # probability (st[_ST_PMAX], each within st[_ST_PERR]); P <= upper + its bound;
         # and where a narrower tube (k' sigmas) is certified, O = 0 on it and
         # O <= 2 off it: E[O] <= 2 P(chi^2_2D > k'^2) (_overcount_tail)
         slack = err + _P0_ERR + 2 * TUBE_TAIL
         hi = upper + slack
-        lo = max(st[_ST_PMAX] - _P0_ERR, upper - slack - _overcount_tail(dp, dv, da, Sigma, t0, t1))
+        lo = max(st[_ST_PMAX] - st[_ST_PERR], upper - slack - _overcount_tail(dp, dv, da, Sigma, t0, t1))
         if lo <= hi and 0.5 * (hi - lo) <= BRACKET_HALF_WIDTH + slack:
             # no wider than the tightest bound the RQMC could state (its floor + the
             # same slack): the midpoint, bounded without sampling
@@ -1049,7 +1049,7 @@ def _pair_kernel(dp, dv, da, R, Sigma, H, thr, out):
         out[_OUT_ERR] = slack
         return
     out[_OUT_QMC] = 1.0
-    out[_OUT_LO] = st[_ST_PMAX] - _P0_ERR
+    out[_OUT_LO] = st[_ST_PMAX] - st[_ST_PERR]
     out[_OUT_HI] = 1.0 if degenerate else upper + err + _P0_ERR + 2 * TUBE_TAIL
 
 
