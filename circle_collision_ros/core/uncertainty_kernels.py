@@ -11,7 +11,7 @@ import math
 from statistics import NormalDist
 
 import numpy as np
-from numba import njit
+from numba import njit, prange
 
 from circle_collision_ros.core.entry_rate import BROAD_K2, entry_rate_gauss3, entry_rate_integral, entry_rate_k15
 from circle_collision_ros.core.line_sampling import line_factor, line_replicates
@@ -1077,17 +1077,32 @@ def _pair_kernel(dp, dv, da, R, Sigma, H, thr, out):
         # a tube path crosses the sphere only within the ambiguous intervals (sorted:
         # the tube walk visits [0, H] left to right), so an exit, the maximum
         # of f after it and the re-entry all lie within their hull
-        if _no_reentry(dp, dv, da, Sigma, leaves[0, 0], leaves[cnt - 1, 1], BROAD_PHASE_SIGMAS):
+        t0, t1 = leaves[0, 0], leaves[cnt - 1, 1]
+        if _no_reentry(dp, dv, da, Sigma, t0, t1, BROAD_PHASE_SIGMAS):
             # no path of the tube can come back (O = 0 on it): upper is P but
             # for the tail paths, each off by at most 2 (<= 3 counted, contact
             # 0 or 1), which the 2 TUBE_TAIL of the bound covers
             out[_OUT_P] = min(1.0, max(0.0, upper))
             out[_OUT_BOUND] = err + _P0_ERR + 2 * TUBE_TAIL
             return
+        # the bracket [lo, hi] of P without sampling: P >= every instantaneous
+        # probability (st[_ST_PMAX], each within pmax_err); P <= upper + its bound;
+        # and where a narrower tube (k' sigmas) is certified, O = 0 on it and
+        # O <= 2 off it: E[O] <= 2 P(chi^2_2D > k'^2) (_overcount_tail)
+        slack = err + _P0_ERR + 2 * TUBE_TAIL
+        hi = upper + slack
+        lo = max(st[_ST_PMAX] - pmax_err, upper - slack - _overcount_tail(dp, dv, da, Sigma, t0, t1))
+        if lo <= hi and 0.5 * (hi - lo) <= BRACKET_HALF_WIDTH + slack:
+            # no wider than the tightest bound the RQMC could state (its floor + the
+            # same slack): the midpoint, bounded without sampling
+            mid = 0.5 * (lo + hi)
+            out[_OUT_P] = min(1.0, max(0.0, mid))
+            out[_OUT_BOUND] = 0.5 * (hi - lo)
+            return
         out[_OUT_QMC] = 2.0
-        out[_OUT_LO] = st[_ST_PMAX] - pmax_err
+        out[_OUT_LO] = lo
         out[_OUT_HI] = upper
-        out[_OUT_ERR] = err + _P0_ERR + 2 * TUBE_TAIL
+        out[_OUT_ERR] = slack
         return
     out[_OUT_QMC] = 1.0
     out[_OUT_LO] = st[_ST_PMAX] - pmax_err
@@ -1149,6 +1164,31 @@ def _no_reentry(dp, dv, da, Sigma, t0, t1, k):
     return True
 
 
+# The narrower tubes _overcount_tail tries (sigmas), widest first: 2 P(chi^2_4 > k'^2)
+# = 5.8e-7, 1.0e-4, 8.9e-4 in 2-D (chi^2_6: 5.5e-6, 6.8e-4, 5.0e-3); narrower ones
+# would cost more than the bracket below can carry
+REENTRY_SIGMAS = (6.0, 5.0, 4.5)
+# An uncertified accelerating pair is answered by its bracket when the bracket's
+# half-width is at most the smallest bound the over-count RQMC can state: U's
+# slack plus 3 / (QMC_REPLICATES * QMC_CV_POINTS) = 1.5e-3 (the rule of three at
+# its first stage); never a looser answer than the sampling would give
+BRACKET_HALF_WIDTH = 3.0 / (QMC_REPLICATES * QMC_CV_POINTS)
+_REENTRY_TAILS = np.array([[2.0 * chi2_tail_even(k * k, 2 * D) for k in REENTRY_SIGMAS] for D in (2, 3)])
+
+
+@njit(cache=True, error_model="numpy")
+def _overcount_tail(dp, dv, da, Sigma, t0, t1):
+    """An upper bound of E[O], the over-count of an accelerating pair whose tube
+    paths cross the sphere only within [t0, t1] (1.0: none found): 2 P(chi^2_2D >
+    k'^2) for the widest k' of REENTRY_SIGMAS that ``_no_reentry`` certifies (no
+    path of the k'-tube comes back: O = 0 there; O <= 2 on every path)."""
+    row = dp.shape[0] - 2
+    for j in range(len(REENTRY_SIGMAS)):
+        if _no_reentry(dp, dv, da, Sigma, t0, t1, REENTRY_SIGMAS[j]):
+            return _REENTRY_TAILS[row, j]
+    return 1.0
+
+
 @njit(cache=True, error_model="numpy")
 def _line_sampled(dp, dv, da, Sigma):
     """True for the pairs whose probability is computed by line sampling: 3-D,
@@ -1194,9 +1234,24 @@ def relative_rows(pa, va, aa, ra, pb, vb, ab, rb, sigma, rows, dp, dv, da, rad, 
 
 @njit(cache=True, error_model="numpy")
 def evaluate_uncertain_rows(dp, dv, da, rad, sig, H, thr, out):
-    """_pair_kernel on every row (out (n, OUT_SIZE)); rows with out[j, _OUT_QMC] = 1
-    still need ``finish_row``'s RQMC fallback."""
+    """_pair_kernel on every row (out (n, OUT_SIZE)); rows with out[j, _OUT_QMC] != 0
+    still need ``finish_row``'s sampling."""
     for j in range(dp.shape[0]):
+        _pair_kernel(dp[j], dv[j], da[j], rad[j], sig[j], H, thr, out[j])
+
+
+#: Rows from which evaluate_uncertain_rows_par may run on numba's threads (when a
+#: core is free: parallel_policy): a row takes ~50-300 us in 2-D and milliseconds
+#: in 3-D, a parallel launch ~20 us, so two rows already pay.
+PARALLEL_MIN_UNCERTAIN_ROWS = 2
+
+
+@njit(cache=True, error_model="numpy", parallel=True)
+def evaluate_uncertain_rows_par(dp, dv, da, rad, sig, H, thr, out):
+    """``evaluate_uncertain_rows`` over numba's threads: each row is computed by the
+    same _pair_kernel from its own inputs into its own out row, so the results are
+    bit for bit the serial ones."""
+    for j in prange(dp.shape[0]):
         _pair_kernel(dp[j], dv[j], da[j], rad[j], sig[j], H, thr, out[j])
 
 
