@@ -39,7 +39,8 @@ import math
 import numpy as np
 from numba import njit
 
-from circle_collision_ros.core.quadrature import G7_WEIGHTS, K15_NODES, K15_WEIGHTS, make_adaptive, make_adaptive_nested
+from circle_collision_ros.core.quadrature import (G7_WEIGHTS, K15_NODES, K15_WEIGHTS, make_adaptive, make_adaptive_angle,
+                                                  make_adaptive_nested)
 
 __all__ = ["entry_rate_integral", "entry_rate_k15", "entry_rate_gauss3", "mat_mul", "DEGENERATE_RATIO"]
 
@@ -157,20 +158,21 @@ def _surface_integrand(n0, n1, n2, R, g, gd, A, norm, K, Vc):
 # ---- 2-D: the arc integral at one t ---------------------------------------------
 # prm: a flat tuple of floats (no arrays: the 2-D path allocates nothing per
 # evaluation, see _state2):
-_P_R, _P_PHIG, _P_G0, _P_G1, _P_GD0, _P_GD1 = 0, 1, 2, 3, 4, 5
+_P_R, _P_CG, _P_G0, _P_G1, _P_GD0, _P_GD1 = 0, 1, 2, 3, 4, 5  # _P_CG, _P_SG: cos, sin of g's direction
 _P_A00, _P_A01, _P_A11, _P_NORM = 6, 7, 8, 9  # _P_A01: A[0, 1] + A[1, 0]
 _P_K00, _P_K01, _P_K10, _P_K11 = 10, 11, 12, 13
 _P_V00, _P_V01, _P_V11 = 14, 15, 16  # _P_V01: Vc[0, 1] + Vc[1, 0]
+_P_SG = 17
 
 
 @njit(cache=True, error_model="numpy")
-def _arc_integrand(psi, prm):
-    """R f_t(x) E[(-n.Xdot)^+ | x] at x = R (cos, sin)(phig + psi): scalar
-    code (no temporaries: this is the innermost loop)."""
+def _arc_integrand(cp, sp, prm):
+    """R f_t(x) E[(-n.Xdot)^+ | x] at x = R (cos, sin)(phig + psi), given cp, sp =
+    cos, sin of psi (quadrature.make_adaptive_angle): scalar code (no
+    temporaries: this is the innermost loop)."""
     R = prm[_P_R]
-    phi = prm[_P_PHIG] + psi
-    n0 = math.cos(phi)
-    n1 = math.sin(phi)
+    n0 = prm[_P_CG] * cp - prm[_P_SG] * sp
+    n1 = prm[_P_SG] * cp + prm[_P_CG] * sp
     d0 = R * n0 - prm[_P_G0]
     d1 = R * n1 - prm[_P_G1]
     q = prm[_P_A00] * d0 * d0 + prm[_P_A01] * d0 * d1 + prm[_P_A11] * d1 * d1
@@ -182,7 +184,7 @@ def _arc_integrand(psi, prm):
     return R * prm[_P_NORM] * math.exp(-0.5 * q) * _pos_part_mean(m, math.sqrt(max(s2, 0.0)))
 
 
-_arc_adaptive = make_adaptive(_arc_integrand)
+_arc_adaptive = make_adaptive_angle(_arc_integrand)
 
 
 @njit(cache=True, error_model="numpy")
@@ -284,8 +286,8 @@ def nu_plus_2d(dp, dv, da, R, Sigma, t, tol, acc):
     for j in range(j0 + 1, j1):
         if qs[j] <= qs[j - 1] and qs[j] < qs[j + 1]:
             npieces += 1
-    prm = (R, phig, g0, g1, gd0, gd1, a00, a01s, a11, norm, k00, k01, k10, k11,
-           v00, v01 + v10, v11)
+    prm = (R, math.cos(phig), g0, g1, gd0, gd1, a00, a01s, a11, norm, k00, k01, k10, k11,
+           v00, v01 + v10, v11, math.sin(phig))
     ptol = tol / npieces
     total = 0.0
     err = 0.0

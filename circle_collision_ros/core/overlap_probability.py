@@ -42,13 +42,16 @@ from circle_collision_ros.core.quadrature import make_adaptive
 
 __all__ = ["overlap_probability", "overlap_probability_2d", "overlap_probability_tol", "interval_mass",
            "disc_probability", "disc_probability_tol", "ball_probability", "ball_probability_tol", "WINDOW_SIGMAS",
-           "BALL_ERR_PER_TOL"]
+           "BALL_ERR_PER_TOL", "DISC_ERR_PER_TOL", "overlap_probability_2d_tol"]
 
 WINDOW_SIGMAS = 9.0  # integration window [-9, 9] sigma of each integrated component
 _TOL = 1e-10  # |K15 - G7| tolerance per 1-D integral (absolute, on a probability)
 # a 3-D probability at tolerance tol per piece is within BALL_ERR_PER_TOL * tol (by the
 # estimates): 4 pieces per level, two levels; at _TOL: 8e-10 <= 1e-9
 BALL_ERR_PER_TOL = 8.0
+# a 2-D probability at tolerance tol per piece is within DISC_ERR_PER_TOL * tol (by the
+# estimates; a dropped edge piece counts its whole mass, <= tol): 4 pieces, one level
+DISC_ERR_PER_TOL = 4.0
 _RS2 = 1.0 / math.sqrt(2.0)
 _RS2PI = 1.0 / math.sqrt(2.0 * math.pi)
 
@@ -153,10 +156,27 @@ def _make_narrow(inner):
         # stays in plain u where it is smooth
         ca = ua + min(1.0, 0.5 * (c - ua)) if lo_edge else ua
         cb = ub - min(1.0, 0.5 * (ub - c)) if hi_edge else ub
-        v0, e0 = piece(R, ehi0, elo0, s1, ua, ca, lo_edge, False, m2, s2, m3, s3, tol)
+        # 2-D at a looser tolerance than the proven _TOL (the plausible-time
+        # walk's): an edge piece whose whole density mass is <= tol is not
+        # integrated: value 0, error that mass (the integrand is phi(u) F, 0 <= F
+        # <= 1), so the piece still stays within tol and DISC_ERR_PER_TOL holds.
+        # The neighbouring plain piece ends a sigma (or half the way to the
+        # peak) short of the edge, where the sqrt singularity is, so it stays
+        # smooth.  Typical of the walk: means a few sigma outside the disc,
+        # whose far edge lies >= 5 sigma away (one K15 of 4 saved)
+        drop = s3 < 0.0 and tol > _TOL
+        mass0 = interval_mass(ua, ca, 0.0, 1.0) if (drop and lo_edge) else math.inf
+        if mass0 <= tol:
+            v0, e0 = 0.0, mass0
+        else:
+            v0, e0 = piece(R, ehi0, elo0, s1, ua, ca, lo_edge, False, m2, s2, m3, s3, tol)
         v1, e1 = piece(R, ehi0, elo0, s1, ca, c, False, False, m2, s2, m3, s3, tol)
         v2, e2 = piece(R, ehi0, elo0, s1, c, cb, False, False, m2, s2, m3, s3, tol)
-        v3, e3 = piece(R, ehi0, elo0, s1, cb, ub, False, hi_edge, m2, s2, m3, s3, tol)
+        mass3 = interval_mass(cb, ub, 0.0, 1.0) if (drop and hi_edge) else math.inf
+        if mass3 <= tol:
+            v3, e3 = 0.0, mass3
+        else:
+            v3, e3 = piece(R, ehi0, elo0, s1, cb, ub, False, hi_edge, m2, s2, m3, s3, tol)
         return (v0 + v1) + (v2 + v3), (e0 + e1) + (e2 + e3)
 
     return narrow
@@ -294,9 +314,16 @@ def eig_sym(S):
 @njit(cache=True, error_model="numpy")
 def overlap_probability_2d(g0, g1, s00, s01, s11, R):
     """P(|X| <= R) for X ~ N((g0, g1), [[s00, s01], [s01, s11]]) (PSD): overlap_probability
-    in scalars (no temporaries: the plausible-time search calls it per step).  The
-    eigenbasis is eig_sym's single Jacobi rotation (Rutishauser's form: the
-    eigenvalues s00 - t s01, s11 + t s01 lose no digits to cancellation)."""
+    in scalars (no temporaries: the plausible-time search calls it per step)."""
+    return overlap_probability_2d_tol(g0, g1, s00, s01, s11, R, _TOL)
+
+
+@njit(cache=True, error_model="numpy")
+def overlap_probability_2d_tol(g0, g1, s00, s01, s11, R, tol):
+    """overlap_probability_2d with the quadrature tolerance ``tol`` per piece (stated
+    error <= DISC_ERR_PER_TOL * tol).  The eigenbasis is eig_sym's single Jacobi
+    rotation (Rutishauser's form: the eigenvalues s00 - t s01, s11 + t s01 lose no
+    digits to cancellation)."""
     if s01 == 0.0:
         c = 1.0
         sn = 0.0
@@ -312,7 +339,7 @@ def overlap_probability_2d(g0, g1, s00, s01, s11, R):
     # eigenvectors (c, -sn) for l0 and (sn, c) for l1; clamp rounding below 0
     m0 = c * g0 - sn * g1
     m1 = sn * g0 + c * g1
-    return disc_probability(R, m0, math.sqrt(max(l0, 0.0)), m1, math.sqrt(max(l1, 0.0)))
+    return disc_probability_tol(R, m0, math.sqrt(max(l0, 0.0)), m1, math.sqrt(max(l1, 0.0)), tol)
 
 
 @njit(cache=True, error_model="numpy")
@@ -325,11 +352,11 @@ def overlap_probability(mean, S, R):
 
 @njit(cache=True, error_model="numpy")
 def overlap_probability_tol(mean, S, R, tol):
-    """overlap_probability with the 3-D quadrature tolerance ``tol`` per piece and
-    level (stated error <= BALL_ERR_PER_TOL * tol; the 2-D case always at _TOL)."""
+    """overlap_probability with the quadrature tolerance ``tol`` per piece and level
+    (stated error <= DISC_ERR_PER_TOL * tol in 2-D, BALL_ERR_PER_TOL * tol in 3-D)."""
     D = mean.shape[0]
     if D == 2:
-        return overlap_probability_2d(mean[0], mean[1], S[0, 0], 0.5 * (S[0, 1] + S[1, 0]), S[1, 1], R)
+        return overlap_probability_2d_tol(mean[0], mean[1], S[0, 0], 0.5 * (S[0, 1] + S[1, 0]), S[1, 1], R, tol)
     lam, Q = eig_sym(S)
     mu = np.zeros(D)
     for j in range(D):

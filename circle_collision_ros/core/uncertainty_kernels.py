@@ -16,8 +16,9 @@ from numba import njit, prange
 from circle_collision_ros.core.entry_rate import BROAD_K2, entry_rate_gauss3, entry_rate_integral, entry_rate_k15
 from circle_collision_ros.core.line_sampling import line_factor, line_replicates
 from circle_collision_ros.core.narrow_phase import _ttc_kernel_h
-from circle_collision_ros.core.overlap_probability import (BALL_ERR_PER_TOL, eig_sym, overlap_probability,
-                                                           overlap_probability_2d, overlap_probability_tol)
+from circle_collision_ros.core.overlap_probability import (BALL_ERR_PER_TOL, DISC_ERR_PER_TOL, eig_sym,
+                                                           overlap_probability, overlap_probability_2d,
+                                                           overlap_probability_2d_tol, overlap_probability_tol)
 from circle_collision_ros.core.quadrature import push_halves, subinterval_integral
 from circle_collision_ros.core.sobol import scrambled_directions, sobol_points
 
@@ -299,8 +300,11 @@ def screen_rows_at(pa, va, aa, ra, pb, vb, ab, rb, sigma, rows, H, k, clear, t_f
 def row_classes(pa, va, aa, ra, pb, vb, ab, rb, sigma, exact, finite):
     """Per row: exact[i] = Sigma all zero (a NaN is not zero); finite[i] = every
     position, velocity, acceleration and Sigma entry finite and both radii >= 0
-    (one pass instead of a dozen array reductions)."""
+    (one pass instead of a dozen array reductions).  Returns (count of exact rows,
+    count of rows neither finite nor exact)."""
     n = pa.shape[0]
+    n_exact = 0
+    n_bad = 0
     D = pa.shape[1]
     m = sigma.shape[1]
     for i in range(n):
@@ -319,6 +323,11 @@ def row_classes(pa, va, aa, ra, pb, vb, ab, rb, sigma, exact, finite):
                 fin = False
         exact[i] = ex
         finite[i] = fin
+        if ex:
+            n_exact += 1
+        elif not fin:
+            n_bad += 1
+    return n_exact, n_bad
 
 
 @functools.lru_cache(maxsize=16)  # a pure function of (threshold, dof): ~50 tail evaluations, once
@@ -521,7 +530,7 @@ def instant_probability(dp, dv, da, R, Sigma, t):
 
 @njit(cache=True, error_model="numpy")
 def instant_probability_tol(dp, dv, da, R, Sigma, t, tol):
-    """instant_probability with the 3-D quadrature tolerance ``tol`` per piece and
+    """instant_probability with the quadrature tolerance ``tol`` per piece and
     level (0.0: the standard one; see overlap_probability_tol)."""
     D = dp.shape[0]
     if D == 2:  # scalars, as S_at
@@ -529,9 +538,11 @@ def instant_probability_tol(dp, dv, da, R, Sigma, t, tol):
         s01 = Sigma[0, 1] + t * (Sigma[0, 3] + Sigma[2, 1]) + t * t * Sigma[2, 3]
         s10 = Sigma[1, 0] + t * (Sigma[1, 2] + Sigma[3, 0]) + t * t * Sigma[3, 2]
         s11 = Sigma[1, 1] + t * (Sigma[1, 3] + Sigma[3, 1]) + t * t * Sigma[3, 3]
-        return overlap_probability_2d(dp[0] + t * (dv[0] + 0.5 * t * da[0]),
-                                      dp[1] + t * (dv[1] + 0.5 * t * da[1]),
-                                      s00, 0.5 * (s01 + s10), s11, R)
+        g0 = dp[0] + t * (dv[0] + 0.5 * t * da[0])
+        g1 = dp[1] + t * (dv[1] + 0.5 * t * da[1])
+        if tol > 0.0:
+            return overlap_probability_2d_tol(g0, g1, s00, 0.5 * (s01 + s10), s11, R, tol)
+        return overlap_probability_2d(g0, g1, s00, 0.5 * (s01 + s10), s11, R)
     g = np.empty(D)
     for k in range(D):
         g[k] = dp[k] + t * (dv[k] + 0.5 * t * da[k])
@@ -545,6 +556,7 @@ def instant_probability_tol(dp, dv, da, R, Sigma, t, tol):
 _PANELS = 2
 _RICE_TOL = 1e-3  # quadrature tolerance of the entry-rate integral per panel
 _P0_ERR = 1e-9  # error of one instantaneous probability (overlap_probability)
+_P0_SKIP = 1e-12  # P(0) is taken as 0 where instant_bound certifies it below this
 PLAUSIBLE_RTOL = 1e-6  # the plausible time's bracket width, relative to H
 
 
@@ -568,14 +580,24 @@ def _panels(leaves, cnt, t_end, pa, pb):
 # Per-pair scratch of the compiled orchestration (float64 array st):
 _ST_PMAX = 0  # largest instantaneous probability computed (a lower bound of P(contact))
 _ST_DEGENERATE = 1  # 1.0 once S(t) was degenerate at a quadrature node: the Rice values are unusable
-_ST_PTOL = 2  # 3-D quadrature tolerance of the pair's instantaneous probabilities (0.0: the standard)
-_ST_PERR = 3  # stated error of one of them (_P0_ERR at the standard tolerance)
+_ST_PTOL = 2  # quadrature tolerance of the walk's instantaneous probabilities (0.0: the standard)
+_ST_PERR = 3  # stated error of one of them (_P0_ERR at the standard tolerance; >= _P0_ERR)
 _ST_SIZE = 4
 # Straight 3-D pairs (line sampling) use the instantaneous probability only in the
 # plausible-time walk, where it is compared with the threshold: tolerance
 # _WALK_TOL_REL x threshold per piece and level (stated error 8e-7 x threshold,
 # far inside the certificate's margins): ~2-3x cheaper on the benchmark's pairs
 _WALK_TOL_REL = 1e-7
+# 2-D walk: tolerance min(_WALK_TOL_2D_REL x threshold, _WALK_TOL_2D) per piece,
+# stated error 4 x that (<= 1e-7 absolute, <= 1e-5 x threshold): far inside the
+# certificate's margins (the Rice step's integral + estimate ~1e-3), and the
+# walk's answers within 1e-7 of the threshold where the 1e-9 ones were within
+# 1e-9 (its tests allow 1e-6).  The splits of the standard tolerance come from
+# |K15 - G7| over-estimating K15's error (actual errors ~1e-14): at this
+# tolerance the benchmark's walk probabilities take one K15 per piece, ~60
+# segment evaluations instead of ~60-120
+_WALK_TOL_2D_REL = 2.5e-6
+_WALK_TOL_2D = 2.5e-8
 
 
 @njit(cache=True, error_model="numpy")
@@ -814,6 +836,19 @@ def _first_crossing(dp, dv, da, R, Sigma, pa, pb, j, a0, p_start, thr, dt, cache
             if not (lo + dt < hi and lo + dt <= b) or probed == lo:
                 return lo
             probed = lo
+            if st[_ST_PTOL] > 0.0 and dp.shape[0] == 2:
+                # the end game at the standard tolerance: the looser 2-D
+                # probabilities' stated error is comparable with the Rice
+                # integral over one dt, so the certificate of [lo, lo + dt]
+                # would fail on it (a conservative exit a few 1e-7 below thr
+                # where the 1e-9 ones bracket the crossing).  P(lo) is
+                # recomputed (it only starts the next certificate: the invariant
+                # on [a, lo] stands); the rest of the pair's walk keeps the
+                # standard tolerance (a cheap 2-D evaluation: 3-D keeps its own)
+                st[_ST_PTOL] = 0.0
+                st[_ST_PERR] = _P0_ERR
+                perr = _P0_ERR
+                plo = _prob_at(dp, dv, da, R, Sigma, lo, st)
             c = lo + dt
             pc = _prob_at(dp, dv, da, R, Sigma, c, st)
             if pc >= thr:
@@ -931,12 +966,33 @@ def _pair_kernel(dp, dv, da, R, Sigma, H, thr, out):
     if sampled:
         st[_ST_PTOL] = max(_WALK_TOL_REL * thr, 1e-10)
         st[_ST_PERR] = BALL_ERR_PER_TOL * st[_ST_PTOL]
+    elif dp.shape[0] == 2:
+        # 2-D: the walk's probabilities only meet the threshold (its certificate
+        # and comparisons, each with st[_ST_PERR]), so they take a looser
+        # tolerance (_WALK_TOL_2D; 4 pieces, one level: stated error 4 x tol,
+        # never below the standard one's 1e-9); P(0), which enters the reported
+        # probability, stays at the standard tolerance (below)
+        st[_ST_PTOL] = max(min(_WALK_TOL_2D_REL * thr, _WALK_TOL_2D), 1e-10)
+        st[_ST_PERR] = max(DISC_ERR_PER_TOL * st[_ST_PTOL], _P0_ERR)
+    # the largest error of any probability in st[_ST_PMAX] (the walk may switch
+    # to the standard tolerance at its end, _first_crossing)
+    pmax_err = st[_ST_PERR]
     if sampled and instant_bound(dp, dv, da, R, Sigma, 0.0, 0.0) < thr:
         # P(0) < thr is certified and only the walk would use P(0) (as its start
         # value, computed below if the walk starts at 0)
         p0 = -1.0
-    else:
+    elif sampled:
         p0 = _prob_at(dp, dv, da, R, Sigma, 0.0, st)
+    elif instant_bound(dp, dv, da, R, Sigma, 0.0, 0.0) <= _P0_SKIP:
+        # P(0) <= 1e-12 is certified without quadrature (bodies that start
+        # apart): 0 is within the _P0_ERR = 1e-9 that the bound already states
+        # for P(0), and within the walk's st[_ST_PERR] (>= 1e-9) as its start
+        p0 = 0.0
+    else:
+        # P(0) is part of the reported probability (upper = P0 + the Rice
+        # integral, with _P0_ERR in the bound): always the standard tolerance
+        p0 = instant_probability(dp, dv, da, R, Sigma, 0.0)
+        st[_ST_PMAX] = max(st[_ST_PMAX], p0)
     dt = PLAUSIBLE_RTOL * H
     pa = np.empty(_PANELS * cnt + 1)
     pb = np.empty(_PANELS * cnt + 1)
@@ -990,7 +1046,7 @@ def _pair_kernel(dp, dv, da, R, Sigma, H, thr, out):
         # line sampling: unbiased, no tube truncation; clipped below by the
         # largest instantaneous probability seen
         out[_OUT_QMC] = 3.0
-        out[_OUT_LO] = st[_ST_PMAX] - st[_ST_PERR]
+        out[_OUT_LO] = st[_ST_PMAX] - pmax_err
         out[_OUT_HI] = 1.0
         return
     total = 0.0
@@ -1030,12 +1086,12 @@ def _pair_kernel(dp, dv, da, R, Sigma, H, thr, out):
             out[_OUT_BOUND] = err + _P0_ERR + 2 * TUBE_TAIL
             return
         # the bracket [lo, hi] of P without sampling: P >= every instantaneous
-        # probability (st[_ST_PMAX], each within st[_ST_PERR]); P <= upper + its bound;
+        # probability (st[_ST_PMAX], each within pmax_err); P <= upper + its bound;
         # and where a narrower tube (k' sigmas) is certified, O = 0 on it and
         # O <= 2 off it: E[O] <= 2 P(chi^2_2D > k'^2) (_overcount_tail)
         slack = err + _P0_ERR + 2 * TUBE_TAIL
         hi = upper + slack
-        lo = max(st[_ST_PMAX] - st[_ST_PERR], upper - slack - _overcount_tail(dp, dv, da, Sigma, t0, t1))
+        lo = max(st[_ST_PMAX] - pmax_err, upper - slack - _overcount_tail(dp, dv, da, Sigma, t0, t1))
         if lo <= hi and 0.5 * (hi - lo) <= BRACKET_HALF_WIDTH + slack:
             # no wider than the tightest bound the RQMC could state (its floor + the
             # same slack): the midpoint, bounded without sampling
@@ -1049,7 +1105,7 @@ def _pair_kernel(dp, dv, da, R, Sigma, H, thr, out):
         out[_OUT_ERR] = slack
         return
     out[_OUT_QMC] = 1.0
-    out[_OUT_LO] = st[_ST_PMAX] - st[_ST_PERR]
+    out[_OUT_LO] = st[_ST_PMAX] - pmax_err
     out[_OUT_HI] = 1.0 if degenerate else upper + err + _P0_ERR + 2 * TUBE_TAIL
 
 

@@ -123,3 +123,40 @@ def test_eigen_decomposition_is_accurate():
             assert np.all(np.diff(lam) >= 0)
             assert np.abs(V @ np.diag(lam) @ V.T - A).max() <= 1e-13 * np.abs(A).max()
             assert np.abs(V.T @ V - np.eye(n)).max() <= 1e-13
+
+
+@pytest.mark.parametrize("seed", range(2))
+def test_2d_looser_tolerance_within_its_stated_error(seed):
+    """The 2-D plausible-time walk evaluates P at a looser quadrature tolerance
+    (uncertainty_kernels._WALK_TOL_2D; an edge piece whose density mass is <= tol is
+    not integrated, its mass counted as its error): within DISC_ERR_PER_TOL x tol of
+    the mpmath reference on the random cases above (the far-edge drop is exercised by
+    the sigma << R and inside classes), and the standard tolerance's answer unchanged."""
+    from circle_collision_ros.core.overlap_probability import DISC_ERR_PER_TOL, overlap_probability_tol
+    rng = np.random.default_rng(300 + seed)
+    for _ in range(40):
+        mean, S, R = random_case(rng, 2)
+        ref = overlap_reference(mean, S, R)
+        assert overlap_probability_tol(mean, S, R, 1e-10) == overlap_probability(mean, S, R)
+        for tol in (1e-9, 2.5e-8, 1e-7, 1e-6):
+            got = overlap_probability_tol(mean, S, R, tol)
+            assert abs(got - ref) <= DISC_ERR_PER_TOL * tol, (mean.tolist(), S.tolist(), R, tol, got, ref)
+
+
+def test_2d_looser_tolerance_drops_only_light_edge_pieces():
+    """Cases built so that an edge piece is dropped (mean inside, sigma ~ R / 10 to R / 6:
+    the far edge is 6-20 sigma away) against the standard tolerance's answer, which
+    the tests above prove within 1e-9: within DISC_ERR_PER_TOL x tol + 1e-9."""
+    from circle_collision_ros.core.overlap_probability import DISC_ERR_PER_TOL, overlap_probability_tol
+    rng = np.random.default_rng(310)
+    for _ in range(300):
+        R = 10 ** rng.uniform(-1, 1)
+        sig = R * rng.uniform(0.1, 0.17, size=2) * 10 ** rng.uniform(-0.5, 0, size=2)
+        Q = _rotation(rng, 2)
+        S = Q @ np.diag(sig ** 2) @ Q.T
+        u = rng.normal(size=2)
+        mean = u / np.linalg.norm(u) * R * rng.uniform(0, 1.3)
+        a = overlap_probability(mean, S, R)
+        for tol in (2.5e-8, 1e-6):
+            b = overlap_probability_tol(mean, S, R, tol)
+            assert abs(a - b) <= DISC_ERR_PER_TOL * tol + 1e-9, (mean.tolist(), S.tolist(), R, tol, a, b)
