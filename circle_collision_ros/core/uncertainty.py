@@ -31,14 +31,11 @@ import numpy as np
 
 from circle_collision_ros.core.line_sampling import line_factor, line_replicates
 from circle_collision_ros.core.narrow_phase import time_to_collision
-from circle_collision_ros.core.parallel_policy import threads_pay
 from circle_collision_ros.core.uncertainty_kernels import (
     BROAD_PHASE_SIGMAS,
-    PARALLEL_MIN_UNCERTAIN_ROWS,
     TUBE_TAIL,
     OUT_SIZE,
     evaluate_uncertain_rows,
-    evaluate_uncertain_rows_par,
     factor,
     finish_row,
     max_sigma_rows,
@@ -262,10 +259,7 @@ def uncertain_pairs(pa, va, aa, ra, cov_a, pb, vb, ab, rb, cov_b,
         now = np.sort(order[:m])
         todo, dp, dv, da, rad, sig = todo[now], dp[now], dv[now], da[now], rad[now], sig[now]
     out = np.empty((todo.size, OUT_SIZE))
-    # rows are independent: the threaded twin gives the same bits (when a core is free)
-    evaluate = (evaluate_uncertain_rows_par if threads_pay(todo.size, PARALLEL_MIN_UNCERTAIN_ROWS)
-                else evaluate_uncertain_rows)
-    evaluate(dp, dv, da, rad, sig, H, thr, out)
+    evaluate_uncertain_rows(dp, dv, da, rad, sig, H, thr, out)
     for j, i in enumerate(todo.tolist()):
         prob[i], bound[i], tpl[i] = r = finish_row(dp[j], dv[j], da[j], float(rad[j]), sig[j], H, out[j])
         if memo is not None:

@@ -11,7 +11,7 @@ import math
 from statistics import NormalDist
 
 import numpy as np
-from numba import njit, prange
+from numba import njit
 
 from circle_collision_ros.core.entry_rate import BROAD_K2, entry_rate_gauss3, entry_rate_integral, entry_rate_k15
 from circle_collision_ros.core.line_sampling import line_factor, line_replicates
@@ -1234,24 +1234,10 @@ def relative_rows(pa, va, aa, ra, pb, vb, ab, rb, sigma, rows, dp, dv, da, rad, 
 
 @njit(cache=True, error_model="numpy")
 def evaluate_uncertain_rows(dp, dv, da, rad, sig, H, thr, out):
-    """_pair_kernel on every row (out (n, OUT_SIZE)); rows with out[j, _OUT_QMC] != 0
-    still need ``finish_row``'s sampling."""
+    """_pair_kernel on every row (out (n, OUT_SIZE)), serially: on numba's threads the
+    node's tail latency suffered (docs/uncertainty.md, "Not guaranteed / weak");
+    rows with out[j, _OUT_QMC] != 0 still need ``finish_row``'s sampling."""
     for j in range(dp.shape[0]):
-        _pair_kernel(dp[j], dv[j], da[j], rad[j], sig[j], H, thr, out[j])
-
-
-#: Rows from which evaluate_uncertain_rows_par may run on numba's threads (when a
-#: core is free: parallel_policy): a row takes ~50-300 us in 2-D and milliseconds
-#: in 3-D, a parallel launch ~20 us, so two rows already pay.
-PARALLEL_MIN_UNCERTAIN_ROWS = 2
-
-
-@njit(cache=True, error_model="numpy", parallel=True)
-def evaluate_uncertain_rows_par(dp, dv, da, rad, sig, H, thr, out):
-    """``evaluate_uncertain_rows`` over numba's threads: each row is computed by the
-    same _pair_kernel from its own inputs into its own out row, so the results are
-    bit for bit the serial ones."""
-    for j in prange(dp.shape[0]):
         _pair_kernel(dp[j], dv[j], da[j], rad[j], sig[j], H, thr, out[j])
 
 

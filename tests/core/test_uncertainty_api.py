@@ -3,8 +3,7 @@
 Guarantees proved here (docs/uncertainty.md):
 * zero covariance rows give the exact solver's answer bit for bit, with
   probability exactly 0.0 or 1.0 and bound 0.0;
-* a row's result does not depend on the batch it comes in, nor on whether the
-  rows ran on numba's threads;
+* a row's result does not depend on the batch it comes in;
 * the k-sigma exits: far pairs report 0 and deep contacts 1, bound TUBE_TAIL;
 * covariance_problem names each bad class.
 """
@@ -14,7 +13,6 @@ import numpy as np
 import pytest
 
 from circle_collision_ros.core import time_to_collision
-from circle_collision_ros.core.parallel_policy import threads_forced
 from circle_collision_ros.core.uncertainty import (
     BROAD_PHASE_SIGMAS,
     TUBE_TAIL,
@@ -69,21 +67,6 @@ def test_rows_do_not_depend_on_the_batch():
     again = uncertain_pairs(*args, H, 0.05)
     for x, y in zip(whole, again):
         assert x.tobytes() == y.tobytes()
-
-
-@pytest.mark.parametrize("D", [2, 3])
-def test_threaded_rows_are_the_serial_rows_bit_for_bit(D):
-    """uncertain_pairs evaluates its rows on numba's threads when a core is free: forced
-    on and off, the same bits (every kind of row: straight, accelerating, 3-D line sampled)."""
-    rng = np.random.default_rng(12 + D)
-    args = _batch(rng, 9 if D == 2 else 4, D, 0.2)
-    answers = []
-    for threaded in (False, True):
-        with threads_forced(threaded):
-            answers.append(uncertain_pairs(*args, 2.0, 0.05))
-    for x, y in zip(*answers):
-        assert x.tobytes() == y.tobytes()
-    assert np.count_nonzero((answers[0].collision_probability > 0) & (answers[0].collision_probability < 1)) >= 2
 
 
 def test_k_sigma_exits():
