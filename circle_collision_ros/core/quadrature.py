@@ -130,6 +130,18 @@ def _make_driver(rule):
     return adaptive
 
 
+def _value_and_error(driver):
+    """``adaptive(prm, a, b, tol) -> (integral, error estimate)`` from a driver of a
+    rule without inner errors."""
+
+    @njit(cache=True, error_model="numpy")
+    def adaptive(prm, a, b, tol):
+        v, e, _ = driver(prm, a, b, tol)
+        return v, e
+
+    return adaptive
+
+
 def make_adaptive(fn):
     """``adaptive(prm, a, b, tol) -> (integral, error estimate)`` of
     ``fn(x, prm)`` over [a, b] (a <= b), see the module doc.
@@ -153,14 +165,7 @@ def make_adaptive(fn):
                 g += _WG[j // 2] * s
         return k * h, abs((k - g) * h), 0.0
 
-    driver = _make_driver(gk15)
-
-    @njit(cache=True, error_model="numpy")
-    def adaptive(prm, a, b, tol):
-        v, e, _ = driver(prm, a, b, tol)
-        return v, e
-
-    return adaptive
+    return _value_and_error(_make_driver(gk15))
 
 
 def make_adaptive_angle(fn):
@@ -194,14 +199,7 @@ def make_adaptive_angle(fn):
                 g += _WG[j // 2] * s
         return k * h, abs((k - g) * h), 0.0
 
-    driver = _make_driver(gk15)
-
-    @njit(cache=True, error_model="numpy")
-    def adaptive(prm, a, b, tol):
-        v, e, _ = driver(prm, a, b, tol)
-        return v, e
-
-    return adaptive
+    return _value_and_error(_make_driver(gk15))
 
 
 def make_adaptive_nested(fn, last_inner):
