@@ -160,3 +160,59 @@ def test_2d_looser_tolerance_drops_only_light_edge_pieces():
         for tol in (2.5e-8, 1e-6):
             b = overlap_probability_tol(mean, S, R, tol)
             assert abs(a - b) <= DISC_ERR_PER_TOL * tol + 1e-9, (mean.tolist(), S.tolist(), R, tol, a, b)
+
+
+def _ruben_case(rng, D):
+    """(R, m, s sorted ascending, tol): sigma 0.06-5 R, means inside to ~3 R out."""
+    R = 10 ** rng.uniform(-1, 1)
+    s = np.sort(R * 10 ** rng.uniform(-1.2, 0.7, size=D))
+    m = rng.normal(size=D) * R * rng.uniform(0, 2.5)
+    return R, m, s, 10 ** rng.uniform(-10, -7)
+
+
+def _ruben(R, m, s, tol, max_terms):
+    from circle_collision_ros.core.overlap_probability import ruben_probability
+    if len(m) == 2:
+        return ruben_probability(R, m[0], s[0], m[1], s[1], 0.0, -1.0, tol, max_terms)
+    return ruben_probability(R, m[0], s[0], m[1], s[1], m[2], s[2], tol, max_terms)
+
+
+@pytest.mark.parametrize("D, cases", [(2, 60), (3, 8)])
+def test_ruben_mixture_within_its_stated_error(D, cases):
+    """Ruben's chi-square mixture (the fast path of the instantaneous probability):
+    where it decides, the mpmath reference lies within its stated error above it
+    (it returns the bracket's lower end), which is at most tol + RUBEN_ROUNDING (the bracket is rigorous: the mixture's weights are
+    a probability distribution and F_{n+2k} falls with k).  Most cases of this
+    class (sigma 0.06-5 R, axis ratios up to ~80) decide within the 3-D budget;
+    the others answer (nan, -1)."""
+    from circle_collision_ros.core.overlap_probability import RUBEN_MAX_TERMS_3D, RUBEN_ROUNDING
+    from tests.core.uncertainty_reference import independent_reference
+    rng = np.random.default_rng(400 + D)
+    decided = 0
+    for _ in range(cases):
+        R, m, s, tol = _ruben_case(rng, D)
+        v, err = _ruben(R, m, s, tol, RUBEN_MAX_TERMS_3D)
+        if err == -1.0 and math.isnan(v):
+            continue
+        decided += 1
+        assert 0.0 <= err <= tol + RUBEN_ROUNDING, (R, m.tolist(), s.tolist(), tol, err)
+        ref = independent_reference(R, m, s, dps=30 if D == 2 else 20)
+        assert abs(v - ref) <= err, (R, m.tolist(), s.tolist(), tol, v, err, ref)
+        assert v <= ref + RUBEN_ROUNDING  # the bracket's lower end
+    assert decided >= 0.6 * cases
+
+
+def test_ruben_mixture_gives_way_where_it_would_not_close():
+    """Outside its regime the mixture answers (nan, -1) and the quadrature takes
+    over: sigma << R (x = (R / s1)^2 huge) with the mean near the edge, very
+    unequal sigmas (a slow geometric tail), a mean far out in sigmas; and
+    overlap_probability is then still within 1e-9 of mpmath."""
+    from circle_collision_ros.core.overlap_probability import RUBEN_MAX_TERMS_2D
+    cases = [(1.0, np.array([1.0, 0.0]), np.array([0.01, 0.02])),
+             (1.0, np.array([0.5, 0.5]), np.array([1e-3, 3.0])),
+             (1.0, np.array([30.0, 0.0]), np.array([0.5, 0.6]))]
+    for R, m, s in cases:
+        v, err = _ruben(R, m, s, 1e-10, RUBEN_MAX_TERMS_2D)
+        assert err == -1.0 and math.isnan(v)
+        got = overlap_probability(m, np.diag(s ** 2), R)
+        assert abs(got - overlap_reference(m, np.diag(s ** 2), R)) <= TOL

@@ -4,6 +4,8 @@
   float matrix given (its eigen-decomposition in 40-digit arithmetic), then
   tanh-sinh quadrature (mpmath.quad) over the narrow eigen-direction with
   break points at the density's peak and at the inner factor's transitions.
+* ``independent_reference(R, m, s)``: the same for independent components
+  (no rotation), e.g. for Ruben's mixture, which takes them in that form.
 * ``isotropic_reference(m, s, R, D)``: the noncentral chi-square CDF by its
   Poisson series (a second, quadrature-free formula for S = s^2 I).
 """
@@ -88,6 +90,17 @@ def overlap_reference(mean, S, R, dps: int = 40) -> float:
         if D == 2:
             return float(_disc(Rm, mu[0], s[0], mu[1], s[1]))
         return float(_ball(Rm, mu, s))
+
+
+def independent_reference(R: float, m, s, dps: int = 30) -> float:
+    """P(sum y_i^2 <= R^2) for independent y_i ~ N(m_i, s_i^2) (2 or 3 components,
+    floats as given): the quadrature above, without an eigen-decomposition."""
+    with mp.workdps(dps):
+        mm = [mp.mpf(float(v)) for v in m]
+        ss = [mp.mpf(float(v)) for v in s]
+        if len(mm) == 2:
+            return float(_disc(mp.mpf(float(R)), mm[0], ss[0], mm[1], ss[1]))
+        return float(_ball(mp.mpf(float(R)), mm, ss))
 
 
 def isotropic_reference(m: float, s: float, R: float, D: int, dps: int = 40) -> float:
