@@ -304,39 +304,40 @@ def nu_plus_2d(dp, dv, da, R, Sigma, t, tol, acc):
 
 
 # ---- 3-D: the cap integral at one t ---------------------------------------------
-# prm = (R, theta, u, e1, e2, g, gd, A, norm, K, Vc)
+# prm = (R, cos theta, sin theta, u, e1, e2, g, gd, A, norm, K, Vc)
 
 
 @njit(cache=True, error_model="numpy")
-def _ring_integrand(psi, prm):
+def _ring_integrand(cp, sp, prm):
+    """The surface integrand at polar angle theta (its cos/sin in prm, computed once
+    per ring) and azimuth psi, given cp, sp = cos, sin of psi
+    (quadrature.make_adaptive_angle)."""
     R = prm[0]
-    th = prm[1]
-    u = prm[2]
-    e1 = prm[3]
-    e2 = prm[4]
-    ct = math.cos(th)
-    st = math.sin(th)
-    cp = math.cos(psi)
-    sp = math.sin(psi)
+    ct = prm[1]
+    st = prm[2]
+    u = prm[3]
+    e1 = prm[4]
+    e2 = prm[5]
     n0 = ct * u[0] + st * (cp * e1[0] + sp * e2[0])
     n1 = ct * u[1] + st * (cp * e1[1] + sp * e2[1])
     n2 = ct * u[2] + st * (cp * e1[2] + sp * e2[2])
-    return _surface_integrand(n0, n1, n2, R, prm[5], prm[6], prm[7], prm[8], prm[9], prm[10])
+    return _surface_integrand(n0, n1, n2, R, prm[6], prm[7], prm[8], prm[9], prm[10], prm[11])
 
 
-_ring_adaptive = make_adaptive(_ring_integrand)
+_ring_adaptive = make_adaptive_angle(_ring_integrand)
 
 
 @njit(cache=True, error_model="numpy")
 def _cap_integrand(th, prm):
     """R^2 sin(theta) * ring integral at polar angle theta."""
     R = prm[0]
-    p2 = (R, th, prm[1], prm[2], prm[3], prm[4], prm[5], prm[6], prm[7], prm[8], prm[9])
+    sth = math.sin(th)
+    p2 = (R, math.cos(th), sth, prm[1], prm[2], prm[3], prm[4], prm[5], prm[6], prm[7], prm[8], prm[9])
     tol = prm[10]
     v1, e1 = _ring_adaptive(p2, 0.0, math.pi, tol)
     v2, e2 = _ring_adaptive(p2, math.pi, 2.0 * math.pi, tol)
     acc = prm[11]
-    st = R * R * math.sin(th)
+    st = R * R * sth
     acc[0] = max(acc[0], (e1 + e2) * st)
     return (v1 + v2) * st
 
