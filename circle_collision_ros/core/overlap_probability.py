@@ -2,8 +2,10 @@
 
 Method (docs/uncertainty.md has the derivation and the measurements).  In the
 eigenbasis of the covariance S the components y_i of X are independent,
-y_i ~ N(m_i, s_i^2) with s_1 <= s_2 (<= s_3).  The probability is a 1-D
-integral over the *narrowest* component,
+y_i ~ N(m_i, s_i^2) with s_1 <= s_2 (<= s_3).  First Ruben's chi-square
+mixture (``ruben_probability``: a rigorous bracket, ~1 us) where it closes
+within a few hundred terms; otherwise, and as the inner level of the 3-D
+quadrature, the probability is a 1-D integral over the *narrowest* component,
 
     P = int phi(u) F(w(x)) du,   x = m_1 + s_1 u,   w(x) = sqrt(R^2 - x^2),
 
@@ -21,7 +23,7 @@ one level down).  Choices, each for a reason:
 * the window is split at u = 0 (the density's peak) so every panel of the
   adaptive Gauss-Kronrod rule sees the peak at an end.
 
-Error: truncation 2.3e-19 per level plus the quadrature's |K15 - G7| sum,
+Quadrature error: truncation 2.3e-19 per level plus the quadrature's |K15 - G7| sum,
 held below ``_TOL`` = 1e-10 per level (|K15 - G7| over-estimates the
 error of K15 by orders of magnitude on these smooth integrands);
 tests/core/test_uncertainty_overlap.py checks
@@ -42,7 +44,8 @@ from circle_collision_ros.core.quadrature import make_adaptive
 
 __all__ = ["overlap_probability", "overlap_probability_2d", "overlap_probability_tol", "interval_mass",
            "disc_probability", "disc_probability_tol", "ball_probability", "ball_probability_tol", "WINDOW_SIGMAS",
-           "BALL_ERR_PER_TOL", "DISC_ERR_PER_TOL", "overlap_probability_2d_tol"]
+           "BALL_ERR_PER_TOL", "DISC_ERR_PER_TOL", "overlap_probability_2d_tol", "ruben_probability",
+           "RUBEN_MAX_TERMS_2D", "RUBEN_MAX_TERMS_3D", "RUBEN_ROUNDING"]
 
 WINDOW_SIGMAS = 9.0  # integration window [-9, 9] sigma of each integrated component
 _TOL = 1e-10  # |K15 - G7| tolerance per 1-D integral (absolute, on a probability)
@@ -366,9 +369,11 @@ def ball_probability(R, m1, s1, m2, s2, m3, s3):
 
 @njit(cache=True, error_model="numpy")
 def ball_probability_tol(R, m1, s1, m2, s2, m3, s3, tol):
-    """ball_probability with the quadrature tolerance ``tol`` per piece and level:
-    the stated error is <= BALL_ERR_PER_TOL * tol (4 pieces per level, each within
-    tol, the inner level's errors weighted by a density of total mass <= 1)."""
+    """ball_probability with the tolerance ``tol`` per piece and level: Ruben's mixture
+    (within tol + RUBEN_ROUNDING) where it closes in RUBEN_MAX_TERMS_3D terms, else
+    the quadrature; the stated error is <= BALL_ERR_PER_TOL * tol either way (the
+    quadrature's: 4 pieces per level, each within tol, the inner level's errors
+    weighted by a density of total mass <= 1)."""
     # sort so that s1 <= s2 <= s3
     if s1 > s2:
         m1, s1, m2, s2 = m2, s2, m1, s1
