@@ -598,12 +598,16 @@ class CollisionNode(Node):
     SHUTDOWN_ACK_S = 1.0
 
     def destroy_node(self) -> None:
-        self.markers.close()  # clears the display while the publisher still exists
-        try:  # ... and delivered: the process may exit right after
-            self._markers_pub.wait_for_all_acked(Duration(seconds=self.SHUTDOWN_ACK_S))
-        except Exception as exc:  # e.g. the context was shut down from outside
-            self.get_logger().warning(f"final markers not acknowledged: {exc!r}")
-        if self._recorder is not None:
+        # Also called on a node whose __init__ did not finish (Ctrl-C during the warm-up,
+        # a start-up error): rclpy's shutdown destroys every node of the context, so only
+        # what exists is closed.
+        if hasattr(self, "markers"):
+            self.markers.close()  # clears the display while the publisher still exists
+            try:  # ... and delivered: the process may exit right after
+                self._markers_pub.wait_for_all_acked(Duration(seconds=self.SHUTDOWN_ACK_S))
+            except Exception as exc:  # e.g. the context was shut down from outside
+                self.get_logger().warning(f"final markers not acknowledged: {exc!r}")
+        if getattr(self, "_recorder", None) is not None:
             try:
                 self._recorder.close()
             except RecordingError as exc:

@@ -377,3 +377,28 @@ def test_best_effort_publishers_are_accepted(in_process, ros_node) -> None:
     harness.send(state_array(_stamped_now([state("a", (0, 0), (1, 0, 0)), state("b", (3, 0))], ros_node)),
                  pub=best_effort)
     assert contacts_of(harness.predictions[-1]) == {("a", "b"): pytest.approx(2.0)}
+
+
+INTERRUPTED_START = """
+import sys
+from circle_collision_ros.pipeline import predictor
+
+
+def interrupted(self):  # Ctrl-C while numba's kernels load (minutes on a cold cache)
+    raise KeyboardInterrupt
+
+
+predictor.CollisionPredictor.warm_up = interrupted
+from circle_collision_ros.node import collision_node
+sys.exit(collision_node.main(["collision_node"]))
+"""
+
+
+def test_ctrl_c_during_start_up_exits_cleanly() -> None:
+    """Ctrl-C before the node is built (its warm-up loads or compiles the kernels first):
+    rclpy's shutdown destroys the half-built node, which has no markers or recorder yet.
+    That used to end in an AttributeError traceback and exit code 1; now exit code 0."""
+    run = subprocess.run([sys.executable, "-c", INTERRUPTED_START], capture_output=True, text=True,
+                         timeout=120)
+    assert run.returncode == 0, run.stdout + run.stderr
+    assert "Traceback" not in run.stderr, run.stderr
