@@ -96,7 +96,8 @@ def interval_mass(lo, hi, m, s):
 # (absolute rounding ~k ulps, enough to decide); the sum S_K recomputes them
 # upwards from the last one, F_v = F_{v+2} + T_v (positive terms: relatively
 # accurate even where P ~ 1e-15), the last one by its series where that
-# converges fast.  RUBEN_ROUNDING covers the rest (the tests measure ~1e-15).
+# converges fast.  RUBEN_ROUNDING covers the rest (measured ~1e-15:
+# test_ruben_mixture_rounding_is_far_below_its_allowance).
 # Cost: ~K^2 / 2 multiply-adds, K ~ x / 2 + a few sqrt(x) or the weights'
 # spread; the quadrature below does ~60 (2-D) to ~4,000 (3-D) erfc evaluations.
 # It is tried first and gives way to the quadrature when it would need more
