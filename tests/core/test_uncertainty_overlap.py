@@ -1,7 +1,8 @@
 """Instantaneous overlap probability P(|X| <= R) against mpmath, 1e-9 absolute.
 
 Guarantee proved here (docs/uncertainty.md, "Instantaneous probability"):
-``overlap_probability(mean, S, R)`` is within 1e-9 of the exact value for the
+``overlap_probability(mean, S, R)`` (Ruben's mixture where it closes, else the
+quadrature; each also tested alone below) is within 1e-9 of the exact value for the
 float inputs as given, in 2-D and 3-D, for covariances that are isotropic,
 strongly anisotropic (axis ratio up to 1e6), singular (rank 0, 1, 2),
 sigma << R (down to 1e-5 R) and sigma >> R (up to 1e4 R), and means inside,
@@ -181,10 +182,11 @@ def _ruben(R, m, s, tol, max_terms):
 def test_ruben_mixture_within_its_stated_error(D, cases):
     """Ruben's chi-square mixture (the fast path of the instantaneous probability):
     where it decides, the mpmath reference lies within its stated error above it
-    (it returns the bracket's lower end), which is at most tol + RUBEN_ROUNDING (the bracket is rigorous: the mixture's weights are
-    a probability distribution and F_{n+2k} falls with k).  Most cases of this
-    class (sigma 0.06-5 R, axis ratios up to ~80) decide within the 3-D budget;
-    the others answer (nan, -1)."""
+    (it returns the bracket's lower end), which is at most tol + RUBEN_ROUNDING
+    (the bracket is rigorous: the mixture's weights are a probability
+    distribution and F_{n+2k} falls with k).  Most cases of this class (sigma
+    0.06-5 R, axis ratios up to ~80) decide within the 3-D budget; the others
+    answer (nan, -1)."""
     from circle_collision_ros.core.overlap_probability import RUBEN_MAX_TERMS_3D, RUBEN_ROUNDING
     from tests.core.uncertainty_reference import independent_reference
     rng = np.random.default_rng(400 + D)
