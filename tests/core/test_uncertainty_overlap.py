@@ -2,7 +2,7 @@
 
 Guarantee proved here (docs/uncertainty.md, "Instantaneous probability"):
 ``overlap_probability(mean, S, R)`` (Ruben's mixture where it closes, else the
-quadrature; each also tested alone below) is within 1e-9 of the exact value for the
+quadrature; the mixture is also tested alone below) is within 1e-9 of the exact value for the
 float inputs as given, in 2-D and 3-D, for covariances that are isotropic,
 strongly anisotropic (axis ratio up to 1e6), singular (rank 0, 1, 2),
 sigma << R (down to 1e-5 R) and sigma >> R (up to 1e4 R), and means inside,
