@@ -86,21 +86,22 @@ def overlap_reference(mean, S, R, dps: int = 40) -> float:
         lam, Q = mp.eigsy(A)
         mu = [sum(Q[k, j] * mp.mpf(float(mean[k])) for k in range(D)) for j in range(D)]
         s = [mp.sqrt(max(lam[j], 0)) for j in range(D)]
-        Rm = mp.mpf(float(R))
-        if D == 2:
-            return float(_disc(Rm, mu[0], s[0], mu[1], s[1]))
-        return float(_ball(Rm, mu, s))
+        return float(_independent(mp.mpf(float(R)), mu, s))
+
+
+def _independent(R, m, s):
+    """P(sum y_i^2 <= R^2), independent y_i ~ N(m_i, s_i^2), 2 or 3 components (mpmath numbers)."""
+    if len(m) == 2:
+        return _disc(R, m[0], s[0], m[1], s[1])
+    return _ball(R, m, s)
 
 
 def independent_reference(R: float, m, s, dps: int = 30) -> float:
     """P(sum y_i^2 <= R^2) for independent y_i ~ N(m_i, s_i^2) (2 or 3 components,
     floats as given): the quadrature above, without an eigen-decomposition."""
     with mp.workdps(dps):
-        mm = [mp.mpf(float(v)) for v in m]
-        ss = [mp.mpf(float(v)) for v in s]
-        if len(mm) == 2:
-            return float(_disc(mp.mpf(float(R)), mm[0], ss[0], mm[1], ss[1]))
-        return float(_ball(mp.mpf(float(R)), mm, ss))
+        return float(_independent(mp.mpf(float(R)), [mp.mpf(float(v)) for v in m],
+                                  [mp.mpf(float(v)) for v in s]))
 
 
 def isotropic_reference(m: float, s: float, R: float, D: int, dps: int = 40) -> float:
