@@ -42,7 +42,7 @@ from numba import njit
 from circle_collision_ros.core.quadrature import (G7_WEIGHTS, K15_NODES, K15_WEIGHTS, make_adaptive, make_adaptive_angle,
                                                   make_adaptive_nested)
 
-__all__ = ["entry_rate_integral", "entry_rate_k15", "entry_rate_gauss3", "mat_mul", "DEGENERATE_RATIO"]
+__all__ = ["entry_rate_integral", "entry_rate_k15", "entry_rate_gauss3", "mat_mul", "rate_factor", "DEGENERATE_RATIO"]
 
 DEGENERATE_RATIO = 1e-12
 _RS2 = 1.0 / math.sqrt(2.0)
@@ -51,13 +51,96 @@ BROAD_K2 = 7.5 ** 2  # BROAD_PHASE_SIGMAS^2 (uncertainty_kernels asserts they ag
 _SCAN = 16  # arc scan points for the density's local maxima (panel ends)
 
 
+# W. J. Cody's rational Chebyshev approximations of erf and erfc (Math. Comp. 23,
+# 631-638, 1969; Netlib SPECFUN CALERF), ~1e-16 relative on their ranges:
+# erf(x) = x A(x^2) / B(x^2) for |x| < 0.46875; erfcx(x) = exp(x^2) erfc(x) =
+# C(x) / D(x) for 0.46875 <= x <= 4 and (1 / sqrt(pi) - r3(x)) / x, r3 = z P(z) / Q(z),
+# z = 1 / x^2, for x > 4.  (tests/core/test_uncertainty_entry_rate.py checks the
+# rate factor built on them against 40-digit mpmath.)
+_CODY_A = (3.16112374387056560e0, 1.13864154151050156e2, 3.77485237685302021e2, 3.20937758913846947e3,
+           1.85777706184603153e-1)
+_CODY_B = (2.36012909523441209e1, 2.44024637934444173e2, 1.28261652607737228e3, 2.84423683343917062e3)
+_CODY_C = (5.64188496988670089e-1, 8.88314979438837594e0, 6.61191906371416295e1, 2.98635138197400131e2,
+           8.81952221241769090e2, 1.71204761263407058e3, 2.05107837782607147e3, 1.23033935479799725e3,
+           2.15311535474403846e-8)
+_CODY_D = (1.57449261107098347e1, 1.17693950891312499e2, 5.37181101862009858e2, 1.62138957456669019e3,
+           3.29079923573345963e3, 4.36261909014324716e3, 3.43936767414372164e3, 1.23033935480374942e3)
+_CODY_P = (3.05326634961232344e-1, 3.60344899949804439e-1, 1.25781726111229246e-1, 1.60837851487422766e-2,
+           6.58749161529837803e-4, 1.63153871373020978e-2)
+_CODY_Q = (2.56852019228982242e0, 1.87295284992346047e0, 5.27905102951428412e-1, 6.05183413124413191e-2,
+           2.33520497626869185e-3)
+
+
+@njit(cache=True, error_model="numpy", inline="always")
+def _cody_erf_small(x):
+    """erf(x) for |x| < 0.46875 (Cody's first range)."""
+    a, b = _CODY_A, _CODY_B
+    z = x * x
+    num = (((a[4] * z + a[0]) * z + a[1]) * z + a[2]) * z + a[3]
+    den = (((z + b[0]) * z + b[1]) * z + b[2]) * z + b[3]
+    return x * num / den
+
+
+@njit(cache=True, error_model="numpy", inline="always")
+def _cody_erfcx_mid(x):
+    """exp(x^2) erfc(x) for 0.46875 <= x <= 4 (Cody's second range)."""
+    c, d = _CODY_C, _CODY_D
+    num = c[8] * x
+    den = x
+    for i in range(7):
+        num = (num + c[i]) * x
+        den = (den + d[i]) * x
+    return (num + c[7]) / (den + d[7])
+
+
+@njit(cache=True, error_model="numpy", inline="always")
+def _cody_r3(x):
+    """r3(x) of Cody's third range (x > 4): exp(x^2) erfc(x) = (1 / sqrt(pi) - r3) / x, r3 > 0."""
+    p, qq = _CODY_P, _CODY_Q
+    z = 1.0 / (x * x)
+    num = ((((p[5] * z + p[0]) * z + p[1]) * z + p[2]) * z + p[3]) * z + p[4]
+    den = ((((z + qq[0]) * z + qq[1]) * z + qq[2]) * z + qq[3]) * z + qq[4]
+    return z * num / den
+
+
+_RATE_TAIL_NEGLIGIBLE = 8.5
+
+
 @njit(cache=True, error_model="numpy")
-def _pos_part_mean(m, s):
-    """E[(-Y)^+] for Y ~ N(m, s^2)."""
+def rate_factor(q, m, s):
+    """exp(-q/2) E[(-Y)^+] for Y ~ N(m, s^2), s >= 0: the density's exponential
+    times Rice's rate factor, the surface integrand's only transcendental part.
+
+    E[(-Y)^+] = s phi(r) - m Phi(-r), r = m / s.  Off |r| < 0.66 it is written as
+    [-m if m < 0] + exp(-r^2/2) (s / sqrt(2 pi) - |m| erfcx(|r| / sqrt 2) / 2)
+    with Cody's erfcx, so the two exponentials merge: one exp (m > 0) or two
+    (m < 0) and a rational function, where exp, exp and erfc cost ~2x as much.
+    The bracket is s r3 / sqrt 2 for |r| > 4 sqrt 2, free of the cancellation of
+    the direct form (its two terms agree to ~1 / r^2 there); for smaller |r| it
+    keeps >= 3 % of s / sqrt(2 pi) (sqrt(pi) 4 erfcx(4) = 0.971), so no
+    cancellation beyond ~1.5 digits.  Entering fast (r < -8.5, the common case
+    where the velocity is well known) the tail is dropped: one exp.  Relative
+    error ~1e-13 at worst (the rounding of exp's argument ~700; the test allows
+    1e-12)."""
     if not (s > 0.0):
-        return max(-m, 0.0)
+        return math.exp(-0.5 * q) * max(-m, 0.0)
     r = m / s
-    return s * _RS2PI * math.exp(-0.5 * r * r) - m * 0.5 * math.erfc(r * _RS2)
+    if r < -_RATE_TAIL_NEGLIGIBLE:
+        # entering fast: the tail is below e^(-r^2/2) / (sqrt(2 pi) |r|) < 1e-17 of -m
+        # (bracket <= s / sqrt(2 pi)): below half an ulp of the sum, one exp instead of two
+        return math.exp(-0.5 * q) * (-m)
+    x = r * _RS2
+    ax = abs(x)
+    if ax < 0.46875:
+        return math.exp(-0.5 * q) * (s * _RS2PI * math.exp(-0.5 * r * r) - 0.5 * m * (1.0 - _cody_erf_small(x)))
+    if ax <= 4.0:
+        bracket = s * _RS2PI - 0.5 * abs(m) * _cody_erfcx_mid(ax)
+    else:
+        bracket = s * _RS2 * _cody_r3(ax)
+    tail = math.exp(-0.5 * (q + r * r)) * bracket
+    if m > 0.0:
+        return tail
+    return math.exp(-0.5 * q) * (-m) + tail
 
 
 @njit(cache=True, error_model="numpy")
@@ -152,7 +235,7 @@ def _surface_integrand(n0, n1, n2, R, g, gd, A, norm, K, Vc):
         s2 += ni * Vn
     if not (q < 1400.0):
         return 0.0
-    return norm * math.exp(-0.5 * q) * _pos_part_mean(m, math.sqrt(max(s2, 0.0)))
+    return norm * rate_factor(q, m, math.sqrt(max(s2, 0.0)))
 
 
 # ---- 2-D: the arc integral at one t ---------------------------------------------
@@ -181,7 +264,7 @@ def _arc_integrand(cp, sp, prm):
     m = (n0 * (prm[_P_GD0] + prm[_P_K00] * d0 + prm[_P_K01] * d1)
          + n1 * (prm[_P_GD1] + prm[_P_K10] * d0 + prm[_P_K11] * d1))
     s2 = prm[_P_V00] * n0 * n0 + prm[_P_V01] * n0 * n1 + prm[_P_V11] * n1 * n1
-    return R * prm[_P_NORM] * math.exp(-0.5 * q) * _pos_part_mean(m, math.sqrt(max(s2, 0.0)))
+    return R * prm[_P_NORM] * rate_factor(q, m, math.sqrt(max(s2, 0.0)))
 
 
 _arc_adaptive = make_adaptive_angle(_arc_integrand)
