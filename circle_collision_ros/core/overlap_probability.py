@@ -23,9 +23,10 @@ one level down).  Choices, each for a reason:
 * the window is split at u = 0 (the density's peak) so every panel of the
   adaptive Gauss-Kronrod rule sees the peak at an end.
 
-Quadrature error: truncation 2.3e-19 per level plus the quadrature's |K15 - G7| sum,
-held below ``_TOL`` = 1e-10 per level (|K15 - G7| over-estimates the
-error of K15 by orders of magnitude on these smooth integrands);
+Quadrature error: truncation 2.3e-19 per level plus the quadrature's estimates
+(|K15 - G7|, or |P31 - K15| on a panel extended to Patterson's rule), held
+below ``_TOL`` = 1e-10 per level (they over-estimate the error of the accepted
+rule by orders of magnitude on these smooth integrands);
 tests/core/test_uncertainty_overlap.py checks
 1e-9 absolute against mpmath on random cases (anisotropic, singular,
 sigma << R, sigma >> R, mean far outside).
@@ -48,7 +49,7 @@ __all__ = ["overlap_probability", "overlap_probability_2d", "overlap_probability
            "RUBEN_MAX_TERMS_2D", "RUBEN_MAX_TERMS_3D", "RUBEN_ROUNDING"]
 
 WINDOW_SIGMAS = 9.0  # integration window [-9, 9] sigma of each integrated component
-_TOL = 1e-10  # |K15 - G7| tolerance per 1-D integral (absolute, on a probability)
+_TOL = 1e-10  # quadrature tolerance per 1-D integral (absolute, on a probability)
 # a 3-D probability at tolerance tol per piece is within BALL_ERR_PER_TOL * tol (by the
 # estimates): 4 pieces per level, two levels; at _TOL: 8e-10 <= 1e-9
 BALL_ERR_PER_TOL = 8.0

@@ -4,8 +4,13 @@ Guarantees proved here (quadrature.py's module doc states them):
 * the abscissae and weights are QUADPACK's dqk15 to double precision (against
   mpmath's Gauss-Legendre nodes and exact polynomial moments): K15 integrates
   polynomials of degree <= 22 exactly, G7 (its odd nodes) of degree <= 13;
+* Patterson's P31 extends K15 (its 15 nodes plus 16 new ones in (-1, 1), all
+  weights positive) and integrates polynomials of degree <= 46 exactly; its new
+  nodes are the roots of the degree-16 polynomial orthogonal to lower degrees
+  under the weight prod (x - x_i) over K15's nodes (recomputed with mpmath);
 * ``make_adaptive`` meets its tolerance on smooth integrands and reports an
-  error estimate that is not below the true error;
+  error estimate that is not below the true error; a panel whose K15 fails is
+  extended to P31 before it is split;
 * ``make_adaptive_nested`` returns the same value and outer estimate as
   ``make_adaptive`` on the same integrand, and as inner error the K15 rule
   applied to the integrand's own error estimates over the accepted panels.
@@ -30,6 +35,45 @@ def test_gauss_nodes_and_weights_match_mpmath() -> None:
     assert np.allclose(q._XGK[1:7:2], [float(r) for r in positive], rtol=0, atol=1e-15)
     for x, w in zip(positive + [mpmath.mpf(0)], q._WG):
         assert abs(float(2 / ((1 - x ** 2) * mpmath.diff(p7, x) ** 2)) - w) < 1e-15
+
+
+def _p31_legendre_error(degree: int) -> float:
+    """|P31(P_degree) - int_-1^1 P_degree| (Legendre polynomial: int = 0 but for degree 0)
+    in 50-digit arithmetic on the double tables."""
+    mpmath.mp.dps = 50
+    nodes = [mpmath.mpf(float(x)) for x in np.concatenate((q.K15_NODES, q.P31_NEW_NODES))]
+    weights = [mpmath.mpf(float(w)) for w in np.concatenate((q.P31_K15_WEIGHTS, q.P31_NEW_WEIGHTS))]
+    exact = 2 if degree == 0 else 0
+    return float(abs(mpmath.fsum(w * mpmath.legendre(degree, x) for x, w in zip(nodes, weights)) - exact))
+
+
+@pytest.mark.parametrize("degree", [0, 2, 10, 22, 24, 30, 40, 44, 46, 48])
+def test_p31_polynomial_exactness(degree: int) -> None:
+    # exact to degree 46 (up to the tables' rounding, ~1e-16); the claim is tight at 48
+    # (odd degrees vanish by symmetry)
+    if degree <= 46:
+        assert _p31_legendre_error(degree) < 1e-15
+    else:
+        assert _p31_legendre_error(degree) > 1e-6
+    # K15 is not (the extension is what buys the degree)
+    if degree == 24:
+        assert abs(float(np.dot(q.K15_WEIGHTS, [float(mpmath.legendre(24, x)) for x in q.K15_NODES]))) > 1e-6
+
+
+def test_p31_extends_k15_with_positive_weights() -> None:
+    new = q.P31_NEW_NODES
+    assert new.shape == (16,) and np.all(np.diff(new) > 0) and np.all(np.abs(new) < 1.0)
+    assert np.min(np.abs(new[:, None] - q.K15_NODES[None, :])) > 1e-3  # nested: no node repeated
+    assert np.all(q.P31_K15_WEIGHTS > 0) and np.all(q.P31_NEW_WEIGHTS > 0)
+    # the new nodes are the roots of p16 with int p16 x^j w(x) = 0 (j < 16), w = prod (x - x_i)
+    mpmath.mp.dps = 60
+    K = [mpmath.mpf(float(x)) for x in q.K15_NODES]
+    w = lambda x: mpmath.fprod(x - xi for xi in K)  # noqa: E731
+    p16 = lambda x: mpmath.fprod(x - mpmath.mpf(float(r)) for r in new)  # noqa: E731
+    scale = mpmath.quad(lambda x: abs(p16(x) * w(x)), [-1, 0, 1])
+    for j in range(16):
+        moment = mpmath.quad(lambda x: p16(x) * x ** j * w(x), [-1, -0.5, 0, 0.5, 1])
+        assert abs(moment) < 1e-14 * scale, j
 
 
 def _rule(values_at, nodes, weights_pos, weight_mid):
@@ -76,7 +120,8 @@ _nested = q.make_adaptive_nested(_bump_with_error, _last_error)
 
 
 @pytest.mark.parametrize("centre,width,wiggle,freq", [(0.3, 0.05, 0.0, 1.0), (-1.0, 0.4, 0.1, 7.0),
-                                                      (2.5, 0.01, 0.02, 30.0)])
+                                                      (2.5, 0.01, 0.02, 30.0), (0.7, 0.3, 0.0, 1.0),
+                                                      (-2.2, 0.15, 0.0, 1.0)])
 def test_adaptive_meets_its_tolerance(centre, width, wiggle, freq) -> None:
     mpmath.mp.dps = 30
     a, b, tol = -3.0, 3.0, 1e-9
@@ -86,6 +131,28 @@ def test_adaptive_meets_its_tolerance(centre, width, wiggle, freq) -> None:
     v, e = _adaptive(prm, a, b, tol)
     assert abs(v - exact) <= max(e, 1e-15)
     assert e <= tol
+
+
+@njit(cache=False)
+def _counted_bump(x, prm):
+    prm[2][0] += 1.0
+    return math.exp(-0.5 * ((x - prm[0]) / prm[1]) ** 2)
+
+
+_counted = q.make_adaptive(_counted_bump)
+
+
+def test_failed_k15_panel_is_extended_to_p31_before_it_is_split() -> None:
+    """A bump of width 1 on [-3, 3]: |K15 - G7| misses 1e-9, P31 meets it on the same
+    panel (31 evaluations; splitting would cost 15 + 30), within its estimate."""
+    calls = np.zeros(1)
+    v, e = _counted((0.0, 1.0, calls), -3.0, 3.0, 1e-9)
+    exact = math.sqrt(2.0 * math.pi) * math.erf(3.0 / math.sqrt(2.0))
+    assert calls[0] == 31
+    assert abs(v - exact) <= max(e, 1e-15) and e <= 1e-9
+    # the estimate is |P31 - K15|: K15's own error, far above P31's
+    k15 = 3.0 * float(np.dot(q.K15_WEIGHTS, np.exp(-0.5 * (3.0 * q.K15_NODES) ** 2)))
+    assert e == pytest.approx(abs(v - k15), rel=1e-12)
 
 
 def test_nested_rule_is_the_plain_rule_plus_the_weighted_inner_errors() -> None:
