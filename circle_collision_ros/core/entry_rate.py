@@ -48,8 +48,11 @@ __all__ = ["entry_rate_integral", "entry_rate_k15", "entry_rate_p31", "entry_rat
 DEGENERATE_RATIO = 1e-12
 _RS2 = 1.0 / math.sqrt(2.0)
 _RS2PI = 1.0 / math.sqrt(2.0 * math.pi)
-BROAD_K2 = 7.5 ** 2  # BROAD_PHASE_SIGMAS^2 (uncertainty_kernels asserts they agree)
-_SCAN = 16  # arc scan points for the density's local maxima (panel ends)
+BROAD_K = 7.5  # BROAD_PHASE_SIGMAS (uncertainty_kernels asserts they agree)
+BROAD_K2 = BROAD_K ** 2
+_SCAN = 16  # arc scan steps for the density's local maxima (panel ends), at least
+_SCAN_MAX = 4096  # at most (a step >= 2 alpha R / 4096 > sigma_min: S(t) degenerate)
+_SCAN_ANCHOR = 64  # scan directions re-anchored by cos/sin every this many steps
 
 
 # W. J. Cody's rational Chebyshev approximations of erf and erfc (Math. Comp. 23,
@@ -286,6 +289,58 @@ def _arc_half_angle(R, gn, rho2):
 
 
 @njit(cache=True, error_model="numpy")
+def _scan_runs(qs, n, reach2, jmin, ra, rb):
+    """The integration window of a scan qs[0..n] of q along an arc: each run of
+    scan points with q <= reach2, widened by one step each side (runs that then
+    touch merge), as index ranges [ra[r], rb[r]]; the narrowest window about the
+    minimum jmin when no point qualifies.  Returns the number of runs.  Between
+    runs no arc point has sqrt(q) <= k (nu_plus_2d: the scan's Lipschitz step),
+    and a run is ~2 reach widths of its density peak, which a Kronrod piece with
+    the peak at its end resolves (one window spanning both crossings of a thin
+    ridge put them at the ends of one long piece whose nodes all missed them)."""
+    nr = 0
+    j = 0
+    while j <= n:
+        if qs[j] <= reach2:
+            k = j
+            while k < n and qs[k + 1] <= reach2:
+                k += 1
+            a = max(j - 1, 0)
+            b = min(k + 1, n)
+            if nr > 0 and a <= rb[nr - 1]:
+                rb[nr - 1] = b
+            else:
+                ra[nr] = a
+                rb[nr] = b
+                nr += 1
+            j = k + 1
+        else:
+            j += 1
+    if nr == 0:
+        ra[0] = max(jmin - 1, 0)
+        rb[0] = min(jmin + 1, n)
+        nr = 1
+    return nr
+
+
+@njit(cache=True, error_model="numpy", inline="always")
+def _piece_end(qs, j, end):
+    """Whether scan point j ends a piece of a run ending at end: the run's end, or a
+    local minimum of q (a density peak: Kronrod nodes cluster at piece ends)."""
+    return j == end or (qs[j] <= qs[j - 1] and qs[j] < qs[j + 1])
+
+
+@njit(cache=True, error_model="numpy")
+def _count_pieces(qs, ra, rb, nr):
+    n = 0
+    for r in range(nr):
+        for j in range(ra[r] + 1, rb[r] + 1):
+            if _piece_end(qs, j, rb[r]):
+                n += 1
+    return n
+
+
+@njit(cache=True, error_model="numpy")
 def nu_plus_2d(dp, dv, da, R, Sigma, t, tol, acc):
     """nu+(t) in 2-D over the tube's arc; acc[2] = this value's error
     estimate (the arc rule's), acc[1] = 1 when S(t) is degenerate.  The state
@@ -333,56 +388,69 @@ def nu_plus_2d(dp, dv, da, R, Sigma, t, tol, acc):
     # Only arc points with Mahalanobis distance q(x) <= k^2 matter: a path
     # through x at time t has |z| >= sqrt(q(x)) (the whitened (dp, dv)
     # projects onto X(t) - g(t) without growing), so entries at q > k^2 belong
-    # to paths outside the tube (already counted in the tail).  A scan of
-    # _SCAN + 1 points finds that window (one scan step of margin each side)
-    # and the local minima of q (the density's peaks: panel ends).
-    # The scan's directions by rotation (one cos/sin pair per scan instead of
-    # one per point: this runs at every nu+ node).  The accumulated rounding
-    # (~17 ulps) only moves q by ~1e-15 relative: it can flip a scan point's
-    # membership of the window only within that of k^2, and the window keeps
-    # one scan step of margin each side.
-    qs = np.empty(_SCAN + 1)
+    # to paths outside the tube (already counted in the tail).  A scan of the
+    # arc finds that window and the local minima of q (the density's peaks:
+    # piece ends).  sqrt(q(x)) = |S^(-1/2) (x - g)| is Lipschitz in x with
+    # constant 1 / sigma_min (sigma_min^2 = lambda_min(S)), so along the arc it
+    # changes by at most c = R step / sigma_min between scan points: every arc
+    # point with sqrt(q) <= k lies within half a step of a scan point with
+    # sqrt(q) <= k + c / 2, and the window (those scan points, plus one step of
+    # margin each side) contains it.  The step is at most sigma_min / R (c <= 1)
+    # where _SCAN steps would be coarser: a thin density ridge (nearly
+    # singular S(t), e.g. a rank-deficient covariance near the time its
+    # position part is singular) is then never stepped over.  Beyond
+    # _SCAN_MAX steps S(t) counts as degenerate (the caller samples instead).
+    lam_max = 0.5 * tr + math.sqrt(0.25 * (s00 - s11) ** 2 + 0.25 * (s01 + s10) ** 2)
+    sig_min = math.sqrt(max(det / lam_max, 0.0))  # det / lambda_max: no cancellation
+    nscan = _SCAN
+    if 2.0 * alpha * R > _SCAN * sig_min:
+        nscan = int(math.ceil(2.0 * alpha * R / sig_min))
+        if nscan > _SCAN_MAX:
+            acc[1] = 1.0
+            return 0.0
+    step = 2.0 * alpha / nscan
+    reach = BROAD_K + 0.5 * R * step / sig_min if sig_min > 0.0 else math.inf
+    # The scan's directions by rotation (one cos/sin pair per _SCAN_ANCHOR points
+    # instead of one per point: this runs at every nu+ node).  Re-anchored every
+    # _SCAN_ANCHOR points, the accumulated rounding stays ~_SCAN_ANCHOR ulps: it
+    # moves q by ~1e-14 relative, so it can flip a scan point's membership of
+    # the window only within that of the threshold, and the window keeps one
+    # scan step of margin each side.
+    qs = np.empty(nscan + 1)
     jmin = 0
-    step = 2.0 * alpha / _SCAN
-    cr = math.cos(phig - alpha)
-    sr = math.sin(phig - alpha)
     cd = math.cos(step)
     sd = math.sin(step)
-    for j in range(_SCAN + 1):
+    cr = 0.0
+    sr = 0.0
+    for j in range(nscan + 1):
+        if j % _SCAN_ANCHOR == 0:
+            cr = math.cos(phig - alpha + j * step)
+            sr = math.sin(phig - alpha + j * step)
         d0 = R * cr - g0
         d1 = R * sr - g1
         qs[j] = a00 * d0 * d0 + a01s * d0 * d1 + a11 * d1 * d1
         if qs[j] < qs[jmin]:
             jmin = j
         cr, sr = cr * cd - sr * sd, sr * cd + cr * sd
-    j0 = _SCAN
-    j1 = 0
-    for j in range(_SCAN + 1):
-        if qs[j] <= BROAD_K2:
-            j0 = min(j0, j)
-            j1 = max(j1, j)
-    if j0 > j1:  # no scan point inside: the narrowest window about the minimum
-        j0 = jmin
-        j1 = jmin
-    j0 = max(j0 - 1, 0)
-    j1 = min(j1 + 1, _SCAN)
-    npieces = 1
-    for j in range(j0 + 1, j1):
-        if qs[j] <= qs[j - 1] and qs[j] < qs[j + 1]:
-            npieces += 1
+    # the window's runs, cut into pieces at the density's peaks (_scan_runs)
+    ra = np.empty(nscan + 1, dtype=np.int64)
+    rb = np.empty(nscan + 1, dtype=np.int64)
+    nr = _scan_runs(qs, nscan, reach * reach, jmin, ra, rb)
+    npieces = _count_pieces(qs, ra, rb, nr)
     prm = (R, math.cos(phig), g0, g1, gd0, gd1, a00, a01s, a11, norm, k00, k01, k10, k11,
            v00, v01 + v10, v11, math.sin(phig))
     ptol = tol / npieces
     total = 0.0
     err = 0.0
-    start = -alpha + 2.0 * alpha * j0 / _SCAN
-    for j in range(j0 + 1, j1 + 1):
-        if j == j1 or (qs[j] <= qs[j - 1] and qs[j] < qs[j + 1]):
-            end = -alpha + 2.0 * alpha * j / _SCAN
-            v, e = _arc_adaptive(prm, start, end, ptol)
-            total += v
-            err += e
-            start = end
+    for r in range(nr):
+        start = -alpha + step * ra[r]
+        for j in range(ra[r] + 1, rb[r] + 1):
+            if _piece_end(qs, j, rb[r]):
+                end = -alpha + step * j
+                v, e = _arc_adaptive(prm, start, end, ptol)
+                total += v
+                err += e
+                start = end
     acc[2] = err
     return total
 
@@ -413,17 +481,78 @@ _ring_adaptive = make_adaptive_angle(_ring_integrand)
 
 @njit(cache=True, error_model="numpy")
 def _cap_integrand(th, prm):
-    """R^2 sin(theta) * ring integral at polar angle theta."""
+    """R^2 sin(theta) * ring integral at polar angle theta.  The ring as two
+    halves where its circumference is at most _SCAN lower bounds of sigma_min
+    (the density varies slowly along it); else scanned like nu_plus_2d's arc,
+    with a step of at most sigma_min / R along the ring (q is Lipschitz with
+    constant 1 / sigma_min), integrated over the scan's runs cut at their
+    peaks: a thin density band (nearly singular S(t)) crosses a ring in two
+    spikes that two fixed halves' nodes can miss."""
     R = prm[0]
     sth = math.sin(th)
-    p2 = (R, math.cos(th), sth, prm[1], prm[2], prm[3], prm[4], prm[5], prm[6], prm[7], prm[8], prm[9])
+    cth = math.cos(th)
+    p2 = (R, cth, sth, prm[1], prm[2], prm[3], prm[4], prm[5], prm[6], prm[7], prm[8], prm[9])
     tol = prm[10]
-    v1, e1 = _ring_adaptive(p2, 0.0, math.pi, tol)
-    v2, e2 = _ring_adaptive(p2, math.pi, 2.0 * math.pi, tol)
     acc = prm[11]
+    sig_lb = prm[12]
     st = R * R * sth
-    acc[0] = max(acc[0], (e1 + e2) * st)
-    return (v1 + v2) * st
+    ring = 2.0 * math.pi * R * sth
+    if not (ring > _SCAN * sig_lb):
+        v1, e1 = _ring_adaptive(p2, 0.0, math.pi, tol)
+        v2, e2 = _ring_adaptive(p2, math.pi, 2.0 * math.pi, tol)
+        acc[0] = max(acc[0], (e1 + e2) * st)
+        return (v1 + v2) * st
+    n = int(math.ceil(ring / sig_lb))
+    if n > _SCAN_MAX:
+        acc[1] = 1.0
+        return 0.0
+    step = 2.0 * math.pi / n
+    reach = BROAD_K + 0.5 * R * sth * step / sig_lb
+    # q(psi) = |A^(1/2) (w0 + R sin(theta) (cos psi e1 + sin psi e2))|^2, w0 = R cos(theta) u - g
+    u, e1, e2, g, A = prm[1], prm[2], prm[3], prm[4], prm[6]
+    w0 = np.empty(3)
+    for i in range(3):
+        w0[i] = R * cth * u[i] - g[i]
+    c00 = 0.0
+    c1 = 0.0
+    c2 = 0.0
+    d11 = 0.0
+    d12 = 0.0
+    d22 = 0.0
+    for i in range(3):
+        for k in range(3):
+            c00 += w0[i] * A[i, k] * w0[k]
+            c1 += w0[i] * A[i, k] * e1[k]
+            c2 += w0[i] * A[i, k] * e2[k]
+            d11 += e1[i] * A[i, k] * e1[k]
+            d12 += e1[i] * A[i, k] * e2[k]
+            d22 += e2[i] * A[i, k] * e2[k]
+    rs = R * sth
+    qs = np.empty(n + 1)
+    jmin = 0
+    for j in range(n + 1):
+        cp = math.cos(j * step)
+        sp = math.sin(j * step)
+        qs[j] = c00 + 2.0 * rs * (cp * c1 + sp * c2) + rs * rs * (cp * cp * d11 + 2.0 * cp * sp * d12 + sp * sp * d22)
+        if qs[j] < qs[jmin]:
+            jmin = j
+    ra = np.empty(n + 1, dtype=np.int64)
+    rb = np.empty(n + 1, dtype=np.int64)
+    nr = _scan_runs(qs, n, reach * reach, jmin, ra, rb)
+    ptol = 2.0 * tol / _count_pieces(qs, ra, rb, nr)  # the two halves' total
+    total = 0.0
+    err = 0.0
+    for r in range(nr):
+        start = step * ra[r]
+        for j in range(ra[r] + 1, rb[r] + 1):
+            if _piece_end(qs, j, rb[r]):
+                end = step * j
+                v, e = _ring_adaptive(p2, start, end, ptol)
+                total += v
+                err += e
+                start = end
+    acc[0] = max(acc[0], err * st)
+    return total * st
 
 
 _cap_adaptive = make_adaptive(_cap_integrand)
@@ -463,7 +592,14 @@ def nu_plus_3d(dp, dv, da, R, Sigma, t, tol, acc):
     e2[1] = u[2] * e1[0] - u[0] * e1[2]
     e2[2] = u[0] * e1[1] - u[1] * e1[0]
     inner_tol = tol / (2.0 * math.pi * R * R + 1e-300)
-    prm = (R, u, e1, e2, g, gd, A, norm, K, Vc, inner_tol, acc)
+    # sigma_min >= 1 / sqrt(|A|_F) (|A|_F >= lambda_max(A) = 1 / sigma_min^2): a lower
+    # bound that keeps the rings' scan steps within sigma_min / R, without eigenvalues
+    af = 0.0
+    for i in range(3):
+        for k in range(3):
+            af += A[i, k] * A[i, k]
+    sig_lb = 1.0 / math.sqrt(math.sqrt(af))
+    prm = (R, u, e1, e2, g, gd, A, norm, K, Vc, inner_tol, acc, sig_lb)
     acc[0] = 0.0  # the largest ring error (times R^2 sin theta) of this cap
     v, e = _cap_adaptive(prm, 0.0, alpha, tol)
     acc[2] = e + alpha * acc[0]

@@ -13,7 +13,7 @@ from statistics import NormalDist
 import numpy as np
 from numba import njit
 
-from circle_collision_ros.core.entry_rate import (BROAD_K2, entry_rate_gauss3, entry_rate_integral, entry_rate_k15,
+from circle_collision_ros.core.entry_rate import (BROAD_K, entry_rate_gauss3, entry_rate_integral, entry_rate_k15,
                                                  entry_rate_p31)
 from circle_collision_ros.core.line_sampling import line_factor, line_replicates
 from circle_collision_ros.core.narrow_phase import _ttc_kernel_h
@@ -45,7 +45,7 @@ def chi2_tail_even(x: float, dof: int) -> float:
 # (Cauchy-Schwarz).  Two bodies: 2 * TUBE_TAIL = 5.2e-10 < 1e-9.
 BROAD_PHASE_SIGMAS = 7.5
 TUBE_TAIL = chi2_tail_even(BROAD_PHASE_SIGMAS ** 2, 6)  # 2.6e-10
-assert BROAD_K2 == BROAD_PHASE_SIGMAS ** 2
+assert BROAD_K == BROAD_PHASE_SIGMAS
 
 # Randomized QMC: QMC_REPLICATES independent scrambles of QMC_POINTS Sobol
 # points; stated bound QMC_T standard errors of the replicate mean (Student t

@@ -114,3 +114,35 @@ def test_rate_factor_matches_mpmath():
         for m in (-2.0, 0.0, 3.0):  # s = 0: exp(-q/2) max(-m, 0) exactly
             assert rate_factor(q, m, 0.0) == math.exp(-0.5 * q) * max(-m, 0.0)
     assert checked > 2500
+
+
+# A rank-deficient pair (dp and dv driven by two Gaussians) whose position
+# covariance S(t) is singular near t = 1.43: around that time the density is a
+# ridge ~0.003 wide across a circle of radius ~1.06, thinner than the 17-point
+# arc scan's step (0.28 rad).  The scan stepped over it (nu+(1.4) = 1e-151,
+# true 1.013) and the pair's probability came out 0.788 +- 3e-4 where it is
+# 0.968 (found by test_monotone_in_radius_and_horizon); the scan's step now
+# never exceeds sigma_min / R.
+THIN_RIDGE_PAIR = dict(
+    dp=np.array([-3.693736225315321, -0.43178974303728507]),
+    dv=np.array([1.778742544003076, -0.1657714197402687]),
+    da=np.zeros(2),
+    R=1.061493729143788,
+    Sigma=np.array([[0.10345053824703071, -0.015967292483462077, -0.006101315479565192, 0.01304885445525855],
+                    [-0.015967292483462077, 0.017860750484717587, 0.0014867919148831457, -0.012739742347957375],
+                    [-0.006101315479565192, 0.0014867919148831457, 0.0003791410532461635, -0.001149316871860645],
+                    [0.01304885445525855, -0.012739742347957375, -0.001149316871860645, 0.009117910950218643]]))
+
+
+def test_thin_density_ridge_is_not_stepped_over():
+    c = THIN_RIDGE_PAIR
+    checked = 0
+    for t in (1.3, 1.38, 1.4, 1.45, 1.5):
+        acc = np.zeros(3)
+        v = nu_plus_2d(c["dp"], c["dv"], c["da"], c["R"], c["Sigma"], t, 1e-4, acc)
+        if acc[1] != 0.0:  # too thin to scan: flagged degenerate (the pair is sampled instead)
+            continue
+        ref = _reference(c["dp"], c["dv"], c["da"], c["R"], c["Sigma"], t, n_psi=1 << 18)
+        assert abs(v - ref) <= 1e-4 + 1e-12, (t, v, ref)
+        checked += 1
+    assert checked >= 4

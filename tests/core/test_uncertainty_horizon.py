@@ -103,6 +103,20 @@ def test_horizon_probability_3d_and_large_mc():
     _check_pairs(2, KINDS, 4, 1_000_000, seed=5)
 
 
+def test_thin_density_ridge_pair_within_the_stated_bound():
+    """The rank-deficient pair whose ridge the arc scan used to step over
+    (tests/core/test_uncertainty_entry_rate.py): 0.788 +- 3e-4 reported, 0.968 true."""
+    from tests.core.test_uncertainty_entry_rate import THIN_RIDGE_PAIR as c
+    z = np.zeros(2)
+    # as bodies: a carries the relative state and the whole covariance, b sits at 0
+    pair = (c["dp"], c["dv"], c["da"], c["R"] / 2, c["Sigma"], z, z, z, c["R"] / 2, np.zeros((4, 4)))
+    for H in (2.0, 3.0):
+        r = uncertain_pairs(*(np.asarray(x, dtype=np.float64)[None] for x in pair), H, 0.01)
+        p, b = r.collision_probability[0], r.collision_probability_bound[0]
+        ref, se = mc_probability(*pair, H, 400_000, seed=485)
+        assert abs(p - ref) <= b + 4 * se, (H, p, b, ref, se)
+
+
 def test_plausible_time_is_the_first_crossing():
     rng = np.random.default_rng(9)
     H = 3.0
