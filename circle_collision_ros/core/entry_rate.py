@@ -682,27 +682,31 @@ def entry_rate_k15(dp, dv, da, R, Sigma, ta, tb, tol, acc, f, fe):
 
 
 @njit(cache=True, error_model="numpy")
-def entry_rate_p31(dp, dv, da, R, Sigma, ta, tb, tol, acc, f, fe):
-    """(P31 of nu+ over [ta, tb], |P31 - K15|, P31 of the nodes' own estimates):
-    Patterson's extension of ``entry_rate_k15``'s rule on the same interval and
-    tolerance, from its 15 values f and estimates fe and 16 new nu+ values (the two
-    K15 halves the adaptive rule would take next cost 30).  |P31 - K15| is the
-    estimate as |K15 - G7| is K15's: P31 is exact to degree 46, K15 to 22."""
+def entry_rate_p31(dp, dv, da, R, Sigma, ta, tb, tol, acc, f, fe, fnew):
+    """(P31 of nu+ over [ta, tb], |P31 - K15|, P31 of the nodes' own estimates,
+    the largest of the new nodes' estimates): Patterson's extension of
+    ``entry_rate_k15``'s rule on the same interval and tolerance, from its 15
+    values f and estimates fe and 16 new nu+ values, kept in fnew (nodes
+    ta + (tb - ta)(1 + P31_NEW_NODES) / 2; the two K15 halves the adaptive rule
+    would take next cost 30).  |P31 - K15| is the estimate as |K15 - G7| is
+    K15's: P31 is exact to degree 46, K15 to 22."""
     h = 0.5 * (tb - ta)
     c = ta + h
     itol = INNER_TOL_FACTOR * tol / max(tb - ta, 1e-300)
     p = 0.0
     k = 0.0
     ie = 0.0
+    ie_max = 0.0
     for i in range(15):
         p += P31_K15_WEIGHTS[i] * f[i]
         k += K15_WEIGHTS[i] * f[i]
         ie += P31_K15_WEIGHTS[i] * fe[i]
     for i in range(16):
-        v = _nu(dp, dv, da, R, Sigma, c + h * P31_NEW_NODES[i], itol, acc)
-        p += P31_NEW_WEIGHTS[i] * v
+        fnew[i] = _nu(dp, dv, da, R, Sigma, c + h * P31_NEW_NODES[i], itol, acc)
+        p += P31_NEW_WEIGHTS[i] * fnew[i]
         ie += P31_NEW_WEIGHTS[i] * acc[2]
-    return p * h, abs((p - k) * h), ie * h
+        ie_max = max(ie_max, acc[2])
+    return p * h, abs((p - k) * h), ie * h, ie_max
 
 
 @njit(cache=True, error_model="numpy", inline="always")

@@ -35,7 +35,8 @@ import numpy as np
 from numba import njit
 
 __all__ = ["make_adaptive", "make_adaptive_angle", "make_adaptive_nested", "push_halves", "MAX_DEPTH", "K15_NODES", "K15_WEIGHTS",
-           "G7_WEIGHTS", "P31_K15_WEIGHTS", "P31_NEW_NODES", "P31_NEW_WEIGHTS", "subinterval_integral"]
+           "G7_WEIGHTS", "P31_K15_WEIGHTS", "P31_NEW_NODES", "P31_NEW_WEIGHTS", "P31_NODES", "P31_K15_POS", "P31_NEW_POS",
+           "subinterval_integral"]
 
 # QUADPACK's dqk15 abscissae and weights (tests/core/test_uncertainty_quadrature.py
 # checks them against mpmath's Gauss-Legendre nodes and polynomial exactness).
@@ -104,6 +105,11 @@ def _legendre_table(x: np.ndarray, n: int) -> np.ndarray:
 # 14): K15's nodes are close to Chebyshev-distributed, so the solve is well
 # conditioned (cond 6.4); tests/core/test_uncertainty_quadrature.py checks it.
 K15_TO_LEGENDRE = np.linalg.inv(_legendre_table(K15_NODES, 15))
+# The same for P31's 31 nodes in ascending order (degree 30; cond 10.3)
+P31_NODES = np.sort(np.concatenate((K15_NODES, P31_NEW_NODES)))
+P31_K15_POS = np.searchsorted(P31_NODES, K15_NODES)  # where K15's nodes and the new ones sit in it
+P31_NEW_POS = np.searchsorted(P31_NODES, P31_NEW_NODES)
+P31_TO_LEGENDRE = np.linalg.inv(_legendre_table(P31_NODES, 31))
 _STACK = MAX_DEPTH + 2
 
 
@@ -322,7 +328,9 @@ def subinterval_integral(f, xl, xr):
     """(integral over [xl, xr] of the degree-14 polynomial p15 through the 15
     values f at K15_NODES, an error estimate) for -1 <= xl <= xr <= 1
     (unit-interval coordinates: multiply both by the half-width).  Over
-    [-1, 1] the value is K15 of f.
+    [-1, 1] the value is K15 of f.  With 31 values f at P31_NODES: the same
+    with the degree-30 interpolant (over [-1, 1]: P31 of f) and its last four
+    coefficients (k = 27..30).
 
     The estimate is (xr - xl) * sum of |c_k| over p15's last four Legendre
     coefficients (k = 11..14): the spectral tail, as Chebfun judges a
@@ -332,12 +340,14 @@ def subinterval_integral(f, xl, xr):
     does not resolve shows as a large tail), far above the true error on
     smooth integrands; the interpolant of the 7 Gauss values would not do
     (its pointwise error is orders of magnitude above G7's quadrature error)."""
-    c = np.zeros(15)
-    for k in range(15):
+    n = f.shape[0]
+    T = K15_TO_LEGENDRE if n == 15 else P31_TO_LEGENDRE
+    c = np.zeros(n)
+    for k in range(n):
         a = 0.0
-        for i in range(15):
-            a += K15_TO_LEGENDRE[k, i] * f[i]
+        for i in range(n):
+            a += T[k, i] * f[i]
         c[k] = a
     value = _legendre_antiderivative(c, xr) - _legendre_antiderivative(c, xl)
-    tail = abs(c[11]) + abs(c[12]) + abs(c[13]) + abs(c[14])
+    tail = abs(c[n - 4]) + abs(c[n - 3]) + abs(c[n - 2]) + abs(c[n - 1])
     return value, (xr - xl) * tail

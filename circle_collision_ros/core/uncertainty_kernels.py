@@ -20,7 +20,7 @@ from circle_collision_ros.core.narrow_phase import _ttc_kernel_h
 from circle_collision_ros.core.overlap_probability import (BALL_ERR_PER_TOL, DISC_ERR_PER_TOL, eig_sym,
                                                            overlap_probability, overlap_probability_2d,
                                                            overlap_probability_2d_tol, overlap_probability_tol)
-from circle_collision_ros.core.quadrature import push_halves, subinterval_integral
+from circle_collision_ros.core.quadrature import P31_K15_POS, P31_NEW_POS, push_halves, subinterval_integral
 from circle_collision_ros.core.sobol import scrambled_directions, sobol_points
 
 __all__ = ["BROAD_PHASE_SIGMAS", "TUBE_TAIL", "chi2_tail_even", "S_at", "max_sigma_over",
@@ -510,27 +510,52 @@ def overcount_replicates(dp, dv, da, R, H, L, Z, m, est):
     sampled path (dp, dv) + L z: the amount by which P0 + E[entries] exceeds
     P(contact) for that path (docs/uncertainty.md, "Accelerating")."""
     D = dp.shape[0]
+    n = 2 * D
     p = np.empty(D)
     v = np.empty(D)
+    # over-counting needs an exit followed by an entry, so a local maximum of
+    # f = |X|^2 - R^2 inside (0, H): impossible where f''/2 = |Xdot|^2 + X.da =
+    # |v|^2 + p.da + 3 t v.da + 1.5 t^2 |da|^2 > 0 on all of [0, H] (its minimum
+    # over [0, H] is checked), which is most paths.  p.da and v.da are linear in
+    # z (weights L^T da, formed once), so the test needs v and two dot products;
+    # p, the quartic and its crossings only for the paths that fail it
+    wp = np.zeros(n)
+    wv = np.zeros(n)
+    pa0 = 0.0
+    va0 = 0.0
+    aa = 0.0
+    for k in range(D):
+        pa0 += dp[k] * da[k]
+        va0 += dv[k] * da[k]
+        aa += da[k] * da[k]
+        for j in range(n):
+            wp[j] += L[k, j] * da[k]
+            wv[j] += L[D + k, j] * da[k]
     for r in range(Z.shape[0]):
         tot = 0
         for i in range(m):
+            pda = pa0
+            vda = va0
+            for j in range(n):
+                pda += wp[j] * Z[r, i, j]
+                vda += wv[j] * Z[r, i, j]
+            vv = 0.0
             for k in range(D):
-                yp = 0.0
-                yv = 0.0
-                for j in range(2 * D):
-                    yp += L[k, j] * Z[r, i, j]
+                yv = dv[k]
+                for j in range(n):
                     yv += L[D + k, j] * Z[r, i, j]
-                p[k] = dp[k] + yp
-                v[k] = dv[k] + yv
-            # over-counting needs an exit followed by an entry, so a local maximum
-            # of f = |X|^2 - R^2 inside (0, H): impossible where f'' =
-            # 2 (|Xdot|^2 + X.da) > 0 on all of [0, H] (a quadratic in t; its
-            # minimum over [0, H] is checked), which is most paths
-            c4, c3, c2, _, _ = _quartic_coefficients(p, v, da)
-            tm = min(max(-c3 / (4.0 * c4), 0.0), H) if c4 > 0.0 else (0.0 if c3 >= 0.0 else H)
-            if (12.0 * c4 * tm + 6.0 * c3) * tm + 2.0 * c2 > 0.0:
+                v[k] = yv
+                vv += yv * yv
+            a2 = 1.5 * aa
+            b1 = 3.0 * vda
+            tm = min(max(-b1 / (2.0 * a2), 0.0), H) if a2 > 0.0 else (0.0 if b1 >= 0.0 else H)
+            if vv + pda + (b1 + a2 * tm) * tm > 0.0:
                 continue
+            for k in range(D):
+                yp = dp[k]
+                for j in range(n):
+                    yp += L[k, j] * Z[r, i, j]
+                p[k] = yp
             inside0, entries = _quartic_crossings(p, v, da, R, H)
             o = (1 if inside0 else 0) + entries - 1
             if o > 0:
@@ -625,12 +650,13 @@ def _prob_at(dp, dv, da, R, Sigma, t, st):
 
 
 # The per-pair cache of panel integrals (one row per panel): computed flag,
-# value, error estimate; then, when the panel's single K15 was accepted (no
-# split), a flag, the largest of the nodes' own (arc/cap) error estimates and
-# the 15 values of nu+ at the panel's K15 nodes (the walk's short steps
-# integrate their interpolant instead of evaluating nu+ again).
+# value, error estimate; then, when the panel's single K15 or its P31 extension
+# was accepted (no split), the number of kept values (15 or 31; 0: none), the
+# largest of the nodes' own (arc/cap) error estimates and the values of nu+ at
+# the rule's nodes, ascending (the walk's short steps integrate their
+# interpolant instead of evaluating nu+ again).
 _C_DONE, _C_VALUE, _C_ERR, _C_NODES_OK, _C_INNER_MAX, _C_NODES = 0, 1, 2, 3, 4, 5
-CACHE_COLUMNS = _C_NODES + 15
+CACHE_COLUMNS = _C_NODES + 31
 
 
 @njit(cache=True, error_model="numpy")
@@ -639,12 +665,13 @@ def _rice_short(dp, dv, da, R, Sigma, a, b, pa, pb, j, cache, plo, thr, acc, st)
     estimate: from the panel's kept nu+ values where they certify the step
     (plo + value + estimate + P's error < thr: no new nu+ evaluation), else by
     the 3-point Gauss rule."""
-    if cache[j, _C_NODES_OK] != 0.0:
+    nk = int(cache[j, _C_NODES_OK])
+    if nk != 0:
         h = 0.5 * (pb[j] - pa[j])
         m = pa[j] + h
         xl = min(max((a - m) / h, -1.0), 1.0)
         xr = min(max((b - m) / h, -1.0), 1.0)
-        v, e = subinterval_integral(cache[j, _C_NODES:], xl, xr)
+        v, e = subinterval_integral(cache[j, _C_NODES:_C_NODES + nk], xl, xr)
         v = max(v * h, 0.0)  # nu+ >= 0: a negative interpolant integral is rounding or ringing
         # the nodes' own estimates as the adaptive rule of entry_rate_integral
         # counted them before it weighted them: width times the largest
@@ -667,20 +694,28 @@ def _rice_panel(dp, dv, da, R, Sigma, pa, pb, j, cache, acc, st):
     with half the tolerance each, which is where the adaptive rule goes next."""
     if cache[j, _C_DONE] == 0.0:
         acc[1] = 0.0
+        f15 = np.empty(15)
         fe = np.empty(15)
-        v, e, inner, inner_max = entry_rate_k15(dp, dv, da, R, Sigma, pa[j], pb[j], _RICE_TOL, acc,
-                                                cache[j, _C_NODES:], fe)
+        v, e, inner, inner_max = entry_rate_k15(dp, dv, da, R, Sigma, pa[j], pb[j], _RICE_TOL, acc, f15, fe)
         if not (e > _RICE_TOL):  # (a NaN estimate is accepted, as by the adaptive rule)
-            cache[j, _C_NODES_OK] = 1.0
+            cache[j, _C_NODES_OK] = 15.0
             cache[j, _C_INNER_MAX] = inner_max
+            cache[j, _C_NODES:_C_NODES + 15] = f15
             e += inner
         else:
             # Patterson's extension first: a K15 fails on a panel much wider than
             # nu+'s peak (one clipped at 0 or H, the peak inside), where |K15 - G7|
             # is ~100x K15's error and P31 settles it with 16 more values
-            v, e, inner = entry_rate_p31(dp, dv, da, R, Sigma, pa[j], pb[j], _RICE_TOL, acc,
-                                         cache[j, _C_NODES:], fe)
+            fnew = np.empty(16)
+            v, e, inner, new_max = entry_rate_p31(dp, dv, da, R, Sigma, pa[j], pb[j], _RICE_TOL, acc,
+                                                  f15, fe, fnew)
             if not (e > _RICE_TOL):
+                cache[j, _C_NODES_OK] = 31.0
+                cache[j, _C_INNER_MAX] = max(inner_max, new_max)
+                for i in range(15):
+                    cache[j, _C_NODES + P31_K15_POS[i]] = f15[i]
+                for i in range(16):
+                    cache[j, _C_NODES + P31_NEW_POS[i]] = fnew[i]
                 e += inner
             else:  # the adaptive rule's next panels: the halves, half the tolerance each
                 m = 0.5 * (pa[j] + pb[j])

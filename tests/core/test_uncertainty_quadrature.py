@@ -171,6 +171,26 @@ def test_legendre_table_inverse_is_well_conditioned() -> None:
     V = q._legendre_table(q.K15_NODES, 15)
     assert np.linalg.cond(V) < 10.0
     assert np.allclose(q.K15_TO_LEGENDRE @ V, np.eye(15), atol=1e-13)
+    V = q._legendre_table(q.P31_NODES, 31)
+    assert np.linalg.cond(V) < 12.0
+    assert np.allclose(q.P31_TO_LEGENDRE @ V, np.eye(31), atol=1e-13)
+    assert np.array_equal(q.P31_NODES[q.P31_K15_POS], q.K15_NODES)
+    assert np.array_equal(q.P31_NODES[q.P31_NEW_POS], q.P31_NEW_NODES)
+
+
+@pytest.mark.parametrize("seed", range(5))
+def test_subinterval_integral_is_exact_for_degree_30_on_p31_nodes(seed: int) -> None:
+    rng = np.random.default_rng(100 + seed)
+    poly = np.polynomial.Legendre(rng.normal(size=31))  # degree 30 (Legendre basis: well scaled)
+    xl, xr = np.sort(rng.uniform(-1.0, 1.0, 2))
+    v, _ = q.subinterval_integral(poly(q.P31_NODES), xl, xr)
+    anti = poly.integ()
+    assert v == pytest.approx(anti(xr) - anti(xl), rel=1e-12, abs=1e-13)
+    whole, _ = q.subinterval_integral(poly(q.P31_NODES), -1.0, 1.0)
+    weights = np.empty(31)
+    weights[q.P31_K15_POS] = q.P31_K15_WEIGHTS
+    weights[q.P31_NEW_POS] = q.P31_NEW_WEIGHTS
+    assert whole == pytest.approx(float(np.dot(weights, poly(q.P31_NODES))), rel=1e-12, abs=1e-13)
 
 
 @pytest.mark.parametrize("seed", range(5))
@@ -186,16 +206,19 @@ def test_subinterval_integral_is_exact_for_degree_14(seed: int) -> None:
     assert whole == pytest.approx(float(np.dot(q.K15_WEIGHTS, poly(q.K15_NODES))), rel=1e-13, abs=1e-14)
 
 
-@pytest.mark.parametrize("width", [0.5, 0.3, 0.2, 0.1, 0.05])
-def test_subinterval_estimate_covers_the_error_of_a_bump(width: float) -> None:
+@pytest.mark.parametrize("nodes,width", [(n, w) for n in ("K15", "P31") for w in (0.5, 0.3, 0.2, 0.1, 0.05)]
+                         + [("P31", 0.03)])  # (K15's estimate falls below the error at 0.03)
+def test_subinterval_estimate_covers_the_error_of_a_bump(width: float, nodes: str) -> None:
     """The walk certifies steps with value + estimate: the estimate must not fall below
     the true error on the bumps nu+ looks like, resolved or not (a narrow bump gives a
-    large estimate: the walk then evaluates nu+ instead)."""
+    large estimate: the walk then evaluates nu+ instead); on K15's 15 nodes and on
+    P31's 31 (a panel accepted at P31 keeps those)."""
     mpmath.mp.dps = 30
+    x = q.K15_NODES if nodes == "K15" else q.P31_NODES
     rng = np.random.default_rng(int(width * 1000))
     for _ in range(20):
         centre = rng.uniform(-0.8, 0.8)
-        f = np.exp(-0.5 * ((q.K15_NODES - centre) / width) ** 2)
+        f = np.exp(-0.5 * ((x - centre) / width) ** 2)
         xl, xr = np.sort(rng.uniform(-1.0, 1.0, 2))
         v, e = q.subinterval_integral(f, xl, xr)
         pts = [xl, centre, xr] if xl < centre < xr else [xl, xr]
