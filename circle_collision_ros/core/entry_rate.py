@@ -53,6 +53,7 @@ BROAD_K2 = BROAD_K ** 2
 _SCAN = 16  # arc scan steps for the density's local maxima (panel ends), at least
 _SCAN_MAX = 4096  # at most (a step >= 2 alpha R / 4096 > sigma_min: S(t) degenerate)
 _SCAN_ANCHOR = 64  # scan directions re-anchored by cos/sin every this many steps
+_RING_ISOTROPIC = 4.0  # 3-D rings keep two fixed halves while sigma_min >= sqrt(tr S) / this
 
 
 # W. J. Cody's rational Chebyshev approximations of erf and erfc (Math. Comp. 23,
@@ -483,7 +484,11 @@ _ring_adaptive = make_adaptive_angle(_ring_integrand)
 def _cap_integrand(th, prm):
     """R^2 sin(theta) * ring integral at polar angle theta.  The ring as two
     halves where its circumference is at most _SCAN lower bounds of sigma_min
-    (the density varies slowly along it); else scanned like nu_plus_2d's arc,
+    (the density varies slowly along it) or S(t) is within _RING_ISOTROPIC of
+    isotropic (sigma_min >= sigma_lb >= sqrt(tr S) / _RING_ISOTROPIC >=
+    sigma_max / _RING_ISOTROPIC: no feature narrower than a quarter of the
+    density's extent, which the halves' nodes resolve, as the entry-rate and
+    horizon tests show); else scanned like nu_plus_2d's arc,
     with a step of at most sigma_min / R along the ring (q is Lipschitz with
     constant 1 / sigma_min), integrated over the scan's runs cut at their
     peaks: a thin density band (nearly singular S(t)) crosses a ring in two
@@ -497,7 +502,7 @@ def _cap_integrand(th, prm):
     sig_lb = prm[12]
     st = R * R * sth
     ring = 2.0 * math.pi * R * sth
-    if not (ring > _SCAN * sig_lb):
+    if not (ring > _SCAN * sig_lb) or sig_lb >= prm[13]:
         v1, e1 = _ring_adaptive(p2, 0.0, math.pi, tol)
         v2, e2 = _ring_adaptive(p2, math.pi, 2.0 * math.pi, tol)
         acc[0] = max(acc[0], (e1 + e2) * st)
@@ -599,7 +604,8 @@ def nu_plus_3d(dp, dv, da, R, Sigma, t, tol, acc):
         for k in range(3):
             af += A[i, k] * A[i, k]
     sig_lb = 1.0 / math.sqrt(math.sqrt(af))
-    prm = (R, u, e1, e2, g, gd, A, norm, K, Vc, inner_tol, acc, sig_lb)
+    sig_iso = math.sqrt(rho2 / BROAD_K2) / _RING_ISOTROPIC  # sqrt(tr S) / _RING_ISOTROPIC
+    prm = (R, u, e1, e2, g, gd, A, norm, K, Vc, inner_tol, acc, sig_lb, sig_iso)
     acc[0] = 0.0  # the largest ring error (times R^2 sin theta) of this cap
     v, e = _cap_adaptive(prm, 0.0, alpha, tol)
     acc[2] = e + alpha * acc[0]
