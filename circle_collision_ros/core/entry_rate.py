@@ -29,8 +29,10 @@ the t-integral runs over the tube's ambiguous intervals only
 arc/cap |x - g(t)| <= rho(t).
 
 Degenerate S(t) (smallest/largest eigenvalue ratio < 1e-12 at a quadrature
-node, e.g. a covariance of rank < D): no density on the sphere; the node is
-flagged and the caller falls back to randomized QMC on the exact solver.
+node, e.g. a covariance of rank < D: no density on the sphere; or a density
+ridge so thin that the arc or ring scan would need more than _SCAN_MAX steps to
+keep its step within sigma_min): the node is flagged and the caller falls back
+to randomized QMC on the exact solver.
 """
 from __future__ import annotations
 
