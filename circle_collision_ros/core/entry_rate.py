@@ -334,13 +334,23 @@ def _piece_end(qs, j, end):
 
 
 @njit(cache=True, error_model="numpy")
-def _count_pieces(qs, ra, rb, nr):
-    n = 0
+def _scan_pieces(qs, n, reach2, jmin, ia, ib):
+    """The integration pieces of a scan qs[0..n]: the window's runs (_scan_runs)
+    cut at their local minima of q, as scan-index pairs [ia[i], ib[i]] (arrays of
+    length >= n); returns their number."""
+    ra = np.empty(n + 1, dtype=np.int64)
+    rb = np.empty(n + 1, dtype=np.int64)
+    nr = _scan_runs(qs, n, reach2, jmin, ra, rb)
+    m = 0
     for r in range(nr):
+        start = ra[r]
         for j in range(ra[r] + 1, rb[r] + 1):
             if _piece_end(qs, j, rb[r]):
-                n += 1
-    return n
+                ia[m] = start
+                ib[m] = j
+                m += 1
+                start = j
+    return m
 
 
 @njit(cache=True, error_model="numpy")
@@ -412,7 +422,7 @@ def nu_plus_2d(dp, dv, da, R, Sigma, t, tol, acc):
             acc[1] = 1.0
             return 0.0
     step = 2.0 * alpha / nscan
-    reach = BROAD_K + 0.5 * R * step / sig_min if sig_min > 0.0 else math.inf
+    reach = BROAD_K + 0.5 * R * step / sig_min  # sig_min > 0: det > 0 passed the degenerate test
     # The scan's directions by rotation (one cos/sin pair per _SCAN_ANCHOR points
     # instead of one per point: this runs at every nu+ node).  Re-anchored every
     # _SCAN_ANCHOR points, the accumulated rounding stays ~_SCAN_ANCHOR ulps: it
@@ -435,25 +445,19 @@ def nu_plus_2d(dp, dv, da, R, Sigma, t, tol, acc):
         if qs[j] < qs[jmin]:
             jmin = j
         cr, sr = cr * cd - sr * sd, sr * cd + cr * sd
-    # the window's runs, cut into pieces at the density's peaks (_scan_runs)
-    ra = np.empty(nscan + 1, dtype=np.int64)
-    rb = np.empty(nscan + 1, dtype=np.int64)
-    nr = _scan_runs(qs, nscan, reach * reach, jmin, ra, rb)
-    npieces = _count_pieces(qs, ra, rb, nr)
+    # the window's runs, cut into pieces at the density's peaks
+    ia = np.empty(nscan, dtype=np.int64)
+    ib = np.empty(nscan, dtype=np.int64)
+    npieces = _scan_pieces(qs, nscan, reach * reach, jmin, ia, ib)
     prm = (R, math.cos(phig), g0, g1, gd0, gd1, a00, a01s, a11, norm, k00, k01, k10, k11,
            v00, v01 + v10, v11, math.sin(phig))
     ptol = tol / npieces
     total = 0.0
     err = 0.0
-    for r in range(nr):
-        start = -alpha + step * ra[r]
-        for j in range(ra[r] + 1, rb[r] + 1):
-            if _piece_end(qs, j, rb[r]):
-                end = -alpha + step * j
-                v, e = _arc_adaptive(prm, start, end, ptol)
-                total += v
-                err += e
-                start = end
+    for i in range(npieces):
+        v, e = _arc_adaptive(prm, -alpha + step * ia[i], -alpha + step * ib[i], ptol)
+        total += v
+        err += e
     acc[2] = err
     return total
 
@@ -543,21 +547,16 @@ def _cap_integrand(th, prm):
         qs[j] = c00 + 2.0 * rs * (cp * c1 + sp * c2) + rs * rs * (cp * cp * d11 + 2.0 * cp * sp * d12 + sp * sp * d22)
         if qs[j] < qs[jmin]:
             jmin = j
-    ra = np.empty(n + 1, dtype=np.int64)
-    rb = np.empty(n + 1, dtype=np.int64)
-    nr = _scan_runs(qs, n, reach * reach, jmin, ra, rb)
-    ptol = 2.0 * tol / _count_pieces(qs, ra, rb, nr)  # the two halves' total
+    ia = np.empty(n, dtype=np.int64)
+    ib = np.empty(n, dtype=np.int64)
+    npieces = _scan_pieces(qs, n, reach * reach, jmin, ia, ib)
+    ptol = 2.0 * tol / npieces  # the two halves' total
     total = 0.0
     err = 0.0
-    for r in range(nr):
-        start = step * ra[r]
-        for j in range(ra[r] + 1, rb[r] + 1):
-            if _piece_end(qs, j, rb[r]):
-                end = step * j
-                v, e = _ring_adaptive(p2, start, end, ptol)
-                total += v
-                err += e
-                start = end
+    for i in range(npieces):
+        v, e = _ring_adaptive(p2, step * ia[i], step * ib[i], ptol)
+        total += v
+        err += e
     acc[0] = max(acc[0], err * st)
     return total * st
 

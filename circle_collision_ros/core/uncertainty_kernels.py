@@ -531,6 +531,7 @@ def overcount_replicates(dp, dv, da, R, H, L, Z, m, est):
         for j in range(n):
             wp[j] += L[k, j] * da[k]
             wv[j] += L[D + k, j] * da[k]
+    a2 = 1.5 * aa
     for r in range(Z.shape[0]):
         tot = 0
         for i in range(m):
@@ -546,7 +547,6 @@ def overcount_replicates(dp, dv, da, R, H, L, Z, m, est):
                     yv += L[D + k, j] * Z[r, i, j]
                 v[k] = yv
                 vv += yv * yv
-            a2 = 1.5 * aa
             b1 = 3.0 * vda
             tm = min(max(-b1 / (2.0 * a2), 0.0), H) if a2 > 0.0 else (0.0 if b1 >= 0.0 else H)
             if vv + pda + (b1 + a2 * tm) * tm > 0.0:
