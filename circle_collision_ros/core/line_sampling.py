@@ -162,21 +162,16 @@ def capsule_interval(c0, c1, c2, e0, e1, e2, v0, v1, v2, R, H):
     """(lo, hi): the x with min over t in [0, H] of |c + x e + v t| <= R (lo > hi:
     none), e a unit vector.  The set is the line's intersection with the capsule
     around the segment from 0 to -v H: the hull of its chords through the two
-    end balls and the finite cylinder."""
-    lo = math.inf
-    hi = -math.inf
-    a, b = _ball_chord(c0, c1, c2, e0, e1, e2, R)
-    if a <= b:
-        lo = a
-        hi = b
+    end balls and the finite cylinder.  Each end ball lies inside the infinite
+    cylinder (its points are within R of the axis), so where the infinite
+    cylinder's chord lies within the slab 0 <= p.u <= |v| H it is the hull
+    itself and the balls' chords are not computed (most lines)."""
     w0 = v0 * H
     w1 = v1 * H
     w2 = v2 * H
-    a, b = _ball_chord(c0 + w0, c1 + w1, c2 + w2, e0, e1, e2, R)
-    if a <= b:
-        lo = min(lo, a)
-        hi = max(hi, b)
     wn = math.sqrt(w0 * w0 + w1 * w1 + w2 * w2)
+    lo = math.inf
+    hi = -math.inf
     if wn > 0.0:
         # axis u = -v / |v| (the segment 0 .. -v H): the slab 0 <= p.u <= |v| H
         u0 = -w0 / wn
@@ -222,11 +217,23 @@ def capsule_interval(c0, c1, c2, e0, e1, e2, v0, v1, v2, R, H):
         else:
             pl = 1.0
             ph = -1.0
+        if not pl <= ph:
+            return 1.0, -1.0  # the line misses the infinite cylinder, hence the balls
+        if sl <= pl and ph <= sh:
+            return pl, ph
         a = max(sl, pl)
         b = min(sh, ph)
         if a <= b:
-            lo = min(lo, a)
-            hi = max(hi, b)
+            lo = a
+            hi = b
+    a, b = _ball_chord(c0, c1, c2, e0, e1, e2, R)
+    if a <= b:
+        lo = min(lo, a)
+        hi = max(hi, b)
+    a, b = _ball_chord(c0 + w0, c1 + w1, c2 + w2, e0, e1, e2, R)
+    if a <= b:
+        lo = min(lo, a)
+        hi = max(hi, b)
     return lo, hi
 
 

@@ -109,8 +109,39 @@ def _lam_max(Sigma, t):
         d = 0.5 * (s00 - s11)
         o = 0.5 * (s01 + s10)
         return h + math.sqrt(d * d + o * o)
-    lam, _ = eig_sym(S_at(Sigma, t))
-    return lam[lam.shape[0] - 1]
+    # 3-D: the symmetric part of S(t), scalars (no temporaries)
+    s = np.empty(6)  # s00, s11, s22, s01, s02, s12
+    for n, (i, j) in enumerate(((0, 0), (1, 1), (2, 2), (0, 1), (0, 2), (1, 2))):
+        s[n] = 0.5 * ((Sigma[i, j] + Sigma[j, i]) + t * ((Sigma[i, 3 + j] + Sigma[3 + i, j])
+                                                         + (Sigma[j, 3 + i] + Sigma[3 + j, i]))
+                      + t * t * (Sigma[3 + i, 3 + j] + Sigma[3 + j, 3 + i]))
+    return lam_max_sym3(s[0], s[1], s[2], s[3], s[4], s[5])
+
+
+@njit(cache=True, error_model="numpy")
+def lam_max_sym3(s00, s11, s22, s01, s02, s12):
+    """Upper bound of the largest eigenvalue of the symmetric PSD 3x3 matrix
+    [[s00, s01, s02], [s01, s11, s12], [s02, s12, s22]] in closed form (the
+    trigonometric solution of the characteristic cubic: ~30 flops instead of a
+    Jacobi eigendecomposition, ~3 us with its temporaries).  With q = tr / 3 and
+    p = |S - q I|_F / sqrt 6, lambda_max = q + 2 p cos(acos(det((S - q I) / p) / 2) / 3).
+    Its rounding error is a few hundred ulps of |q| + p <= 2 tr at worst (acos
+    is ill-conditioned only at r = +-1, where a change dr moves lambda_max by at
+    most 2 p dr / 9); the 1e-12 tr added covers it, and the result is never below
+    the largest diagonal entry (a lower bound of lambda_max)."""
+    tr = s00 + s11 + s22
+    q = tr / 3.0
+    a = s00 - q
+    b = s11 - q
+    c = s22 - q
+    off = s01 * s01 + s02 * s02 + s12 * s12
+    p = math.sqrt((a * a + b * b + c * c + 2.0 * off) / 6.0)
+    lam = q
+    if p > 0.0:
+        det = a * (b * c - s12 * s12) - s01 * (s01 * c - s12 * s02) + s02 * (s01 * s12 - b * s02)
+        r = min(max(0.5 * det / (p * p * p), -1.0), 1.0)
+        lam = q + 2.0 * p * math.cos(math.acos(r) / 3.0)
+    return max(lam, s00, s11, s22) + 1e-12 * abs(tr)
 
 
 @njit(cache=True, error_model="numpy")
@@ -623,7 +654,8 @@ _ST_PMAX = 0  # largest instantaneous probability computed (a lower bound of P(c
 _ST_DEGENERATE = 1  # 1.0 once S(t) was degenerate at a quadrature node: the Rice values are unusable
 _ST_PTOL = 2  # quadrature tolerance of the walk's instantaneous probabilities (0.0: the standard)
 _ST_PERR = 3  # stated error of one of them (_P0_ERR at the standard tolerance; >= _P0_ERR)
-_ST_SIZE = 4
+_ST_SWEEP_DV = 4  # the walk's certificate: < 0 the Rice integral; >= 0 the swept ball (_swept_ball_bound), k sigma_v
+_ST_SIZE = 5
 # Straight 3-D pairs (line sampling) use the instantaneous probability only in the
 # plausible-time walk, where it is compared with the threshold: tolerance
 # _WALK_TOL_REL x threshold per piece and level (stated error 8e-7 x threshold,
@@ -683,6 +715,42 @@ def _rice_short(dp, dv, da, R, Sigma, a, b, pa, pb, j, cache, plo, thr, acc, st)
     if acc[1] != 0.0:
         st[_ST_DEGENERATE] = 1.0
     return v, e
+
+
+@njit(cache=True, error_model="numpy")
+def _velocity_sigma(Sigma):
+    """Upper bound of sqrt(lambda_max(Svv)) (the factor 1 + 1e-9 covers the
+    eigenvalues' rounding, as max_sigma_over)."""
+    D = Sigma.shape[0] // 2
+    lam, _ = eig_sym(np.ascontiguousarray(Sigma[D:, D:]))
+    return math.sqrt(max(lam[D - 1], 0.0) * (1.0 + 1e-9))
+
+
+@njit(cache=True, error_model="numpy")
+def _swept_ball_bound(dp, dv, da, R, Sigma, a, b, st):
+    """Upper bound of P(the path touches the ball within [a, b]) >= sup over
+    [a, b] of P(|X(t)| <= R), but for the velocity tail TUBE_TAIL that the
+    caller adds: a single ball probability, no entry-rate integral.
+
+    With m the midpoint, h the half-width and tau = t - m, X(t) = X(m) +
+    Xdot(m) tau + da tau^2 / 2 and Xdot(m) - gd(m) = dv - E[dv] = L_v w
+    (L_v L_v^T = Svv, w standard normal of rank <= D), so off the event
+    |w| > k (probability P(chi^2_D > k^2) <= TUBE_TAIL) |Xdot(m)| <= |gd(m)| +
+    k sqrt(lambda_max(Svv)) = |gd(m)| + st[_ST_SWEEP_DV], and a path within R of
+    the origin at some t in [a, b] has |X(m)| <= R' = R + h (|gd(m)| +
+    st[_ST_SWEEP_DV]) + |da| h^2 / 2.  Returns P(|X(m)| <= R') (at the walk's
+    tolerance: within st[_ST_PERR]); R' is rounded up by 1e-12 relative."""
+    D = dp.shape[0]
+    m = 0.5 * (a + b)
+    h = 0.5 * (b - a)
+    speed = 0.0
+    acc2 = 0.0
+    for i in range(D):
+        g = dv[i] + da[i] * m
+        speed += g * g
+        acc2 += da[i] * da[i]
+    reach = R + h * (math.sqrt(speed) + st[_ST_SWEEP_DV]) + 0.5 * math.sqrt(acc2) * h * h
+    return instant_probability_tol(dp, dv, da, reach * (1.0 + 1e-12), Sigma, m, st[_ST_PTOL])
 
 
 @njit(cache=True, error_model="numpy")
@@ -886,7 +954,8 @@ def _first_crossing(dp, dv, da, R, Sigma, pa, pb, j, a0, p_start, thr, dt, cache
         if hi - lo <= dt:
             return hi
         pc = -1.0  # P(c), not computed yet
-        if c - lo <= dt:
+        endgame = c - lo <= dt
+        if endgame:
             # the step model says the certificate cannot step further (P(lo)
             # within its resolution of thr): one probe at lo + dt; at or above
             # thr the crossing is in (lo, lo + dt], which is answered like a
@@ -919,7 +988,21 @@ def _first_crossing(dp, dv, da, R, Sigma, pa, pb, j, a0, p_start, thr, dt, cache
             pc = _prob_at(dp, dv, da, R, Sigma, c, st)
         certified = False
         if pc < thr:
-            if whole:
+            if st[_ST_SWEEP_DV] >= 0.0:
+                # the swept ball's bound U of sup_[lo, c] P (+ TUBE_TAIL), written
+                # as the Rice step's increment over P(lo): the certificate below
+                # reads U + TUBE_TAIL + perr < thr
+                v = _swept_ball_bound(dp, dv, da, R, Sigma, lo, c, st) - plo
+                e = TUBE_TAIL
+                width = c - lo
+                if endgame and not plo + v + e + perr < thr:
+                    # its resolution over [lo, lo + dt] (the ball inflated by
+                    # dt / 2 (|gd| + k sigma_v)) is coarser than the Rice
+                    # integral's: the last attempt before a conservative exit
+                    # takes the 3-point Rice rule, so that such exits land
+                    # within the Rice certificate's resolution below thr
+                    v, e = _rice_short(dp, dv, da, R, Sigma, lo, c, pa, pb, j, cache, plo, thr, acc, st)
+            elif whole:
                 # the panel's own integral (computed once per pair; nu+ >= 0, so
                 # over [a, b] it bounds the one over [lo, b])
                 v, e = _rice_panel(dp, dv, da, R, Sigma, pa, pb, j, cache, acc, st)
@@ -1018,6 +1101,7 @@ def _pair_kernel(dp, dv, da, R, Sigma, H, thr, out):
         return
     st = np.zeros(_ST_SIZE)
     st[_ST_PERR] = _P0_ERR
+    st[_ST_SWEEP_DV] = -1.0
     acc = np.zeros(3)  # entry_rate's scratch
     # straight 3-D pairs: the probability by line sampling (finish_row), not by
     # the Rice panels, so the walk does not get them for free; their
@@ -1026,6 +1110,10 @@ def _pair_kernel(dp, dv, da, R, Sigma, H, thr, out):
     if sampled:
         st[_ST_PTOL] = max(_WALK_TOL_REL * thr, 1e-10)
         st[_ST_PERR] = BALL_ERR_PER_TOL * st[_ST_PTOL]
+        # no Rice panels for the probability: the walk certifies its steps with
+        # the swept ball (one ball probability per step instead of ~450 cap
+        # integrand points per nu+ value)
+        st[_ST_SWEEP_DV] = BROAD_PHASE_SIGMAS * _velocity_sigma(Sigma)
     elif dp.shape[0] == 2:
         # 2-D: the walk's probabilities only meet the threshold (its certificate
         # and comparisons, each with st[_ST_PERR]), so they take a looser
@@ -1181,14 +1269,27 @@ def _no_reentry(dp, dv, da, Sigma, t0, t1, k):
     a tube path inside [t0, t1], none can exit the ball and come back.
 
     A re-entry needs a local maximum of f = |X|^2 - R^2 inside (0, H), impossible
-    where f'' = 2 (|Xdot|^2 + X.da) > 0, i.e. where |Xdot|^2 > |X| |da|.  On the
-    tube (|z| <= k) |X(t)| <= |g(t)| + k sqrt(lambda_max(S(t))) and |Xdot(t)| >=
-    |gd(t)| - k sqrt(lambda_max(Svv)) (the velocity deviation is constant:
-    acceleration is exact), so checking (min |gd| - k sv)^2 > (max |g| + k sx) |da|
-    on each of _REENTRY_PIECES pieces of [t0, t1] with rigorous piece bounds
-    (_mean_range, max_sigma_over, the segment distance of the linear gd) certifies
-    f'' > 0 for every tube path.  Typical of moving bodies with modest
-    accelerations: the over-count RQMC is then not needed."""
+    where f'' / 2 = |Xdot|^2 + X.da > 0.  Two lower bounds of f'' / 2 on the tube
+    (|z| <= k), each checked on _REENTRY_PIECES pieces of [t0, t1] with rigorous
+    piece bounds; either certifies:
+
+    * joint: with X = g + dX, Xdot = gd + dV (the deviations linear in z),
+      f'' / 2 = |gd|^2 + g.da + l + |dV|^2 >= P(t) - k sd(l), where
+      P(t) = |gd|^2 + g.da = |dv|^2 + dp.da + 3 (dv.da) t + 1.5 |da|^2 t^2 and
+      l = da.dp_dev + (2 dv + 3 t da).dv_dev is linear in z with variance
+      Q(t) = q0 + q1 t + q2 t^2 (q2 >= 0), so |l| <= k sqrt(Q) on the tube.
+      Both P and Q are convex quadratics: min P over a piece at the clamped
+      vertex, max Q at an end.  It keeps the correlations and the sign of g.da
+      that the next bound throws away;
+    * separate: |X(t)| <= |g(t)| + k sqrt(lambda_max(S(t))) and |Xdot(t)| >=
+      |gd(t)| - k sqrt(lambda_max(Svv)) (the velocity deviation is constant:
+      acceleration is exact), so (min |gd| - k sv)^2 > (max |g| + k sx) |da|
+      (_mean_range, max_sigma_over, the segment distance of the linear gd).  It
+      keeps the |dV|^2 >= 0 that the joint bound drops, and wins when k sv is
+      comparable with |gd|.
+
+    Typical of moving bodies with modest accelerations: the over-count RQMC is
+    then not needed."""
     D = dp.shape[0]
     an = 0.0
     for i in range(D):
@@ -1196,6 +1297,66 @@ def _no_reentry(dp, dv, da, Sigma, t0, t1, k):
     an = math.sqrt(an)
     if an == 0.0:
         return True
+    return _no_reentry_joint(dp, dv, da, Sigma, t0, t1, k) or _no_reentry_separate(dp, dv, da, Sigma, t0, t1, k)
+
+
+@njit(cache=True, error_model="numpy")
+def _no_reentry_joint(dp, dv, da, Sigma, t0, t1, k):
+    """_no_reentry's joint bound: min P(t) > k sqrt(max Q(t)) on every piece."""
+    D = dp.shape[0]
+    p0 = 0.0  # P(t) = p0 + p1 t + p2 t^2 and its scale (for the rounding margin)
+    p1 = 0.0
+    p2 = 0.0
+    pscale = 0.0
+    for i in range(D):
+        p0 += dv[i] * dv[i] + dp[i] * da[i]
+        p1 += 3.0 * dv[i] * da[i]
+        p2 += 1.5 * da[i] * da[i]
+        pscale += dv[i] * dv[i] + abs(dp[i] * da[i]) + 3.0 * abs(dv[i] * da[i]) + 1.5 * da[i] * da[i]
+    # Q(t) = Var(a.dp_dev + (b0 + t b1).dv_dev), a = da, b0 = 2 dv, b1 = 3 da
+    q0 = 0.0
+    q1 = 0.0
+    q2 = 0.0
+    qscale = 0.0
+    for i in range(D):
+        for j in range(D):
+            spp = Sigma[i, j]
+            spv = 0.5 * (Sigma[i, D + j] + Sigma[D + j, i])
+            svv = Sigma[D + i, D + j]
+            b0i = 2.0 * dv[i]
+            b0j = 2.0 * dv[j]
+            b1i = 3.0 * da[i]
+            b1j = 3.0 * da[j]
+            q0 += da[i] * spp * da[j] + 2.0 * da[i] * spv * b0j + b0i * svv * b0j
+            q1 += 2.0 * da[i] * spv * b1j + 2.0 * b0i * svv * b1j
+            q2 += b1i * svv * b1j
+            qscale += (abs(da[i] * spp * da[j]) + 2.0 * abs(da[i] * spv) * (abs(b0j) + abs(b1j))
+                       + abs(svv) * (abs(b0i) + abs(b1i)) * (abs(b0j) + abs(b1j)))
+    tmax = max(abs(t0), abs(t1), 1.0)
+    # rounding: a few ulps per term of sums whose magnitudes are bounded by the scales
+    perr = 1e-12 * pscale * tmax * tmax
+    qerr = 1e-12 * qscale * tmax * tmax
+    for q in range(_REENTRY_PIECES):
+        ta = t0 + (t1 - t0) * q / _REENTRY_PIECES
+        tb = t1 if q == _REENTRY_PIECES - 1 else t0 + (t1 - t0) * (q + 1) / _REENTRY_PIECES
+        tv = min(max(-p1 / (2.0 * p2), ta), tb) if p2 > 0.0 else (ta if p1 >= 0.0 else tb)
+        pmin = p0 + tv * (p1 + tv * p2) - perr
+        if not (pmin > 0.0):
+            return False
+        qmax = max(q0 + ta * (q1 + ta * q2), q0 + tb * (q1 + tb * q2), 0.0) + qerr
+        if not (pmin * pmin > k * k * qmax):
+            return False
+    return True
+
+
+@njit(cache=True, error_model="numpy")
+def _no_reentry_separate(dp, dv, da, Sigma, t0, t1, k):
+    """_no_reentry's separate bound: (min |gd| - k sv)^2 > (max |g| + k sx) |da| on every piece."""
+    D = dp.shape[0]
+    an = 0.0
+    for i in range(D):
+        an += da[i] * da[i]
+    an = math.sqrt(an)
     Svv = np.empty((D, D))
     for i in range(D):
         for j in range(D):
