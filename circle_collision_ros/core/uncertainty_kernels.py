@@ -109,13 +109,17 @@ def _lam_max(Sigma, t):
         d = 0.5 * (s00 - s11)
         o = 0.5 * (s01 + s10)
         return h + math.sqrt(d * d + o * o)
-    # 3-D: the symmetric part of S(t), scalars (no temporaries)
-    s = np.empty(6)  # s00, s11, s22, s01, s02, s12
-    for n, (i, j) in enumerate(((0, 0), (1, 1), (2, 2), (0, 1), (0, 2), (1, 2))):
-        s[n] = 0.5 * ((Sigma[i, j] + Sigma[j, i]) + t * ((Sigma[i, 3 + j] + Sigma[3 + i, j])
-                                                         + (Sigma[j, 3 + i] + Sigma[3 + j, i]))
-                      + t * t * (Sigma[3 + i, 3 + j] + Sigma[3 + j, 3 + i]))
-    return lam_max_sym3(s[0], s[1], s[2], s[3], s[4], s[5])
+    # 3-D: the symmetric part of S(t) entry by entry, as S_at
+    return lam_max_sym3(_s_sym(Sigma, t, 0, 0), _s_sym(Sigma, t, 1, 1), _s_sym(Sigma, t, 2, 2),
+                        _s_sym(Sigma, t, 0, 1), _s_sym(Sigma, t, 0, 2), _s_sym(Sigma, t, 1, 2))
+
+
+@njit(cache=True, error_model="numpy", inline="always")
+def _s_sym(Sigma, t, i, j):
+    """Entry (i, j) of the symmetric part of S(t) in 3-D."""
+    return 0.5 * ((Sigma[i, j] + Sigma[j, i]) + t * ((Sigma[i, 3 + j] + Sigma[3 + i, j])
+                                                     + (Sigma[j, 3 + i] + Sigma[3 + j, i]))
+                  + t * t * (Sigma[3 + i, 3 + j] + Sigma[3 + j, 3 + i]))
 
 
 @njit(cache=True, error_model="numpy")
@@ -1351,13 +1355,13 @@ def _no_reentry(dp, dv, da, Sigma, t0, t1, k):
         tb = t1 if q == _REENTRY_PIECES - 1 else t0 + (t1 - t0) * (q + 1) / _REENTRY_PIECES
         tm = 0.5 * (ta + tb)
         qm = max(q00 + tm * (2.0 * q01 + tm * q11), 0.0)
-        lam0 = math.sqrt(qm) / (2.0 * k)
-        if not (lam0 > 0.0):
-            lam0 = 1e-300
+        # (floored where l has ~no variance: lam k^2 <= 1e-9 of P's scale, and
+        # 1 / (4 lam) stays finite, multiplying the rounding margin werr)
+        lam0 = max(math.sqrt(qm) / (2.0 * k), 1e-9 * pscale / (k * k))
         best = -math.inf
         for c in _DUAL_LAMBDAS:
             lam = lam0 * c
-            # W(t) / lam... as w0 + 2 t w1 + t^2 w2: u^T Sigma u - r^T (lam I + Svv)^-1 r
+            # W(t) = w0 + 2 t w1 + t^2 w2 = u^T Sigma u - r^T (lam I + Svv)^-1 r
             w0 = q00
             w1 = q01
             w2 = q11
