@@ -29,10 +29,11 @@ from typing import NamedTuple
 
 import numpy as np
 
-from circle_collision_ros.core.line_sampling import line_factor, line_replicates
+from circle_collision_ros.core.line_sampling import cylinder_control, line_factor, line_replicates
 from circle_collision_ros.core.narrow_phase import time_to_collision
 from circle_collision_ros.core.uncertainty_kernels import (
     BROAD_PHASE_SIGMAS,
+    controlled_stats,
     TUBE_TAIL,
     OUT_SIZE,
     evaluate_uncertain_rows,
@@ -311,4 +312,7 @@ def load_fallback_kernels(dimensions: int) -> None:
     overcount_replicates(z + 1.5, z, z + 0.1, 1.0, 1.0, factor(cov), Z, 1, np.empty(Z.shape[0]))
     if dimensions == 3:
         G, mu, e, s, _ = line_factor(z + 1.5, z + 1.0, cov)
-        line_replicates(G, mu, e, s, 1.0, 1.0, normal_table(5), 0, 1, np.zeros(Z.shape[0]))
+        f, tbar, a, ctl_mean, _ = cylinder_control(z + 1.5, z + 1.0, cov, e, 1.0, 1.0)
+        line_replicates(G, mu, e, s, f, tbar, a, 1.0, 1.0, normal_table(5), 0, 1, np.zeros(Z.shape[0]),
+                        np.zeros(Z.shape[0]))
+        controlled_stats(np.arange(4.0), np.arange(4.0), ctl_mean)

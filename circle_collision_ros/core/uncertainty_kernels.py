@@ -15,7 +15,7 @@ from numba import njit
 
 from circle_collision_ros.core.entry_rate import (BROAD_K, entry_rate_gauss3, entry_rate_integral, entry_rate_k15,
                                                  entry_rate_p31)
-from circle_collision_ros.core.line_sampling import line_factor, line_replicates
+from circle_collision_ros.core.line_sampling import PHI_ERR, cylinder_control, line_factor, line_replicates
 from circle_collision_ros.core.narrow_phase import _ttc_kernel_h
 from circle_collision_ros.core.overlap_probability import (BALL_ERR_PER_TOL, DISC_ERR_PER_TOL, eig_sym,
                                                            overlap_probability, overlap_probability_2d,
@@ -59,10 +59,14 @@ QMC_CV_POINTS = 128
 QMC_CV_TARGET = 2e-3  # ~4 standard errors: an error ~5e-4, a third of 1e5-sample MC's at P ~ 0.5
 _QMC_SEED = 18_2026
 # Line sampling of straight 3-D pairs (core.line_sampling): QMC_LINE_POINTS points
-# per replicate, then twice as many, then all QMC_POINTS while QMC_T standard errors
-# exceed QMC_LINE_TARGET (each stage adds points to the previous one's)
+# per replicate, then twice as many, then all QMC_POINTS while the stated bound
+# exceeds QMC_LINE_TARGET (each stage adds points to the previous one's).  The
+# control variate's coefficient is fitted to the replicates (regression with one
+# covariate: QMC_REPLICATES - 2 = 14 dof, two-sided 99.9 % Student t quantile
+# 4.140; mpmath: tests/core/test_uncertainty_line_sampling.py)
 QMC_LINE_POINTS = 128
 QMC_LINE_TARGET = 2e-3
+QMC_T_CONTROLLED = 4.15
 
 
 def _normal_table(dim: int) -> np.ndarray:
@@ -432,6 +436,43 @@ def qmc_probability(dp, dv, da, R, Sigma, H, Z):
                   zeros, zeros, zeros, np.zeros(n), H, t)
     est = (t <= H).reshape(r, m).mean(axis=1)
     return _replicate_stats(est)
+
+
+@njit(cache=True, error_model="numpy")
+def controlled_stats(est, ctl, ctl_mean):
+    """(estimate, statistical bound, beta) of the replicate estimates est (r >= 4)
+    with the control variate's replicate values ctl, whose exact mean is
+    ctl_mean: est's mean minus beta (ctl's mean - ctl_mean), beta fitted by
+    least squares, the bound QMC_T_CONTROLLED standard errors of that fitted
+    value at ctl_mean (normal linear model: s^2 (1 / r + (ctl's mean -
+    ctl_mean)^2 / Sxx) with s^2 = the residual sum of squares / (r - 2),
+    Student t with r - 2 dof; the replicate values are means of >= 128 points
+    each).  A control without spread (Sxx = 0) leaves the plain mean, with
+    QMC_T standard errors and beta = 0."""
+    n = est.shape[0]
+    my = 0.0
+    mx = 0.0
+    for i in range(n):
+        my += est[i]
+        mx += ctl[i]
+    my /= n
+    mx /= n
+    sxx = 0.0
+    sxy = 0.0
+    syy = 0.0
+    for i in range(n):
+        dx = ctl[i] - mx
+        dy = est[i] - my
+        sxx += dx * dx
+        sxy += dx * dy
+        syy += dy * dy
+    if not (sxx > 0.0):
+        return my, QMC_T * math.sqrt(syy / (n - 1) / n), 0.0
+    beta = sxy / sxx
+    res = max(syy - beta * sxy, 0.0)
+    d = mx - ctl_mean
+    se = math.sqrt(res / (n - 2) * (1.0 / n + d * d / sxx))
+    return my - beta * d, QMC_T_CONTROLLED * se, beta
 
 
 @njit(cache=True, error_model="numpy", inline="always")
@@ -1490,16 +1531,22 @@ def finish_row(dp, dv, da, R, Sigma, H, out):
     if out[_OUT_QMC] == 3.0:
         # straight 3-D: line sampling; QMC_LINE_POINTS per replicate first, more
         # (up to QMC_POINTS) while the statistical bound exceeds QMC_LINE_TARGET
-        G, mu, e, s, _ = line_factor(dp, dv, np.ascontiguousarray(Sigma))
+        Sigma = np.ascontiguousarray(Sigma)
+        G, mu, e, s, _ = line_factor(dp, dv, Sigma)
+        f, tbar, a, ctl_mean, ctl_err = cylinder_control(dp, dv, Sigma, e, float(R), float(H))
         Z = normal_table(5)
         tot = np.zeros(QMC_REPLICATES)
+        ctot = np.zeros(QMC_REPLICATES)
         m0 = 0
         for m in (QMC_LINE_POINTS, 2 * QMC_LINE_POINTS, QMC_POINTS):
             # the first m points of each replicate (the earlier stages' are reused)
-            line_replicates(G, mu, e, s, float(R), float(H), Z, m0, m, tot)
+            line_replicates(G, mu, e, s, f, tbar, a, float(R), float(H), Z, m0, m, tot, ctot)
             m0 = m
-            mean, se = _replicate_stats(tot / m)
-            stat = max(QMC_T * se, 3.0 / (QMC_REPLICATES * m))
+            mean, half, beta = controlled_stats(tot / m, ctot / m, ctl_mean)
+            # + the deterministic part: each chord's mass within 2 PHI_ERR (the
+            # Phi table), the control's mean within ctl_err (its quadrature)
+            stat = (max(half, 3.0 / (QMC_REPLICATES * m))
+                    + 2.0 * PHI_ERR + abs(beta) * (2.0 * PHI_ERR + ctl_err))
             if stat <= QMC_LINE_TARGET:
                 break
         p = min(1.0, max(0.0, max(mean, float(out[_OUT_LO]))))
