@@ -29,16 +29,15 @@ from typing import NamedTuple
 
 import numpy as np
 
-from circle_collision_ros.core.line_sampling import cylinder_control, line_factor, line_replicates
 from circle_collision_ros.core.narrow_phase import time_to_collision
 from circle_collision_ros.core.uncertainty_kernels import (
     BROAD_PHASE_SIGMAS,
-    controlled_stats,
     TUBE_TAIL,
     OUT_SIZE,
     evaluate_uncertain_rows,
     factor,
     finish_row,
+    line_sampled_probability,
     max_sigma_rows,
     normal_table,
     overcount_replicates,
@@ -311,8 +310,4 @@ def load_fallback_kernels(dimensions: int) -> None:
     qmc_probability(z + 1.5, z, z + 0.1, 1.0, cov, 1.0, Z)
     overcount_replicates(z + 1.5, z, z + 0.1, 1.0, 1.0, factor(cov), Z, 1, np.empty(Z.shape[0]))
     if dimensions == 3:
-        G, mu, e, s, _ = line_factor(z + 1.5, z + 1.0, cov)
-        f, tbar, a, ctl_mean, _ = cylinder_control(z + 1.5, z + 1.0, cov, e, 1.0, 1.0)
-        line_replicates(G, mu, e, s, f, tbar, a, 1.0, 1.0, normal_table(5), 0, 1, np.zeros(Z.shape[0]),
-                        np.zeros(Z.shape[0]))
-        controlled_stats(np.arange(4.0), np.arange(4.0), ctl_mean)
+        line_sampled_probability(z + 1.5, z + 1.0, cov, 1.0, 1.0, normal_table(5))

@@ -798,6 +798,28 @@ def _swept_ball_bound(dp, dv, da, R, Sigma, a, b, st):
     return instant_probability_tol(dp, dv, da, reach * (1.0 + 1e-12), Sigma, m, st[_ST_PTOL])
 
 
+# The end game's swept ball: [lo, lo + dt] in this many sub-steps, one ball each
+# (the inflation h (|gd| + k sigma_v) shrinks with h)
+_ENDGAME_SPLIT = 8
+
+
+@njit(cache=True, error_model="numpy")
+def _swept_ball_split(dp, dv, da, R, Sigma, a, b, st, stop):
+    """The largest ``_swept_ball_bound`` over _ENDGAME_SPLIT equal sub-steps of
+    [a, b]: an upper bound of sup over [a, b] of P(|X(t)| <= R) (each t lies in a
+    sub-step), as that function's is but for TUBE_TAIL.  Returns as soon as one
+    sub-step's reaches ``stop`` (the caller's certificate fails anyway)."""
+    w = (b - a) / _ENDGAME_SPLIT
+    worst = 0.0
+    for i in range(_ENDGAME_SPLIT):
+        ta = a + i * w
+        tb = b if i == _ENDGAME_SPLIT - 1 else a + (i + 1) * w
+        worst = max(worst, _swept_ball_bound(dp, dv, da, R, Sigma, ta, tb, st))
+        if worst >= stop:
+            break
+    return worst
+
+
 @njit(cache=True, error_model="numpy")
 def _rice_panel(dp, dv, da, R, Sigma, pa, pb, j, cache, acc, st):
     """Entry-rate integral over panel j and its error estimate, computed once
@@ -1043,10 +1065,14 @@ def _first_crossing(dp, dv, da, R, Sigma, pa, pb, j, a0, p_start, thr, dt, cache
                 if endgame and not plo + v + e + perr < thr:
                     # its resolution over [lo, lo + dt] (the ball inflated by
                     # dt / 2 (|gd| + k sigma_v)) is coarser than the Rice
-                    # integral's: the last attempt before a conservative exit
-                    # takes the 3-point Rice rule, so that such exits land
-                    # within the Rice certificate's resolution below thr
-                    v, e = _rice_short(dp, dv, da, R, Sigma, lo, c, pa, pb, j, cache, plo, thr, acc, st)
+                    # integral's: first the same bound over _ENDGAME_SPLIT
+                    # sub-steps (8 balls, ~20 us); then the last attempt before
+                    # a conservative exit takes the 3-point Rice rule (3 cap
+                    # integrals, ~150 us), so that such exits land within the
+                    # Rice certificate's resolution below thr
+                    v = _swept_ball_split(dp, dv, da, R, Sigma, lo, c, st, thr - e - perr) - plo
+                    if not plo + v + e + perr < thr:
+                        v, e = _rice_short(dp, dv, da, R, Sigma, lo, c, pa, pb, j, cache, plo, thr, acc, st)
             elif whole:
                 # the panel's own integral (computed once per pair; nu+ >= 0, so
                 # over [a, b] it bounds the one over [lo, b])
@@ -1507,6 +1533,34 @@ def evaluate_uncertain_rows(dp, dv, da, rad, sig, H, thr, out):
         _pair_kernel(dp[j], dv[j], da[j], rad[j], sig[j], H, thr, out[j])
 
 
+@njit(cache=True, error_model="numpy")
+def line_sampled_probability(dp, dv, Sigma, R, H, Z):
+    """(estimate, stated bound) of P(contact within [0, H]) of a straight 3-D pair
+    by line sampling with its control variate (core.line_sampling), Z =
+    normal_table(5): QMC_LINE_POINTS per replicate first, more (up to
+    QMC_POINTS) while the bound exceeds QMC_LINE_TARGET (compiled as one call:
+    from Python its five kernels' dispatch cost ~10 us a pair)."""
+    G, mu, e, s, _ = line_factor(dp, dv, Sigma)
+    f, tbar, a, ctl_mean, ctl_err = cylinder_control(dp, dv, Sigma, e, R, H)
+    tot = np.zeros(QMC_REPLICATES)
+    ctot = np.zeros(QMC_REPLICATES)
+    m0 = 0
+    mean = 0.0
+    stat = 1.0
+    for m in (QMC_LINE_POINTS, 2 * QMC_LINE_POINTS, QMC_POINTS):
+        # the first m points of each replicate (the earlier stages' are reused)
+        line_replicates(G, mu, e, s, f, tbar, a, R, H, Z, m0, m, tot, ctot)
+        m0 = m
+        mean, half, beta = controlled_stats(tot / m, ctot / m, ctl_mean)
+        # + the deterministic part: each chord's mass within 2 PHI_ERR (the
+        # Phi table), the control's mean within ctl_err (its quadrature)
+        stat = (max(half, 3.0 / (QMC_REPLICATES * m))
+                + 2.0 * PHI_ERR + abs(beta) * (2.0 * PHI_ERR + ctl_err))
+        if stat <= QMC_LINE_TARGET:
+            break
+    return mean, stat
+
+
 def finish_row(dp, dv, da, R, Sigma, H, out):
     """(probability, bound, plausible time) of one row from _pair_kernel's out,
     running the RQMC fallback when the kernel asked for it."""
@@ -1529,26 +1583,8 @@ def finish_row(dp, dv, da, R, Sigma, H, out):
         p = min(1.0, max(0.0, min(max(upper - mean, float(out[_OUT_LO])), upper)))
         return p, stat + float(out[_OUT_ERR]), float(out[_OUT_TPL])
     if out[_OUT_QMC] == 3.0:
-        # straight 3-D: line sampling; QMC_LINE_POINTS per replicate first, more
-        # (up to QMC_POINTS) while the statistical bound exceeds QMC_LINE_TARGET
-        Sigma = np.ascontiguousarray(Sigma)
-        G, mu, e, s, _ = line_factor(dp, dv, Sigma)
-        f, tbar, a, ctl_mean, ctl_err = cylinder_control(dp, dv, Sigma, e, float(R), float(H))
-        Z = normal_table(5)
-        tot = np.zeros(QMC_REPLICATES)
-        ctot = np.zeros(QMC_REPLICATES)
-        m0 = 0
-        for m in (QMC_LINE_POINTS, 2 * QMC_LINE_POINTS, QMC_POINTS):
-            # the first m points of each replicate (the earlier stages' are reused)
-            line_replicates(G, mu, e, s, f, tbar, a, float(R), float(H), Z, m0, m, tot, ctot)
-            m0 = m
-            mean, half, beta = controlled_stats(tot / m, ctot / m, ctl_mean)
-            # + the deterministic part: each chord's mass within 2 PHI_ERR (the
-            # Phi table), the control's mean within ctl_err (its quadrature)
-            stat = (max(half, 3.0 / (QMC_REPLICATES * m))
-                    + 2.0 * PHI_ERR + abs(beta) * (2.0 * PHI_ERR + ctl_err))
-            if stat <= QMC_LINE_TARGET:
-                break
+        mean, stat = line_sampled_probability(dp, dv, np.ascontiguousarray(Sigma), float(R), float(H),
+                                              normal_table(5))
         p = min(1.0, max(0.0, max(mean, float(out[_OUT_LO]))))
         return p, stat, float(out[_OUT_TPL])
     mean, se = qmc_probability(dp, dv, da, R, Sigma, H, normal_table(2 * D))
