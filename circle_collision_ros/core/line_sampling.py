@@ -321,8 +321,9 @@ def cylinder_control(dp, dv, Sigma, e, R, H):
     """(f, tbar, a, E[Y], error of E[Y]) of the control variate (module
     docstring): f the unit vector across e and the mean relative velocity (any
     unit vector across e when dv = 0); tbar the mean path's closest-approach
-    time clipped to [0, H]; a (6,) the gradient of t* at the mean (0 when dv = 0
-    or tbar was clipped), its dp part made orthogonal to e; E[Y] by 16-point
+    time clipped to [0, H]; a (6,) the gradient of t* at the mean (0 when dv = 0,
+    tbar was clipped or tau's standard deviation is 0 or above H), its dp part
+    made orthogonal to e; E[Y] by 16-point
     Gauss-Hermite over tau, error |GH16 - GH8| + the disc probabilities' 1e-9."""
     vv = dv[0] * dv[0] + dv[1] * dv[1] + dv[2] * dv[2]
     pv = dp[0] * dv[0] + dp[1] * dv[1] + dp[2] * dv[2]
@@ -368,7 +369,12 @@ def cylinder_control(dp, dv, Sigma, e, R, H):
     sig2 = 0.0
     for i in range(6):
         sig2 += a[i] * Sa[i]
-    if not (sig2 > 0.0):
+    if not (0.0 < sig2 <= H * H):
+        # no spread of t*, or one beyond the horizon (a linearisation that says
+        # nothing; also a non-finite gradient when |dv| is tiny): the fixed time tbar
+        for i in range(6):
+            a[i] = 0.0
+            Sa[i] = 0.0
         return f, tbar, a, _disc_given_tau(dp, Sigma, e, f, tbar, a, Sa, 0.0, 0.0, R), 1e-9
     sig = math.sqrt(sig2)
     g8 = 0.0
