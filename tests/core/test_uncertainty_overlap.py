@@ -6,7 +6,10 @@ quadrature; the mixture is also tested alone below) is within 1e-9 of the exact 
 float inputs as given, in 2-D and 3-D, for covariances that are isotropic,
 strongly anisotropic (axis ratio up to 1e6), singular (rank 0, 1, 2),
 sigma << R (down to 1e-5 R) and sigma >> R (up to 1e4 R), and means inside,
-on the edge of and far outside the disc/ball.
+on the edge of and far outside the disc/ball.  The narrow balls' Gauss-Hermite
+chord rule (sigma <= R / 8, where Ruben's mixture gives way) wherever it is
+accepted: against the quadrature (1,200 cases) and mpmath, and its guard
+against near-step integrands.
 """
 from __future__ import annotations
 
@@ -234,3 +237,99 @@ def test_ruben_mixture_rounding_is_far_below_its_allowance():
         v, err = _ruben(R, m, s, 1e-16, 256)
         assert 0.0 <= err <= 1e-16 + RUBEN_ROUNDING
         assert abs(v - independent_reference(R, m, s, dps=40)) <= 1e-13, (R, m.tolist(), s.tolist())
+
+
+def _narrow_case(rng, k):
+    """(R, m, s) with s1 <= s2 <= s3 <= R / 8, a mean near the sphere (the walk's
+    regime), near the centre or on an axis; isotropic, mildly or strongly anisotropic."""
+    R = 10 ** rng.uniform(-1, 1)
+    kind = k % 4
+    if kind == 0:
+        s = 10 ** rng.uniform(-3.5, -0.9, 3) * R
+    elif kind == 1:
+        s = np.full(3, 10 ** rng.uniform(-3.0, -0.9)) * R * (1 + 0.3 * rng.random(3))
+    elif kind == 2:
+        s = 10 ** rng.uniform(-2.5, -0.9, 3) * R
+        s[0] = s[1] * 10 ** rng.uniform(-3, 0)
+    else:
+        s = np.r_[10 ** rng.uniform(-4, -2), 10 ** rng.uniform(-1.5, -0.9, 2)] * R
+    s = np.sort(s)
+    d = rng.normal(size=3)
+    d /= np.linalg.norm(d)
+    if k % 7 == 0:
+        d = np.eye(3)[rng.integers(3)] * rng.choice([-1.0, 1.0])
+    m = d * (R + rng.normal() * rng.choice([1.0, 3.0, 8.0]) * s[2])
+    if k % 11 == 0:
+        m = rng.normal(size=3) * s[2] * 3.0
+    return R, m, s
+
+
+def test_narrow_ball_rule_against_the_quadrature():
+    """The narrow balls' Gauss-Hermite chord rule (``_ball_gauss_hermite``), wherever
+    its estimate is accepted (<= the standard tolerance 1e-10), is within 1e-9 of the
+    quadrature at 1e-12 (itself proven against mpmath above) on 1,200 random narrow
+    cases; ball_probability agrees with the quadrature on all of them (accepted or
+    not); the rule is taken on a good share of them."""
+    from circle_collision_ros.core.overlap_probability import _TOL, _ball_gauss_hermite, _narrow3, ball_probability
+    rng = np.random.default_rng(61)
+    used = 0
+    for k in range(1200):
+        R, m, s = _narrow_case(rng, k)
+        args = (R, m[0], s[0], m[1], s[1], m[2], s[2])
+        ref = min(1.0, max(0.0, _narrow3(*args, 1e-12)[0]))
+        v, err = _ball_gauss_hermite(*args)
+        if 0.0 <= err <= _TOL:
+            used += 1
+            assert abs(v - ref) <= TOL, (k, args, v, ref, err)
+        got = ball_probability(*args)
+        assert abs(got - ref) <= TOL, (k, args, got, ref)
+    assert used >= 400, used
+
+
+@pytest.mark.slow
+def test_narrow_ball_rule_against_mpmath():
+    """Accepted narrow cases (isotropic and anisotropic, means on and off the sphere)
+    against the mpmath references: the Poisson series (isotropic) and the nested
+    mpmath quadrature (independent components)."""
+    from circle_collision_ros.core.overlap_probability import _TOL, _ball_gauss_hermite, ball_probability
+    from tests.core.uncertainty_reference import independent_reference
+    rng = np.random.default_rng(62)
+    iso = 0
+    aniso = 0
+    while iso < 12 or aniso < 2:
+        R = 10 ** rng.uniform(-1, 1)
+        if iso < 12:
+            s = np.full(3, 10 ** rng.uniform(-3.0, -1.0) * R)
+        else:
+            s = np.sort(10 ** rng.uniform(-2.5, -1.0, 3) * R)
+        d = rng.normal(size=3)
+        d /= np.linalg.norm(d)
+        m = d * (R + rng.normal() * 2.0 * s[2])
+        args = (R, m[0], s[0], m[1], s[1], m[2], s[2])
+        v, err = _ball_gauss_hermite(*args)
+        if not (0.0 <= err <= _TOL):
+            continue
+        got = ball_probability(*args)
+        if iso < 12:
+            ref = isotropic_reference(float(np.linalg.norm(m)), float(s[0]), R, 3)
+            iso += 1
+        else:
+            ref = independent_reference(R, m, s, dps=20)
+            aniso += 1
+        assert abs(got - ref) <= TOL, (args, got, ref)
+
+
+def test_narrow_ball_rule_refuses_a_step():
+    """Where the conditional deviation along the mean's direction is small against the
+    spread of its mean (y_u nearly a function of y_perp), the integrand is a near step in
+    the whitened coordinates and both rules gave exactly 1/2 (estimate 6e-17, error
+    0.056): the steepness guard refuses it and the quadrature answers."""
+    from circle_collision_ros.core.overlap_probability import _ball_gauss_hermite, _narrow3, ball_probability
+    R = 7.056586188687591
+    m = (-1.80309479, 0.89583906, -6.86923166)
+    s = (0.00341824, 0.00568482, 0.7550208)
+    args = (R, m[0], s[0], m[1], s[1], m[2], s[2])
+    assert _ball_gauss_hermite(*args)[1] < 0.0
+    ref = _narrow3(*args, 1e-12)[0]
+    assert abs(ball_probability(*args) - ref) <= TOL
+    assert abs(ref - 0.5) > 0.01  # the value the unguarded rules agreed on was wrong
