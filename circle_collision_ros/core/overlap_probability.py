@@ -373,8 +373,9 @@ _narrow3 = _make_narrow(_disc_factor)
 # 2-D Gauss-Hermite integral of an analytic function (tensor rules of 12 and 20
 # nodes per axis; the 20-point value, |GH20 - GH12| its error estimate, accepted
 # only within the caller's tolerance, else the quadrature below runs).  Applies
-# when the rule's outermost nodes (7.62 sd) stay within R / 2 of the axis:
-# s3 <= R / _GH_NARROW.  ~30 us against ~1 ms of nested quadrature.
+# when s3 <= R / _GH_NARROW: the rule's outermost nodes (7.62 sd) stay within
+# 0.95 R of the axis, short of the chord's branch point at R.  ~30 us against
+# ~1 ms of nested quadrature.
 _GH12_X, _GH12_W = np.polynomial.hermite_e.hermegauss(12)
 _GH12_W = _GH12_W / _GH12_W.sum()
 _GH20_X, _GH20_W = np.polynomial.hermite_e.hermegauss(20)
