@@ -450,7 +450,7 @@ def controlled_stats(est, ctl, ctl_mean):
     least squares, the bound QMC_T_CONTROLLED standard errors of that fitted
     value at ctl_mean (normal linear model: s^2 (1 / r + (ctl's mean -
     ctl_mean)^2 / Sxx) with s^2 = the residual sum of squares / (r - 2),
-    Student t with r - 2 dof; the replicate values are means of >= 128 points
+    Student t with r - 2 dof; the replicate values are means of >= 96 points
     each).  A control without spread (Sxx = 0) leaves the plain mean, with
     QMC_T standard errors and beta = 0."""
     n = est.shape[0]
