@@ -57,7 +57,7 @@ import numpy as np
 from numba import njit
 
 from circle_collision_ros.core.entry_rate import mat_mul
-from circle_collision_ros.core.overlap_probability import eig_sym, overlap_probability_2d
+from circle_collision_ros.core.overlap_probability import eig_sym, overlap_probability_2d, unit_across
 
 __all__ = ["line_factor", "line_replicates", "capsule_interval", "cylinder_control", "PHI_ERR"]
 
@@ -282,23 +282,26 @@ def _disc_given_tau(dp, Sigma, e, f, tbar, a, Sa, sig2, tau, R):
         me += e[i] * w
         mf += f[i] * w
     # the projections' rows: pe = e^T [I, tt I], pf = f^T [I, tt I] (6-vectors)
+    pe = np.empty(6)
+    pf = np.empty(6)
+    for i in range(3):
+        pe[i] = e[i]
+        pf[i] = f[i]
+        pe[3 + i] = tt * e[i]
+        pf[3 + i] = tt * f[i]
     see = 0.0
     sef = 0.0
     sff = 0.0
     pe_sa = 0.0
     pf_sa = 0.0
     for i in range(6):
-        ei = e[i % 3] * (1.0 if i < 3 else tt)
-        fi = f[i % 3] * (1.0 if i < 3 else tt)
-        pe_sa += ei * Sa[i]
-        pf_sa += fi * Sa[i]
+        pe_sa += pe[i] * Sa[i]
+        pf_sa += pf[i] * Sa[i]
         for j in range(6):
-            ej = e[j % 3] * (1.0 if j < 3 else tt)
-            fj = f[j % 3] * (1.0 if j < 3 else tt)
             sij = 0.5 * (Sigma[i, j] + Sigma[j, i])
-            see += ei * sij * ej
-            sef += ei * sij * fj
-            sff += fi * sij * fj
+            see += pe[i] * sij * pe[j]
+            sef += pe[i] * sij * pf[j]
+            sff += pf[i] * sij * pf[j]
     if sig2 > 0.0:
         see -= pe_sa * pe_sa / sig2
         sef -= pe_sa * pf_sa / sig2
@@ -337,23 +340,16 @@ def cylinder_control(dp, dv, Sigma, e, R, H):
                 a[k] = -dv[k] / vv
                 a[3 + k] = -dp[k] / vv + 2.0 * pv * dv[k] / (vv * vv)
         tbar = min(max(tbar, 0.0), H)
-    # f = dv x e (or e x the axis e is least aligned with when dv = 0),
-    # orthogonalised against e and normalised: the estimator needs only an
-    # orthonormal (e, f), and a's dp part orthogonal to e (tau free of x)
-    ax = np.zeros(3)
-    if vv > 0.0:
-        for k in range(3):
-            ax[k] = dv[k]
-    else:
-        k0 = 0
-        for k in range(3):
-            if abs(e[k]) < abs(e[k0]):
-                k0 = k
-        ax[k0] = 1.0
+    # f = dv x e (any unit vector across e when dv = 0), orthogonalised against e
+    # and normalised: the estimator needs only an orthonormal (e, f), and a's dp
+    # part orthogonal to e (tau free of x)
     f = np.empty(3)
-    f[0] = ax[1] * e[2] - ax[2] * e[1]
-    f[1] = ax[2] * e[0] - ax[0] * e[2]
-    f[2] = ax[0] * e[1] - ax[1] * e[0]
+    if vv > 0.0:
+        f[0] = dv[1] * e[2] - dv[2] * e[1]
+        f[1] = dv[2] * e[0] - dv[0] * e[2]
+        f[2] = dv[0] * e[1] - dv[1] * e[0]
+    else:
+        f[0], f[1], f[2] = unit_across(e[0], e[1], e[2])
     fe = f[0] * e[0] + f[1] * e[1] + f[2] * e[2]
     ae = a[0] * e[0] + a[1] * e[1] + a[2] * e[2]
     for k in range(3):
@@ -376,14 +372,19 @@ def cylinder_control(dp, dv, Sigma, e, R, H):
             a[i] = 0.0
             Sa[i] = 0.0
         return f, tbar, a, _disc_given_tau(dp, Sigma, e, f, tbar, a, Sa, 0.0, 0.0, R), 1e-9
-    sig = math.sqrt(sig2)
-    g8 = 0.0
-    for i in range(8):
-        g8 += _GH8_W[i] * _disc_given_tau(dp, Sigma, e, f, tbar, a, Sa, sig2, sig * _GH8_X[i], R)
-    g16 = 0.0
-    for i in range(16):
-        g16 += _GH16_W[i] * _disc_given_tau(dp, Sigma, e, f, tbar, a, Sa, sig2, sig * _GH16_X[i], R)
+    g8 = _mean_over_tau(dp, Sigma, e, f, tbar, a, Sa, sig2, R, _GH8_X, _GH8_W)
+    g16 = _mean_over_tau(dp, Sigma, e, f, tbar, a, Sa, sig2, R, _GH16_X, _GH16_W)
     return f, tbar, a, g16, abs(g16 - g8) + 1e-9
+
+
+@njit(cache=True, error_model="numpy")
+def _mean_over_tau(dp, Sigma, e, f, tbar, a, Sa, sig2, R, X, W):
+    """E[E[Y | tau]] by the Gauss-Hermite rule (X, W), tau ~ N(0, sig2)."""
+    sig = math.sqrt(sig2)
+    total = 0.0
+    for i in range(X.shape[0]):
+        total += W[i] * _disc_given_tau(dp, Sigma, e, f, tbar, a, Sa, sig2, sig * X[i], R)
+    return total
 
 
 @njit(cache=True, error_model="numpy", inline="always")

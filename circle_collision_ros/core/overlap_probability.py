@@ -46,7 +46,7 @@ from circle_collision_ros.core.quadrature import make_adaptive
 __all__ = ["overlap_probability", "overlap_probability_2d", "overlap_probability_tol", "interval_mass",
            "disc_probability", "disc_probability_tol", "ball_probability", "ball_probability_tol", "WINDOW_SIGMAS",
            "BALL_ERR_PER_TOL", "DISC_ERR_PER_TOL", "overlap_probability_2d_tol", "ruben_probability",
-           "RUBEN_MAX_TERMS_2D", "RUBEN_MAX_TERMS_3D", "RUBEN_ROUNDING"]
+           "RUBEN_MAX_TERMS_2D", "RUBEN_MAX_TERMS_3D", "RUBEN_ROUNDING", "unit_across"]
 
 WINDOW_SIGMAS = 9.0  # integration window [-9, 9] sigma of each integrated component
 _TOL = 1e-10  # quadrature tolerance per 1-D integral (absolute, on a probability)
@@ -384,10 +384,25 @@ _GH_NARROW = 8.0
 _GH_STEEP = 2.0
 
 
+@njit(cache=True, error_model="numpy", inline="always")
+def unit_across(u0, u1, u2):
+    """A unit vector orthogonal to the unit vector u: u x (the axis u is least
+    aligned with), normalised (never near-parallel to u, so no cancellation)."""
+    if abs(u0) <= abs(u1) and abs(u0) <= abs(u2):
+        a0, a1, a2 = 0.0, u2, -u1
+    elif abs(u1) <= abs(u2):
+        a0, a1, a2 = -u2, 0.0, u0
+    else:
+        a0, a1, a2 = u1, -u0, 0.0
+    an = math.sqrt(a0 * a0 + a1 * a1 + a2 * a2)
+    return a0 / an, a1 / an, a2 / an
+
+
 @njit(cache=True, error_model="numpy")
 def _chord_rule(R, mn, l11, l21, l22, b1, b2, sc, X, W):
     """E[P(|y_u| <= sqrt(R^2 - |y_perp|^2))] by the tensor Gauss-Hermite rule (X, W)
-    over the whitened y_perp = (l11 z1, l21 z1 + l22 z2), y_u ~ N(mn + b1 z1 + b2 z2, sc^2)."""
+    over the whitened y_perp = (l11 z1, l21 z1 + l22 z2), y_u ~ N(mn + b1 z1 + b2 z2, sc^2),
+    sc > 0 (the caller's steepness guard)."""
     tot = 0.0
     for i in range(X.shape[0]):
         z1 = X[i]
@@ -397,11 +412,7 @@ def _chord_rule(R, mn, l11, l21, l22, b1, b2, sc, X, W):
             z2 = X[j]
             y2 = l21 * z1 + l22 * z2
             h = math.sqrt(max(R * R - y1 * y1 - y2 * y2, 0.0))
-            mu = mn + b1 * z1 + b2 * z2
-            if sc > 0.0:
-                row += W[j] * interval_mass(-h, h, mu, sc)
-            elif -h <= mu <= h:
-                row += W[j]
+            row += W[j] * interval_mass(-h, h, mn + b1 * z1 + b2 * z2, sc)
         tot += W[i] * row
     return tot
 
@@ -416,15 +427,8 @@ def _ball_gauss_hermite(R, m1, s1, m2, s2, m3, s3):
     u0, u1, u2 = 0.0, 0.0, 1.0
     if mn > 0.0:
         u0, u1, u2 = m1 / mn, m2 / mn, m3 / mn
-    # v1 = u x (the axis u is least aligned with), v2 = u x v1: (u, v1, v2) orthonormal
-    if abs(u0) <= abs(u1) and abs(u0) <= abs(u2):
-        a0, a1, a2 = 0.0, u2, -u1
-    elif abs(u1) <= abs(u2):
-        a0, a1, a2 = -u2, 0.0, u0
-    else:
-        a0, a1, a2 = u1, -u0, 0.0
-    an = math.sqrt(a0 * a0 + a1 * a1 + a2 * a2)
-    v10, v11, v12 = a0 / an, a1 / an, a2 / an
+    # v1 across u, v2 = u x v1: (u, v1, v2) orthonormal
+    v10, v11, v12 = unit_across(u0, u1, u2)
     v20 = u1 * v12 - u2 * v11
     v21 = u2 * v10 - u0 * v12
     v22 = u0 * v11 - u1 * v10

@@ -471,7 +471,8 @@ def controlled_stats(est, ctl, ctl_mean):
         sxy += dx * dy
         syy += dy * dy
     if not (sxx > 0.0):
-        return my, QMC_T * math.sqrt(syy / (n - 1) / n), 0.0
+        mean, se = _replicate_stats(est)
+        return mean, QMC_T * se, 0.0
     beta = sxy / sxx
     res = max(syy - beta * sxy, 0.0)
     d = mx - ctl_mean
