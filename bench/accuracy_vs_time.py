@@ -37,7 +37,7 @@ from _common import best_of, fmt_ns, fmt_ulp, md_table, pyplot
 
 from baselines import ttc_companion_eigvals, ttc_ferrari, ttc_lecture, ttc_numpy_roots_loop
 from tests.core.reference import reference
-from tests.core.test_narrow_phase_accuracy import FAMILIES, case_error, family_cases
+from tests.core.narrow.test_narrow_phase_accuracy import FAMILIES, case_error, family_cases
 
 ZERO_FLOOR = 0.1  # where 0-ulp results are drawn on the log axis
 INF_CAP = 1e21  # where infinite errors (wrong "already touching") and anything larger are drawn
@@ -53,12 +53,12 @@ def _ours():
 
 
 def _ours_serial(*args, horizon=math.inf):
-    from circle_collision_ros.core.narrow_phase import _ttc_kernel
+    from circle_collision_ros.core.narrow.batch import ttc_kernel
 
     vecs = [np.ascontiguousarray(x, dtype=np.float64) for x in args]
     n = vecs[3].shape[0]
     out = np.empty(n)
-    _ttc_kernel(*vecs, np.full(n, float(horizon)), out)
+    ttc_kernel(*vecs, np.full(n, float(horizon)), out)
     return out
 
 
@@ -70,7 +70,7 @@ def methods() -> list[dict]:
     """Methods in plot/table order; ``loop``: Python loop per pair (timed on fewer rows)."""
     import numba
 
-    from circle_collision_ros.core.narrow_phase import PARALLEL_MIN_ROWS
+    from circle_collision_ros.core.narrow.batch import PARALLEL_MIN_ROWS
 
     nt = numba.get_num_threads()
     return [

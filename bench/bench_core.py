@@ -38,7 +38,7 @@ sys.path.insert(0, ROOT)
 sys.path.insert(0, HERE)
 
 from baselines import ttc_companion_eigvals, ttc_numpy_roots_loop  # noqa: E402
-from tests.core.test_narrow_phase_accuracy import mixed_pairs  # noqa: E402
+from tests.core.narrow.test_narrow_phase_accuracy import mixed_pairs  # noqa: E402
 
 
 def make_pairs(n: int, seed: int = 1):
@@ -104,7 +104,7 @@ def one_pair_costs(P, H: float, reps: int, rounds: int = 7):
     shared machine the load changes within seconds; interleaving exposes
     every case to the same load, so the ratios to the baseline hold."""
     from circle_collision_ros.core import time_to_collision
-    from circle_collision_ros.core.narrow_phase import _ttc_scalar2
+    from circle_collision_ros.core.narrow.batch import ttc_scalar2
 
     one = tuple(x[0] for x in P)
     one_list = tuple(x.tolist() if np.ndim(x) else float(x) for x in one)
@@ -120,7 +120,7 @@ def one_pair_costs(P, H: float, reps: int, rounds: int = 7):
              "(1, D) arrays": _explicit(time_to_collision, rows1, horizon=H),
              "(1, D) arrays, float radii": _explicit(time_to_collision, rows1_f, horizon=H),
              "1-D arrays, general path": _explicit(time_to_collision, one, horizon=np.array(H)),
-             "numba dispatcher, 15 floats": lambda: _ttc_scalar2(*flat),
+             "numba dispatcher, 15 floats": lambda: ttc_scalar2(*flat),
              "trivial jitted call": lambda: _trivial_jit(1.0)}
     t_one = {k: math.inf for k in cases}
     for fn in cases.values():
@@ -172,7 +172,7 @@ def main() -> None:
         cached = start_cost(tmp)
 
     from circle_collision_ros.core import time_to_collision
-    from circle_collision_ros.core.narrow_phase import _ttc_kernel_h  # noqa: E402
+    from circle_collision_ros.core.narrow.batch import ttc_kernel_h  # noqa: E402
 
     P = make_pairs(n)
     time_to_collision(*(x[:10] for x in P), horizon=H)  # load compiled code
@@ -181,25 +181,25 @@ def main() -> None:
     # single-thread figures: the serial kernel (what time_to_collision runs
     # below PARALLEL_MIN_ROWS) on the same rows, and on each half
     buf = np.empty(n)
-    _ttc_kernel_h(*(x[:10] for x in P), H, buf[:10])
-    t_ours1 = best_of(lambda: _ttc_kernel_h(*P, H, buf), repeat_ours)
+    ttc_kernel_h(*(x[:10] for x in P), H, buf[:10])
+    t_ours1 = best_of(lambda: ttc_kernel_h(*P, H, buf), repeat_ours)
     h = n // 2
     aimed = tuple(np.ascontiguousarray(x[:h]) for x in P)
     rand = tuple(np.ascontiguousarray(x[h:]) for x in P)
-    t_aimed = best_of(lambda: _ttc_kernel_h(*aimed, H, buf[:h]), repeat)
-    t_rand = best_of(lambda: _ttc_kernel_h(*rand, H, buf[:n - h]), repeat)
+    t_aimed = best_of(lambda: ttc_kernel_h(*aimed, H, buf[:h]), repeat)
+    t_rand = best_of(lambda: ttc_kernel_h(*rand, H, buf[:n - h]), repeat)
     # constant relative velocity (da = 0, the closed-form path): the same
     # generator with every row's relative acceleration zeroed, serial kernel
     S = mixed_pairs(n, 2, 1, straight_fraction=1.0)
-    _ttc_kernel_h(*(x[:10] for x in S), H, buf[:10])
-    t_straight = best_of(lambda: _ttc_kernel_h(*S, H, buf), repeat_ours)
+    ttc_kernel_h(*(x[:10] for x in S), H, buf[:10])
+    t_straight = best_of(lambda: ttc_kernel_h(*S, H, buf), repeat_ours)
     t_eig = best_of(lambda: ttc_companion_eigvals(*P, horizon=H), repeat)
     # every k-th pair: the subsample holds aimed and random pairs alike
     sub = tuple(np.ascontiguousarray(x[::n // nroots][:nroots]) for x in P)
     t_roots = best_of(lambda: ttc_numpy_roots_loop(*sub, horizon=H), 1 if args.quick else 3)
     t_ours = min(t_ours, best_of(lambda: time_to_collision(*P, horizon=H), repeat_ours))
-    t_ours1 = min(t_ours1, best_of(lambda: _ttc_kernel_h(*P, H, buf), repeat_ours))
-    t_straight = min(t_straight, best_of(lambda: _ttc_kernel_h(*S, H, buf), repeat_ours))
+    t_ours1 = min(t_ours1, best_of(lambda: ttc_kernel_h(*P, H, buf), repeat_ours))
+    t_straight = min(t_straight, best_of(lambda: ttc_kernel_h(*S, H, buf), repeat_ours))
 
     ours = time_to_collision(*P, horizon=H)
     eig = ttc_companion_eigvals(*P, horizon=H)

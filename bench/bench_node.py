@@ -68,7 +68,7 @@ from diagnostic_msgs.msg import DiagnosticArray  # noqa: E402
 from rclpy.qos import QoSProfile, ReliabilityPolicy  # noqa: E402
 
 from circle_collision_msgs.msg import CircleState, CircleStateArray, CollisionPredictionArray  # noqa: E402
-from circle_collision_ros.pipeline.cdr_codec import encode_state_array  # noqa: E402
+from circle_collision_ros.pipeline.state_codec import encode_state_array  # noqa: E402
 from circle_collision_ros.demo.demo_scene import SyntheticScene  # noqa: E402
 from circle_collision_ros.pipeline.state_batch import StateBatch  # noqa: E402
 

@@ -128,7 +128,7 @@ def dask_runs(corpus: Path, tiny: Path, repeat: int) -> None:
 
 
 def throughput(bags: list[Path], profile_bag: Path) -> None:
-    from circle_collision_ros.recording.replay import load_bag, replay_offline
+    from circle_collision_ros.recording.replay_engine import load_bag, replay_offline
 
     for bag in bags:
         _, records = load_bag(bag)

@@ -21,8 +21,8 @@ import tracemalloc
 
 import numpy as np
 
-from circle_collision_ros.core import broad_phase as bp
-from circle_collision_ros.core.pair_predictions import narrow_on_pairs, predict_all_pairs
+from circle_collision_ros.core import broad as bp
+from circle_collision_ros.core.scene.all_pairs import narrow_on_pairs, predict_all_pairs
 from circle_collision_ros.core.scene import Scene
 
 

@@ -52,7 +52,7 @@ from circle_collision_msgs.msg import CircleState, CircleStateArray
 from circle_collision_ros.demo.demo_scene import SyntheticScene
 from circle_collision_ros.core.scene import Scene
 from circle_collision_ros.pipeline import predictor as predictor_module
-from circle_collision_ros.pipeline.cdr_codec import decode_states
+from circle_collision_ros.pipeline.state_codec import decode_states
 from circle_collision_ros.pipeline.prediction_messages import ScenePrediction
 from circle_collision_ros.pipeline.predictor import CollisionPredictor, PredictorConfig
 from bench_node import scene_bytes  # the same CircleStateArray bytes the node benchmark sends

@@ -28,11 +28,11 @@ HERE = os.path.dirname(os.path.abspath(__file__))
 ROOT = os.path.dirname(HERE)
 sys.path.insert(0, ROOT)
 
-from circle_collision_ros.core import narrow_phase as npz  # noqa: E402
-from circle_collision_ros.core.narrow_exact import exact_first_contact  # noqa: E402
-from circle_collision_ros.core.narrow_fast import UNDECIDED  # noqa: E402
-from tests.core.test_narrow_phase_accuracy import FAMILIES, family_cases, mixed_pairs  # noqa: E402
-from tests.core.test_narrow_phase_exact import GENS  # noqa: E402
+from circle_collision_ros.core.narrow import batch as npz  # noqa: E402
+from circle_collision_ros.core.narrow.exact import exact_first_contact  # noqa: E402
+from circle_collision_ros.core.narrow.fast import UNDECIDED  # noqa: E402
+from tests.core.narrow.test_narrow_phase_accuracy import FAMILIES, family_cases, mixed_pairs  # noqa: E402
+from tests.core.narrow.test_narrow_phase_exact import GENS  # noqa: E402
 
 sys.path.insert(0, HERE)
 from bench_scene import make_scene  # noqa: E402

@@ -42,7 +42,7 @@ import _common
 from _common import best_of, fmt_ms, md_table, pyplot
 
 from bench_scene import all_pairs_narrow, make_scene
-from circle_collision_ros.core.pair_predictions import predict_all_pairs
+from circle_collision_ros.core.scene.all_pairs import predict_all_pairs
 from circle_collision_ros.core.scene import Scene
 
 # bodies per km^2: the issue's scale scene (3,000 bodies in 1 km^2) and 10x that
@@ -95,8 +95,8 @@ def stage_split(p, v, a, r, h, repeat: int) -> dict:
     """Best-of-``repeat`` ms of predict_all_pairs' stages, run as it runs them:
     broad phase (swept bounds + candidate pairs), narrow phase (pair rows +
     time_to_collision), the rest (hit filter, sort, contact details)."""
-    from circle_collision_ros.core import broad_phase as bp
-    from circle_collision_ros.core import pair_predictions as pp
+    from circle_collision_ros.core import broad as bp
+    from circle_collision_ros.core.scene import all_pairs as pp
     n = r.shape[0]
     tref = np.zeros(n)
 
@@ -149,9 +149,9 @@ def node_frame_split(n: int = 5000, frames: int = 30) -> dict:
     records, order) and encoding (ScenePrediction.to_cdr).  Issue 17 asks that
     the broad phase not be the largest share of this frame at 5,000 bodies."""
     from circle_collision_msgs.msg import CircleStateArray
-    from circle_collision_ros.core import broad_phase as bp
+    from circle_collision_ros.core import broad as bp
     from circle_collision_ros.demo.demo_scene import SyntheticScene
-    from circle_collision_ros.pipeline.cdr_codec import decode_states, encode_state_array
+    from circle_collision_ros.pipeline.state_codec import decode_states, encode_state_array
     from circle_collision_ros.pipeline.predictor import CollisionPredictor, PredictorConfig
     from circle_collision_ros.pipeline.state_batch import StateBatch
 

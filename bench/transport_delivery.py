@@ -56,7 +56,7 @@ def publish(bodies: int, count: int, rate: float, wait_s: float, topic: str = TO
     from rclpy.qos import QoSProfile, ReliabilityPolicy
 
     from circle_collision_msgs.msg import CircleStateArray
-    from circle_collision_ros.pipeline.cdr_codec import encode_state_array
+    from circle_collision_ros.pipeline.state_codec import encode_state_array
     from circle_collision_ros.pipeline.state_batch import StateBatch
 
     rclpy.init()

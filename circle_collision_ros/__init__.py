@@ -2,7 +2,8 @@
 
 Subpackages, from the numbers outwards:
 
-- ``core``: first-contact times, broad phase, incremental scene (numpy + numba, no ROS).
+- ``core``: first-contact times, broad phase, incremental scene, probability of contact
+  (numpy + numba, no ROS).
 - ``pipeline``: received circle states to predictions without a ROS graph: CDR
   decoding/encoding, validation, the scene's bodies, the predictor the node,
   the service and replay share.
@@ -10,3 +11,5 @@ Subpackages, from the numbers outwards:
 - ``recording``: MCAP recording in the rosbag2 layout, reading, offline replay.
 - ``demo``: a synthetic scene publisher and the two-command demo.
 """
+
+__all__ = ["core", "pipeline", "node", "recording", "demo"]  # subpackages; nothing is imported here

@@ -79,7 +79,7 @@ fi
 # layout that colcon would install, linked like `colcon build --symlink-install`:
 # every data_files entry of setup.py under <venv>/share/..., and every console
 # script under <venv>/lib/circle_collision_ros/ so that `ros2 run` finds it.
-h=$(inputs_hash setup.py setup.cfg package.xml resource/circle_collision_ros circle_collision_ros/core/_one_pair.c \
+h=$(inputs_hash setup.py setup.cfg package.xml resource/circle_collision_ros circle_collision_ros/core/narrow/one_pair_entry.c \
       $(cd "$ROOT" && ls launch/*.launch.py config/*.yaml 2>/dev/null))
 if ! is_current package "$h"; then
   say "installing circle_collision_ros (editable) and its ROS layout"
@@ -166,14 +166,14 @@ fi
 # first node start or test does not pay the compile; re-runs when the core changes.
 # Old cache files go first: numba checks only the source file of the function it
 # loads, so a kernel cached before a change in a module it calls would be reused.
-h=$(inputs_hash $(cd "$ROOT" && ls circle_collision_ros/core/*.py) constraints.txt)
+h=$(inputs_hash $(cd "$ROOT" && find circle_collision_ros/core -name "*.py" | sort) constraints.txt)
 if ! is_current numba "$h"; then
   say "compiling the numba kernels into their cache"
   find "$ROOT/circle_collision_ros" \( -name '*.nbi' -o -name '*.nbc' \) -delete
   (cd "$ROOT" && "$PY" -c '
 import numpy as np
 from circle_collision_ros.core import contact_details, predict_all_pairs, time_to_collision
-from circle_collision_ros.core.narrow_phase import PARALLEL_MIN_ROWS
+from circle_collision_ros.core.narrow.batch import PARALLEL_MIN_ROWS
 for d in (2, 3):
     z = np.zeros((2, d))
     predict_all_pairs(np.eye(2, d), z, z, np.ones(2), 1.0)

@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from circle_collision_ros.core.narrow_phase import time_to_collision
+from circle_collision_ros.core.narrow import time_to_collision
 
 
 def default_slack_ns(horizon: float) -> int:

@@ -6,24 +6,21 @@ never a result.
 
 Why "a core free right now": a parallel region hands half the rows to a
 worker thread and then waits for it.  When another process holds the other
-core, the worker waits for a time slice first.  Measured on the 2-core
-development machine with other work running (bench runs, compilers), same
-run: the strip sweep of 20,000 bodies took a median 0.8 ms serial and 16 ms
-threaded; contact details of 22,000 contacts 8 ms serial, 16 ms threaded.
-On the idle machine the threaded narrow phase took 0.4x the serial time on
-20,000 rows (1.18 against 2.78 ms, same run).  A robot shares its cores
-with its other nodes, so the kernels ask before each large call.
+core, the worker waits for a time slice first, and the threaded kernel can
+take many times the serial time; on an idle machine it takes well under it
+(bench/accuracy_vs_time.py and bench/scale.py time both).  A robot shares
+its cores with its other nodes, so the kernels ask before each large call.
 
 How: /proc/loadavg's fourth field counts the tasks that are runnable at this
 instant, this thread included; a core is free if that count is below the
 cores this process may use.  Our own pool's workers spin for a while after a
 parallel region (libgomp's default wait policy) and are counted there too:
 without a correction a second threaded kernel right after a first (broad
-phase, then narrow phase) saw no free core and ran serial -- measured: 20 of
-20 checks right after a region saw 0 free cores on the idle machine.  So for
+phase, then narrow phase) saw no free core and ran serial, even on an idle
+machine.  So for
 _GRACE_S after a yes the pool's workers are not counted as other work: the
-decision holds for a burst of kernels.  Reading it costs a few microseconds (one pread
-on a descriptor kept open), against milliseconds of work at the thresholds
+decision holds for a burst of kernels.  Reading it is one pread on a
+descriptor kept open, negligible against the work at the thresholds
 where it is asked.  Where the file is missing (not Linux), threads are used
 above the thresholds as if every core were free.
 """

@@ -57,7 +57,8 @@ from circle_collision_msgs.msg import CircleState, CircleStateArray, CollisionPr
 from circle_collision_msgs.srv import PredictCollisions
 from circle_collision_ros.node import parameters as node_parameters
 from circle_collision_ros.recording.bag_recorder import BagRecorder, RecordingError, qos_profiles_yaml
-from circle_collision_ros.pipeline.cdr_codec import CdrError, decode_states
+from circle_collision_ros.pipeline.cdr import CdrError
+from circle_collision_ros.pipeline.state_codec import decode_states
 from circle_collision_ros.pipeline.odometry import odometry_batch, odometry_sources
 from circle_collision_ros.pipeline.state_batch import StateBatch
 from circle_collision_ros.pipeline.state_groups import ingest_single_states

@@ -135,7 +135,7 @@ class MarkerArrayEncoder:
     serializes to the same bytes at every start position of the same 8-byte
     residue, so each (frame, ns, residue) has one template; per-marker fields
     are written through numpy views. Alignment counts from the end of the
-    4-byte encapsulation header, as in pipeline/cdr_codec.
+    4-byte encapsulation header, as in pipeline/cdr.py.
     """
 
     ORIGIN = 4

@@ -5,7 +5,7 @@ callback; applying a change happens only in the post-set callback, so a
 refused value never touches the node's state. config/collision_node.yaml holds
 the same defaults for `--ros-args --params-file`.
 
-Two rclpy behaviours shape the declarations (tests/ros/test_parameters.py):
+Two rclpy behaviours shape the declarations (tests/node/test_parameters.py):
 
 - Every parameter has a value. rclpy's get_parameters service answers a whole
   request with an empty list if one name in it has no value, so a parameter

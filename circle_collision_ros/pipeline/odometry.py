@@ -26,7 +26,7 @@ frame check, latest-by-stamp merge, recording, replay):
   non-finite or further from unit is rejected as a whole message (OdometryError):
   its velocity direction would be a guess.
 
-Decoding follows cdr_codec's rules (XCDR1, both byte orders, every read
+Decoding follows pipeline/cdr.py's rules (XCDR1, both byte orders, every read
 bounds-checked, strings NUL-terminated inside the buffer); untrusted bytes
 never reach rclpy's deserializer.
 """
@@ -38,12 +38,11 @@ from typing import NamedTuple
 
 import numpy as np
 
-from circle_collision_ros.core.uncertainty import covariance_problem
-from circle_collision_ros.pipeline.cdr_codec import CDR_BE, CDR_LE, CdrError, _align, _string, _u32
+from circle_collision_ros.core.uncertainty.covariance import covariance_problem
+from circle_collision_ros.pipeline.cdr import CDR_BE, CDR_LE, ORIGIN, CdrError, align, read_string, read_u32
 from circle_collision_ros.pipeline.state_batch import StateBatch
 
 ODOMETRY_TYPE = "nav_msgs/msg/Odometry"
-_ORIGIN = 4
 # After child_frame_id (8-aligned): pose (position 3, orientation 4), covariance 36,
 # twist (linear 3, angular 3), covariance 36: 85 float64, fixed-size arrays without a length.
 _DOUBLES = 85
@@ -90,21 +89,21 @@ def decode_odometry(data: bytes) -> OdometryFields:
     CdrError
         If the bytes are not well-formed Odometry CDR (either byte order).
     """
-    if len(data) < _ORIGIN + 8 or bytes(data[:2]) not in (CDR_LE, CDR_BE):
+    if len(data) < ORIGIN + 8 or bytes(data[:2]) not in (CDR_LE, CDR_BE):
         raise CdrError(f"not plain CDR Odometry (encapsulation {bytes(data[:2]).hex() or 'missing'}, "
                        f"{len(data)} bytes)")
     be = bytes(data[:2]) == CDR_BE
     buf = np.frombuffer(data, dtype=np.uint8)
-    sec = int(_u32(buf, _ORIGIN, be))
+    sec = int(read_u32(buf, ORIGIN, be))
     sec = sec - 2**32 if sec >= 2**31 else sec  # int32
-    nanosec = int(_u32(buf, _ORIGIN + 4, be))
-    frame_off, frame_len, pos = _string(buf, _ORIGIN + 8, be)
+    nanosec = int(read_u32(buf, ORIGIN + 4, be))
+    frame_off, frame_len, pos = read_string(buf, ORIGIN + 8, be)
     if frame_off < 0:
         raise CdrError("truncated or malformed Odometry header.frame_id")
-    child_off, child_len, pos = _string(buf, pos, be)
+    child_off, child_len, pos = read_string(buf, pos, be)
     if child_off < 0:
         raise CdrError("truncated or malformed Odometry child_frame_id")
-    pos = int(_align(pos, 8))
+    pos = int(align(pos, 8))
     if pos + 8 * _DOUBLES > len(data):
         raise CdrError(f"truncated Odometry: pose and twist need {8 * _DOUBLES} bytes at {pos}, "
                        f"{len(data) - pos} remain")

@@ -4,8 +4,8 @@ One column builder (`ScenePrediction.columns`) feeds the row view and message
 builder (service, markers, tests) and the compiled CDR encoder. The node's
 publications (contacts, then the probable uncertain pairs: every case but
 report_all_pairs rows and non-finite contacts) take a one-pass encoder from the
-scene's rows instead (cdr_codec.encode_contact_rows, joined to the uncertain rows
-by the same `_uncertain_join`); tests/test_prediction_cdr.py proves its bytes equal
+scene's rows instead (prediction_codec.encode_contact_rows, joined to the uncertain rows
+by the same `_uncertain_join`); tests/pipeline/test_prediction_codec.py proves its bytes equal
 the columns path's.
 
 Guarantee: nothing published is NaN. Contacts carry finite times and details;
@@ -35,7 +35,7 @@ from std_msgs.msg import Header
 
 from circle_collision_msgs.msg import CollisionPrediction, CollisionPredictionArray
 from circle_collision_ros.core.scene import SceneContacts, SceneSnapshot, SceneUncertainty
-from circle_collision_ros.pipeline.cdr_codec import encode_contact_rows, encode_prediction_array
+from circle_collision_ros.pipeline.prediction_codec import encode_contact_rows, encode_prediction_array
 
 _NS_PER_S = 1_000_000_000
 
@@ -248,7 +248,7 @@ class ScenePrediction:
         c, u = self.contacts, self.uncertainty
         if uncertainty and not self._report_all_rows and c.id_utf8 is not None:
             # The node's cases in one compiled pass, bytes equal to the general path's
-            # (tests/test_prediction_cdr.py): no columns built, no id strings touched.
+            # (tests/pipeline/test_prediction_codec.py): no columns built, no id strings touched.
             uncertain = u is not None and len(u) > 0
             # uncertain rows join only when their ids lie in the contacts' blob and no contact
             # row was dropped (then the columns path below)

@@ -8,7 +8,7 @@ predictions, bit for bit: the scene is one `core.Scene`, whose stream and
 prediction rules (and why incremental equals full recomputation) are in
 circle_collision_ros/core/scene.py.
 
-    bytes -> cdr_codec.decode_states -> StateBatch -> state_validation.check_batch
+    bytes -> state_codec.decode_states -> StateBatch -> state_validation.check_batch
           -> core.Scene.merge (removals, latest per id, max_bodies)
           -> core.Scene.predictions (only the pairs of changed bodies re-evaluated)
           -> ScenePrediction (.to_cdr() / .to_message())
@@ -25,7 +25,7 @@ from circle_collision_msgs.msg import CircleState, CircleStateArray
 from circle_collision_ros.core.parallel_policy import threads_forced
 from circle_collision_ros.core.scene import Scene, SceneSnapshot
 from circle_collision_ros.core.uncertainty import load_fallback_kernels
-from circle_collision_ros.pipeline.cdr_codec import decode_states, encode_state, encode_state_array
+from circle_collision_ros.pipeline.state_codec import decode_states, encode_state, encode_state_array
 from circle_collision_ros.pipeline.prediction_messages import ScenePrediction
 from circle_collision_ros.pipeline.state_batch import StateBatch
 from circle_collision_ros.pipeline.state_validation import Rejection, check_batch

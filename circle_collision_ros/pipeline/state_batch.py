@@ -2,7 +2,7 @@
 
 Building Python message objects costs ~30 us per CircleState in rclpy, which
 alone would exceed the latency budget at 1,000 bodies; the node therefore
-decodes the received CDR bytes straight into a StateBatch (cdr_codec), and
+decodes the received CDR bytes straight into a StateBatch (state_codec), and
 message objects (service requests, tests) are converted with from_messages.
 """
 from __future__ import annotations

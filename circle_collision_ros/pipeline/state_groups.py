@@ -13,77 +13,20 @@ once at the run's receive time. So every body's states are merged in the order
 they arrived, and no batch holds an id twice (which check_batch would reject
 as a duplicate). Effects across bodies within one run (which of two new ids
 fills the last max_bodies place) follow wave order, identically live and in replay. A message that is not plain little-endian CDR,
-or is malformed, goes through cdr_codec.decode_states alone (same acceptance,
+or is malformed, goes through state_codec.decode_states alone (same acceptance,
 same error).
 """
 from __future__ import annotations
 
-import struct
 from typing import NamedTuple
 
 import numpy as np
 
 from circle_collision_msgs.msg import CircleState
-from circle_collision_ros.pipeline.cdr_codec import COVARIANCE_SIZE, CdrError, decode_states
+from circle_collision_ros.pipeline.cdr import CdrError
 from circle_collision_ros.pipeline.predictor import CollisionPredictor, IntakeReport
 from circle_collision_ros.pipeline.state_batch import StateBatch, covariance_columns
-
-_HEADER_LE = b"\x00\x01"
-_U32 = struct.Struct("<I")
-_TIME = struct.Struct("<iI")
-_NUMBERS = struct.Struct("<10d")
-
-
-def _string(data: bytes, pos: int) -> tuple[str, int] | None:
-    pos += (-(pos - 4)) % 4
-    if pos + 4 > len(data):
-        return None
-    (size,) = _U32.unpack_from(data, pos)
-    start = pos + 4
-    if size == 0:  # some writers send a bare zero length for ""
-        return "", start
-    if start + size > len(data) or data[start + size - 1] != 0:
-        return None
-    return data[start:start + size - 1].decode(), start + size
-
-
-def _decode_one(data: bytes, uncertainty: bool) -> tuple | None:
-    """(stamp ns, frame, id, 10 numbers, remove, covariance values) of well-formed LE CircleState
-    bytes, else None. uncertainty: the layout has the covariance sequence (cdr_codec)."""
-    if len(data) < 4 or data[:2] != _HEADER_LE:
-        return None
-    try:
-        if len(data) < 12:
-            return None
-        sec, nanosec = _TIME.unpack_from(data, 4)
-        stamp_ns = sec * 1_000_000_000 + nanosec
-        frame = _string(data, 12)
-        if frame is None:
-            return None
-        body = _string(data, frame[1])
-        if body is None:
-            return None
-        pos = body[1]
-        pos += (-(pos - 4)) % 8
-        if pos + 81 > len(data):
-            return None
-        cov: tuple = ()
-        if uncertainty:
-            end = pos + 81
-            end += (-(end - 4)) % 4
-            if end + 4 > len(data):
-                return None
-            (size,) = _U32.unpack_from(data, end)
-            end += 4
-            if size:
-                end += (-(end - 4)) % 8
-                if end + 8 * size > len(data):
-                    return None
-                cov = struct.unpack_from(f"<{size}d", data, end) if size <= COVARIANCE_SIZE \
-                    else (0.0,) * size  # any wrong length is rejected by validation, values unused
-        return stamp_ns, frame[0], body[0], _NUMBERS.unpack_from(data, pos), data[pos + 80] != 0, cov
-    except UnicodeDecodeError:
-        return None  # decode_states names the error
+from circle_collision_ros.pipeline.state_codec import COVARIANCE_SIZE, decode_state_row, decode_states
 
 
 class GroupOutcome(NamedTuple):
@@ -98,7 +41,7 @@ def ingest_single_states(predictor: CollisionPredictor, messages: list[bytes], n
     """Decode and merge a run of serialized CircleState messages received at `now_ns`.
 
     uncertainty : False for the layout before CircleState had `covariance` (replay
-        of old recordings; see cdr_codec).
+        of old recordings; see pipeline/cdr.py).
 
     Returns per message the share of the intake it caused; expiry at `now_ns`
     is reported on the first message. Raises what predictor.receive_batch raises.
@@ -107,7 +50,7 @@ def ingest_single_states(predictor: CollisionPredictor, messages: list[bytes], n
     owner: list[int] = []
     errors: list[CdrError | None] = [None] * len(messages)
     for k, data in enumerate(messages):
-        row = _decode_one(data, uncertainty)
+        row = decode_state_row(data, uncertainty)
         if row is None:
             try:
                 batch = decode_states(data, CircleState, uncertainty=uncertainty)

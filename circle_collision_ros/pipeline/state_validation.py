@@ -15,8 +15,8 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
-from circle_collision_ros.core.uncertainty import COV_PSD_RTOL, COV_SYMMETRY_RTOL, covariance_problem
-from circle_collision_ros.pipeline.cdr_codec import COVARIANCE_SIZE
+from circle_collision_ros.core.uncertainty.covariance import COV_PSD_RTOL, COV_SYMMETRY_RTOL, covariance_problem
+from circle_collision_ros.pipeline.state_codec import COVARIANCE_SIZE
 from circle_collision_ros.pipeline.state_batch import USED_COVARIANCE_AXES, StateBatch, covariance_block
 
 
@@ -269,7 +269,7 @@ _EXACT = np.zeros(1, dtype=bool)
 _EXACT.flags.writeable = False
 
 
-def _clean_single_state(batch: StateBatch, frame_id: str, now_ns: int | None) -> BatchCheck | None:
+def clean_single_state(batch: StateBatch, frame_id: str, now_ns: int | None) -> BatchCheck | None:
     """check_batch of a one-state batch without covariance that passes every check, on Python
     scalars (a per-body stream's message: the vectorised checks cost ~0.1 ms of numpy set-up);
     None when any check might fail (the general path then words the reasons)."""
@@ -306,7 +306,7 @@ def check_batch(batch: StateBatch, *, frame_id: str, now_ns: int | None,
     if n == 0:
         return BatchCheck(np.zeros(0, dtype=bool), [], frame_id)
     if n == 1 and batch.covariance is None:
-        clean = _clean_single_state(batch, frame_id, now_ns)
+        clean = clean_single_state(batch, frame_id, now_ns)
         if clean is not None:
             return clean
     # Per-id Python loops only where a set (C speed) shows they can find something:

@@ -2,7 +2,7 @@
 
 `replay` with several paths, a parent folder or a glob (or any corpus option)
 lands here. Every bag goes through the single-bag engine
-(:func:`~circle_collision_ros.recording.replay.replay_bag`) in a worker:
+(:func:`~circle_collision_ros.recording.replay_engine.replay_bag`) in a worker:
 
 - by default in ``--jobs`` local worker processes (:class:`LocalPool`);
 - with ``--cluster tcp://HOST:8786`` as tasks on a Dask distributed cluster
@@ -75,7 +75,7 @@ def replay_outcome(path: str, tolerant: bool = False) -> BagOutcome:
     import numba
 
     from circle_collision_ros.recording.bag_reader import BagError
-    from circle_collision_ros.recording.replay import replay_bag
+    from circle_collision_ros.recording.replay_engine import replay_bag
 
     numba.set_num_threads(1)  # one process per core: the solver's threaded kernels would oversubscribe
     started = time.perf_counter()
@@ -267,7 +267,7 @@ class LocalPool:
     """
 
     def __init__(self, jobs: int, tolerant: bool = False) -> None:
-        import circle_collision_ros.recording.replay  # noqa: F401  (imported once, before forking)
+        import circle_collision_ros.recording.replay_engine  # noqa: F401  (imported once, before forking)
 
         self.jobs, self.tolerant = jobs, tolerant
         self.ctx = multiprocessing.get_context("fork")

@@ -26,7 +26,7 @@ import pytest
 from circle_collision_ros.recording.corpus import BagOutcome, find_bags
 
 if TYPE_CHECKING:  # the decoder imports numba and the message package: only when replaying
-    from circle_collision_ros.recording.prediction_cdr import PairPrediction, PredictionArray
+    from circle_collision_ros.pipeline.prediction_codec import PairPrediction, PredictionArray
 
 MAX_DETAIL_LINES = 20
 
@@ -73,7 +73,7 @@ class ReplayResult:
 
 def replay_bag_result(path: str, tolerant: bool = False) -> ReplayResult:
     """Replay `path` in this process and keep every replayed prediction (BagError if unreadable)."""
-    from circle_collision_ros.recording.replay import replay_bag
+    from circle_collision_ros.recording.replay_engine import replay_bag
 
     predictions: list[ReplayedPrediction] = []
 
@@ -110,7 +110,7 @@ class ReplayBagItem(pytest.Item):
 
     def runtest(self) -> None:
         from circle_collision_ros.recording.bag_reader import BagError
-        from circle_collision_ros.recording.replay import replay_bag
+        from circle_collision_ros.recording.replay_engine import replay_bag
 
         if self.problem is not None:
             raise ReplayMismatch(f"unreadable: {self.problem.detail}")

@@ -14,8 +14,8 @@ def nudge_first_contact(record) -> bytes:
     """
     import struct
 
-    from circle_collision_ros.recording.prediction_cdr import decode_prediction_array
-    from circle_collision_ros.recording.replay import RecordedLayout, RecordedTypes
+    from circle_collision_ros.pipeline.prediction_codec import decode_prediction_array
+    from circle_collision_ros.recording.replay_engine import RecordedLayout, RecordedTypes
 
     if record.type_name != RecordedTypes.PREDICTIONS:
         return record.data

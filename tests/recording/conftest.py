@@ -22,7 +22,7 @@ def copy_bag(source: Path, out: Path, keep_predictions: int | None = None,
     """
     from circle_collision_ros.recording.bag_reader import RECORDED_TYPES, open_bag
     from circle_collision_ros.recording.bag_recorder import BagRecorder
-    from circle_collision_ros.recording.replay import RecordedTypes
+    from circle_collision_ros.recording.replay_engine import RecordedTypes
 
     contents = open_bag(source, message_types=RECORDED_TYPES | {RecordedTypes.CONFIG})
     predictions = 0

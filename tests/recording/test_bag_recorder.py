@@ -364,7 +364,7 @@ _KILL_CHILD = textwrap.dedent("""
 """)
 
 
-@pytest.mark.slow
+@pytest.mark.stress
 def test_hard_kill_keeps_everything_but_the_open_chunk(tmp_path: Path) -> None:
     script = tmp_path / "child.py"
     script.write_text(_KILL_CHILD)

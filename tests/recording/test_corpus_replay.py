@@ -113,7 +113,7 @@ def _kill_on_start(args: list[str], kills: dict[str, int]) -> tuple[int, str, st
     return proc.returncode, "".join(out), proc.stderr.read()
 
 
-@pytest.mark.slow
+@pytest.mark.stress
 def test_a_killed_worker_is_retried_once_then_the_bag_fails(small_corpus, tmp_path: Path) -> None:
     from tests.recording.conftest import DATA, copy_bag
 
@@ -191,7 +191,7 @@ def dask_cluster():
             yield cluster
 
 
-@pytest.mark.slow
+@pytest.mark.stress
 def test_dask_cluster_gives_the_same_verdicts(small_corpus, dask_cluster, tmp_path: Path) -> None:
     c = small_corpus
     junit = tmp_path / "dask.xml"
@@ -203,7 +203,7 @@ def test_dask_cluster_gives_the_same_verdicts(small_corpus, dask_cluster, tmp_pa
     assert ET.parse(junit).getroot().get("tests") == "6"
 
 
-@pytest.mark.slow
+@pytest.mark.stress
 def test_dask_workers_killed_mid_run_lose_no_bag(good_corpus: Path, dask_cluster) -> None:
     from distributed import Client
 

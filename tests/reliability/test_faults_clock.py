@@ -19,7 +19,7 @@ from rosgraph_msgs.msg import Clock
 from tests.reliability.conftest import fact
 from tests.reliability.node_process import Client, NodeProcess, stamp_of
 from tests.reliability.test_faults_node import _pair, _ttcs
-from tests.ros.node_helpers import ns_time
+from tests.node_helpers import ns_time
 from tests.reliability.wire import encode_array
 
 

@@ -22,12 +22,12 @@ from rclpy.qos import QoSProfile, ReliabilityPolicy
 
 from circle_collision_msgs.msg import CircleStateArray
 from circle_collision_msgs.srv import PredictCollisions
-from circle_collision_ros.pipeline.cdr_codec import decode_states
+from circle_collision_ros.pipeline.state_codec import decode_states
 from circle_collision_ros.pipeline.predictor import CollisionPredictor, PredictorConfig
 from tests.reliability.conftest import fact, tally
 from tests.reliability.node_process import Client, NodeProcess, stamp_of
 from tests.reliability.wire import Body, encode_array
-from tests.ros.node_helpers import state
+from tests.node_helpers import state
 
 ROOT = Path(__file__).resolve().parents[2]
 

@@ -24,11 +24,12 @@ from rclpy.serialization import deserialize_message, serialize_message
 from std_msgs.msg import Header
 
 from circle_collision_msgs.msg import CircleState, CircleStateArray
-from circle_collision_ros.pipeline.cdr_codec import CdrError, decode_states
+from circle_collision_ros.pipeline.cdr import CdrError
+from circle_collision_ros.pipeline.state_codec import decode_states
 from circle_collision_ros.pipeline.state_batch import StateBatch
 from tests.reliability.conftest import tally
 from tests.reliability.wire import Body, encode_array, encode_state
-from tests.ros.node_helpers import random_states, state_array
+from tests.node_helpers import random_states, state_array
 
 TYPES = (CircleState, CircleStateArray)
 # Found by fuzzing (see module doc): rclpy.serialization.deserialize_message

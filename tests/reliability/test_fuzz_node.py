@@ -18,7 +18,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from circle_collision_msgs.msg import CircleStateArray
-from circle_collision_ros.pipeline.cdr_codec import decode_states
+from circle_collision_ros.pipeline.state_codec import decode_states
 from circle_collision_ros.pipeline.predictor import CollisionPredictor, PredictorConfig
 from tests.reliability.conftest import tally
 from tests.reliability.corrupt import corrupted_message

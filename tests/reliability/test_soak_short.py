@@ -27,7 +27,7 @@ def _soak_module():
     return module
 
 
-@pytest.mark.slow
+@pytest.mark.stress
 def test_soak_30_seconds(tmp_path: Path) -> None:
     result = _soak_module().soak(SECONDS, BODIES, RATE, warmup=5.0, log_dir=tmp_path)
     for key in ("bodies", "rate_hz", "seconds", "inputs_sent", "inputs_received_by_node", "dropped_inputs",

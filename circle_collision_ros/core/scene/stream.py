@@ -1,0 +1,236 @@
+"""The scene's stream rules: merge (removals, then states), upsert, remove, expire.
+
+A part of ``Scene``; the rules are stated in scene.py's module docstring.
+"""
+from __future__ import annotations
+
+from typing import Hashable, Sequence
+
+import numpy as np
+from numba import njit
+
+from circle_collision_ros.core.scene.all_pairs import validate_bodies
+from circle_collision_ros.core.scene.results import MergeResult
+from circle_collision_ros.core.scene.store import EMPTY_I
+
+__all__ = ["StreamMixin", "NEVER"]
+
+
+@njit(cache=True)
+def _store_covariances(C, slots, cov, rows, nonzero):
+    """C[slots[j]] = cov[rows[j]] and nonzero[j] = whether it has a non-zero entry (an
+    uncertain body), in one pass."""
+    for j in range(slots.shape[0]):
+        out, src = C[slots[j]], cov[rows[j]]
+        any_ = False
+        for r in range(src.shape[0]):
+            for c in range(src.shape[1]):
+                x = src[r, c]
+                out[r, c] = x
+                if x != 0.0:
+                    any_ = True
+        nonzero[j] = any_
+
+
+NEVER = 1 << 62  # later than any receive time, ns
+_FIRST_ROW = np.zeros(1, dtype=np.int64)
+_FIRST_ROW.flags.writeable = False
+
+
+class StreamMixin:
+    """Scene's stream rules: each message changes the stored bodies by them."""
+
+    def merge(self, ids: Sequence[Hashable], stamps_ns, positions, velocities, accelerations,
+              radii, remove, received_ns: int, covariances=None) -> MergeResult:
+        """Apply one message: removals first, then states (rules in scene.py's module docstring).
+
+        ids : k distinct ids.  stamps_ns : (k,) int ns > 0.  positions, velocities,
+        accelerations : (k, >= dim) (extra columns ignored).  radii : (k,).
+        remove : (k,) bool; a removal's geometry is ignored.  received_ns : the
+        receive clock for expiry.  Rows must be valid (finite, radius >= 0).
+        covariances : None (all exact) or (k, 2 dim, 2 dim) joint covariances of
+        (position, velocity), symmetric PSD (all zero = exact); see uncertain_pairs.
+        """
+        if len(ids) == 1 and covariances is None and not remove[0]:
+            return self._merge_state(ids[0], int(stamps_ns[0]), positions, velocities, accelerations,
+                                     radii, int(received_ns))
+        stamps = np.asarray(stamps_ns, dtype=np.int64)
+        remove = np.asarray(remove, dtype=bool)
+        received_ns = int(received_ns)
+        removed, removal_ignored = [], []
+        for k in np.flatnonzero(remove).tolist():
+            bid, st = ids[k], int(stamps[k])
+            s = self._slot.get(bid)
+            if s is not None and st < self._T[s]:
+                removal_ignored.append(k)  # the body's state is newer than the removal
+                continue
+            old = self._removals.get(bid)
+            if old is None or st >= old[0]:
+                self._removals[bid] = (st, received_ns)
+                self._removal_floor = min(self._removal_floor, received_ns)
+            if s is None:
+                removal_ignored.append(k)
+            else:
+                self._drop(s)
+                removed.append(k)
+        rows = np.flatnonzero(~remove)
+        D = self._dim
+        get = self._slot.get
+        slots = np.fromiter((get(ids[k], -1) for k in rows.tolist()), dtype=np.int64, count=rows.size)
+        st = stamps[rows]
+        known = slots >= 0
+        newer = np.ones(rows.size, dtype=bool)
+        newer[known] = st[known] > self._T[slots[known]]
+        if self._removals:
+            for x in np.flatnonzero(~known).tolist():
+                gone = self._removals.get(ids[rows[x]])
+                if gone is not None:
+                    if st[x] <= gone[0]:
+                        newer[x] = False  # older than its removal: a late state of a removed body
+                    else:
+                        del self._removals[ids[rows[x]]]
+        fresh = np.flatnonzero(~known & newer)
+        room = len(fresh) if self.max_bodies is None else max(0, self.max_bodies - len(self._slot))
+        full = fresh[room:]
+        fresh = fresh[:room]
+        self._n_new = int(fresh.size)
+        for x in fresh.tolist():
+            s = self._alloc()
+            self._preserve((s,))
+            bid = ids[rows[x]]
+            self._slot[bid] = s
+            self._writable_ids()[s] = bid
+            self._alive[s] = True
+            self._rank_insert(s)
+            slots[x] = s
+        if fresh.size:
+            self._add_utf8(slots[fresh])
+        take = newer.copy()
+        take[full] = False
+        sl, src = slots[take], rows[take]
+        if src.size:
+            self._preserve(sl)
+            self._P[sl] = np.asarray(positions)[src, :D]
+            self._V[sl] = np.asarray(velocities)[src, :D]
+            self._A[sl] = np.asarray(accelerations)[src, :D]
+            self._R[sl] = np.asarray(radii)[src]
+            if covariances is None:
+                self._set_uncertain(sl, False)
+            else:
+                nonzero = np.empty(sl.size, dtype=np.bool_)
+                _store_covariances(self._C, sl, np.ascontiguousarray(covariances, dtype=np.float64), src, nonzero)
+                self._set_uncertain(sl, nonzero)
+            self._T[sl] = stamps[src]
+            self._recv[sl] = received_ns
+            self._recv_floor = min(self._recv_floor, received_ns)
+            self._dirty.update(sl.tolist())
+            newest = int(stamps[src].max())
+            if self.reference_ns is None or newest > self.reference_ns:
+                self.reference_ns = newest
+        if src.size or removed:
+            self._version += 1
+        return MergeResult(accepted=src, not_newer=rows[~newer], full=rows[full],
+                           removed=np.array(removed, dtype=np.int64),
+                           removal_ignored=np.array(removal_ignored, dtype=np.int64))
+
+    def _merge_state(self, bid, stamp: int, positions, velocities, accelerations, radii,
+                     received_ns: int) -> MergeResult:
+        """merge of one exact state (a per-body stream's message) on scalars: the same rules
+        and stored bits as the general path, without its array set-up."""
+        s = self._slot.get(bid)
+        if s is None:
+            gone = self._removals.get(bid) if self._removals else None
+            if gone is not None:
+                if stamp <= gone[0]:
+                    return MergeResult(EMPTY_I, _FIRST_ROW, EMPTY_I, EMPTY_I, EMPTY_I)  # a late state of a removed body
+                del self._removals[bid]
+            if self.max_bodies is not None and len(self._slot) >= self.max_bodies:
+                return MergeResult(EMPTY_I, EMPTY_I, _FIRST_ROW, EMPTY_I, EMPTY_I)
+            s = self._alloc()
+            self._preserve((s,))
+            self._slot[bid] = s
+            self._writable_ids()[s] = bid
+            self._alive[s] = True
+            self._n_new = 1
+            self._rank_insert(s)
+            self._add_utf8(np.array([s], dtype=np.int64))
+        elif stamp <= self._T[s]:
+            return MergeResult(EMPTY_I, _FIRST_ROW, EMPTY_I, EMPTY_I, EMPTY_I)
+        else:
+            self._preserve((s,))
+            self._n_new = 0
+        D = self._dim
+        self._P[s] = np.asarray(positions)[0, :D]
+        self._V[s] = np.asarray(velocities)[0, :D]
+        self._A[s] = np.asarray(accelerations)[0, :D]
+        self._R[s] = np.asarray(radii)[0]
+        if self._U[s]:
+            self._set_uncertain(s, False)
+        self._T[s] = stamp
+        self._recv[s] = received_ns
+        self._recv_floor = min(self._recv_floor, received_ns)
+        self._dirty.add(s)
+        if self.reference_ns is None or stamp > self.reference_ns:
+            self.reference_ns = stamp
+        self._version += 1
+        return MergeResult(_FIRST_ROW, EMPTY_I, EMPTY_I, EMPTY_I, EMPTY_I)
+
+    def upsert_many(self, ids: Sequence[Hashable], positions, velocities, accelerations, radii,
+                    stamps_ns, received_ns: int = 0) -> MergeResult:
+        """Validated ``merge`` of states only (ValueError names bad rows; then nothing changes)."""
+        ids = list(ids)
+        p, v, a, r = validate_bodies(positions, velocities, accelerations, radii)
+        st = np.broadcast_to(np.asarray(stamps_ns, dtype=np.int64), (len(ids),))
+        if p.shape != (len(ids), self._dim):
+            raise ValueError(f"expected {len(ids)} rows of dimension {self._dim}, got {p.shape}")
+        if len(set(ids)) != len(ids):
+            raise ValueError("duplicate ids in one update")
+        return self.merge(ids, st, p, v, a, r, np.zeros(len(ids), dtype=bool), received_ns)
+
+    def upsert(self, body_id: Hashable, p, v, a, r: float, stamp_ns: int,
+               received_ns: int = 0) -> MergeResult:
+        """One body's state (see upsert_many)."""
+        return self.upsert_many([body_id], np.asarray(p, dtype=np.float64)[None],
+                                np.asarray(v, dtype=np.float64)[None],
+                                np.asarray(a, dtype=np.float64)[None], [r], [stamp_ns], received_ns)
+
+    def remove(self, body_id: Hashable, stamp_ns: int, received_ns: int = 0) -> bool:
+        """A removal at ``stamp_ns``; True if it deleted the body."""
+        res = self.merge([body_id], [stamp_ns], np.zeros((1, 3)), np.zeros((1, 3)), np.zeros((1, 3)),
+                         [0.0], [True], received_ns)
+        return bool(res.removed.size)
+
+    def expire(self, now_ns: int, timeout_ns: int) -> list:
+        """Drop bodies (and remembered removals) received before ``now_ns - timeout_ns``; ids dropped, sorted."""
+        limit = int(now_ns) - int(timeout_ns)
+        if self._removals and limit > self._removal_floor:
+            self._removals = {k: v for k, v in self._removals.items() if v[1] >= limit}
+            self._removal_floor = min((v[1] for v in self._removals.values()), default=NEVER)
+        if limit <= self._recv_floor:
+            return []  # every body was received at or after the floor
+        stale = np.flatnonzero(self._alive & (self._recv < limit))
+        kept = self._alive & (self._recv >= limit)
+        self._recv_floor = int(self._recv[kept].min()) if kept.any() else NEVER
+        gone = sorted(self._ids[s] for s in stale.tolist())
+        for s in stale.tolist():
+            self._drop(s)
+        if gone:
+            self._version += 1
+        return gone
+
+    def _drop(self, s: int) -> None:
+        self._preserve((s,))
+        del self._slot[self._ids[s]]
+        self._rank_remove(s)
+        self._writable_ids()[s] = None
+        self._alive[s] = False
+        self._set_uncertain(s, False)
+        self._dirty.add(s)
+        self._free.append(s)
+        self._version += 1
+        if not self._slot:
+            # Nothing left to propagate: forget the reference time, else after a tracker's
+            # clock reset (stamps jump back) new bodies would be propagated into the old
+            # future (tests/reliability/test_faults_clock.py::test_stamps_jump_backwards).
+            self.reference_ns = None
+            self._need_full = True

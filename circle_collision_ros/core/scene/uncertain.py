@@ -1,0 +1,335 @@
+"""The scene's uncertain path: ``Scene.uncertain_pairs`` and its helpers (listing by an
+inflated broad phase, pair times, per-pair answers kept between calls, the budget's FIFO).
+
+A part of ``Scene``.
+"""
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import numpy as np
+from numba import njit
+
+from circle_collision_ros.core import broad as _broad
+from circle_collision_ros.core.scene.results import SceneContacts, SceneUncertainty
+from circle_collision_ros.core.scene.store import EMPTY_I
+
+__all__ = ["UncertainMixin", "states_at_rows", "NO_WAITING"]
+
+
+@njit(cache=True, error_model="numpy", inline="always")
+def _covariance_row(C, t, out):
+    """A joint (position, velocity) covariance (2D, 2D) moved by t s into out: ``M C M^T``,
+    ``M = [[I, t I], [0, I]]`` (acceleration is exact, so it adds no uncertainty):
+    ``Spp + t (Spv + Svp) + t^2 Svv``, ``Spv + t Svv``, ``Svp + t Svv``, ``Svv``, evaluated
+    in that order (the numpy block expression's operations and rounding)."""
+    D = C.shape[0] // 2
+    tt = t * t
+    for r in range(D):
+        for c in range(D):
+            vv = C[D + r, D + c]
+            out[r, c] = C[r, c] + t * (C[r, D + c] + C[D + r, c]) + tt * vv
+            out[r, D + c] = C[r, D + c] + t * vv
+            out[D + r, c] = C[D + r, c] + t * vv
+            out[D + r, D + c] = vv
+
+
+@njit(cache=True, error_model="numpy")
+def states_at_rows(P, V, A, C, T, U, slots, t_ns, p, v, c):
+    """The stored bodies `slots` moved from their stamps T to t_ns[j] (int64 ns), in one
+    compiled pass: p, v as propagate_ns, c as _covariance_row for an uncertain body
+    (U) and zero for an exact one (its stored covariance may be stale).  The same
+    operations in the same order as those numpy expressions (no fast-math: no
+    contraction into fused multiply-adds), so the same bits."""
+    D = P.shape[1]
+    for j in range(slots.shape[0]):
+        s = slots[j]
+        dt = np.float64(t_ns[j] - T[s]) * 1e-9  # integer difference first (stamps ~1.7e18 ns)
+        for k in range(D):
+            p[j, k] = P[s, k] + dt * (V[s, k] + (0.5 * dt) * A[s, k])
+            v[j, k] = V[s, k] + dt * A[s, k]
+        if U[s]:
+            _covariance_row(C[s], dt, c[j])
+        else:
+            c[j] = 0.0
+
+
+# The empty columns of an exact scene's SceneUncertainty (published read-only, shared).
+_NO_IDS = np.empty(0, dtype=object)
+_NO_VALUES = np.empty(0)
+_NO_IDS.flags.writeable = False
+_NO_VALUES.flags.writeable = False
+
+
+class UncertainMixin:
+    """Scene's pairs with an uncertain body (see uncertain_pairs)."""
+
+    #: Uncertain pairs: how far (ns) a pair's time t_p may lie before R (see uncertain_pairs).
+    #: A pair whose newer state is older than this is evaluated at the start of R's period of
+    #: this length, so such pairs are evaluated again once per period, not per input.
+    UNCERTAIN_LAG_NS = 100_000_000
+
+    def uncertain_pairs(self, threshold: float, contacts: SceneContacts | None = None,
+                        max_evaluated: int | None = None) -> SceneUncertainty:
+        """Probabilities of the pairs with an uncertain body that may touch within [R, R + H].
+
+        Which pairs: those the broad phase at R over [0, H], each uncertain body's radius
+        inflated by ``core.uncertainty.inflation_radius``, cannot rule out.  Each listed pair
+        is evaluated at its pair time t_p over [t_p, t_p + H]: t_p is the newer of its two
+        stamps when that lies within ``UNCERTAIN_LAG_NS`` of R (always so for a tracker array,
+        where t_p = R; for per-body streams the pair's newest information), else
+        ``R - (R mod UNCERTAIN_LAG_NS)``; so 0 <= R - t_p < UNCERTAIN_LAG_NS.  Both states and
+        covariances are propagated to t_p.  A pair's answer is thus a pure function of its two
+        stored states and t_p, and is kept between calls: a call evaluates only the listed pairs
+        whose body changed or whose t_p moved (a one-body update: that body's pairs), and
+        results equal a from-scratch evaluation bit for bit (the core's rows are independent).
+        The plausible time is reported from R: ``max(0, tau - (R - t_p))`` (0: the overlap
+        probability reached the threshold at or before R).  Cached as a whole while the scene
+        and `threshold` are unchanged.  `contacts` (the exact path's rows) adds their
+        uncertain pairs should the inflated broad phase not list them.  Pairs certified below
+        threshold / 2 skip the full evaluation (``core.uncertainty.uncertain_pairs(screen=True)``);
+        `max_evaluated` caps the full evaluations (the rest are deferred, see there).
+
+        Which pairs the budget evaluates: first come, first served.  A pair that is deferred
+        waits from the first evaluation (call that follows a change) that defers it until one
+        evaluates it; each evaluation takes the `max_evaluated` pairs that have waited longest
+        (never deferred before counts as waiting from now), then the earliest possible contact,
+        then id order.  A pair deferred at evaluation s is therefore evaluated within
+        ceil(n_s / max_evaluated) evaluations, n_s = the pairs waiting at s (itself included),
+        as long as it stays listed and unscreened (a pair that leaves the list stops waiting; a
+        body removed and added again is a new body: its pairs wait from then).
+        A pair whose relative inputs are bit for bit those of a pair fully evaluated by the
+        previous evaluation takes that answer without counting against the budget.  The order
+        depends only on the sequence of scene inputs and calls (no clock): replay, which makes
+        the node's calls in the node's order, reproduces it bit for bit.
+        See SceneUncertainty.
+        """
+        key = (self._version, float(threshold), max_evaluated)
+        if self._uncertain_cache is not None and self._uncertain_cache[0] == key:
+            return self._uncertain_cache[1]
+        res = self._uncertain_pairs(float(threshold), contacts, max_evaluated)
+        self._uncertain_cache = (key, res)
+        return res
+
+    def _uncertain_pairs(self, threshold: float, contacts: SceneContacts | None,
+                         max_evaluated: int | None) -> SceneUncertainty:
+        R = self.reference_ns
+        if R is None or self._n_uncertain == 0:
+            self._uncertain_waiting = NO_WAITING  # no pair listed: none waits
+            self._pair_answers = None
+            return SceneUncertainty(R or 0, _NO_IDS, _NO_IDS, _NO_VALUES, _NO_VALUES, _NO_VALUES)
+        from circle_collision_ros.core import uncertainty as unc  # heavy kernels: loaded on first use
+        slots = self._sorted_slots()
+        I, J, at_R, contact_rows = self._uncertain_listed(slots, R, contacts, unc)
+        if I.size == 0:
+            self._uncertain_waiting = NO_WAITING
+            self._pair_answers = None
+            return SceneUncertainty(R, _NO_IDS, _NO_IDS, _NO_VALUES, _NO_VALUES, _NO_VALUES)
+        ids = self._ids[slots]
+        ida, idb = ids[I], ids[J]
+        sa, sb = slots[I], slots[J]
+        tp = self._uncertain_pair_times(sa, sb, R)
+        key = (sa << 32) | sb
+        prob, bound, tau = np.empty(I.size), np.empty(I.size), np.empty(I.size)
+        hit = np.zeros(I.size, dtype=bool)
+        # where the last call deferred the pair with these same inputs: its screening
+        # tube's first time (the deferred answer's time), so the core skips the screen
+        screened_first = np.full(I.size, np.nan)
+        sv_a, sv_b = self._sv[sa], self._sv[sb]
+        old = self._pair_answers
+        # a kept answer needs both bodies unchanged since (state serials below old.sv_next):
+        # when every body changed (a tracker array) there is nothing to look up
+        if old is not None and old.horizon == self._h and old.threshold == threshold \
+                and self._sv[slots].min() < old.sv_next and old.key.size:
+            keep = np.argsort(old.key, kind="stable")  # keys are distinct
+            at = keep[np.minimum(np.searchsorted(old.key[keep], key), keep.size - 1)]
+            same = ((old.key[at] == key) & (old.state_a[at] == sv_a)
+                    & (old.state_b[at] == sv_b) & (old.pair_ns[at] == tp))
+            hit = same & old.answered[at]
+            prob[hit], bound[hit], tau[hit] = old.probability[at[hit]], old.bound[at[hit]], old.tau[at[hit]]
+            waited = same & ~old.answered[at]
+            screened_first[waited] = old.tau[at[waited]]
+        todo = np.flatnonzero(~hit)
+        answered = hit.copy()
+        if todo.size:
+            deferred = self._evaluate_uncertain(unc, sa[todo], sb[todo], I[todo], J[todo], at_R, tp[todo],
+                                                key[todo], threshold, max_evaluated, screened_first[todo])
+            prob[todo], bound[todo], tau[todo] = deferred.probability, deferred.bound, deferred.tau
+            answered[todo[~deferred.deferred]] = True
+        else:
+            self._uncertain_waiting = NO_WAITING
+            self._uncertain_serial += 1
+        self._pair_answers = _PairAnswers(self._h, threshold, self._sv_next, key, answered, sv_a, sv_b,
+                                          tp, prob, bound, tau)
+        self.uncertain_evaluated = int(todo.size)
+        # reported from R: the pair's plausible time counts from its t_p <= R (d = R - t_p);
+        # one already reached before R is reported as 0 (plausible now)
+        d = (R - tp).astype(np.float64) * 1e-9
+        plausible = np.where(np.isnan(tau) | (tau > d), tau - d, 0.0)
+        return SceneUncertainty(R, ida, idb, prob, bound, plausible,
+                                int(np.count_nonzero(~answered)) if max_evaluated is not None else 0,
+                                contact_rows, contacts if contact_rows is not None else None,
+                                self._id_utf8(sa, sb))
+
+    def _uncertain_listed(self, slots: np.ndarray, R: int, contacts: SceneContacts | None, unc):
+        """``(I, J, at_R, contact_rows)``: local index pairs (I < J, into `slots`, id order) with
+        an uncertain body that the broad phase at R over [0, H], radii inflated by
+        ``unc.inflation_radius``, cannot rule out, plus the uncertain pairs of `contacts`;
+        at_R = (P, V, A, radius, C) of `slots`, propagated to R (C zero for exact bodies); contact_rows:
+        each pair's row in `contacts`, -1 if none (None without contacts)."""
+        P, V, C = self._states_at(slots, np.full(slots.size, R, dtype=np.int64))
+        A, Rad = self._A[slots], self._R[slots]
+        u = self._U[slots]
+        if u.all():
+            grow = unc.inflation_radius(C, self._h)
+        else:
+            grow = np.zeros(slots.size)
+            grow[u] = unc.inflation_radius(C[u], self._h)
+        zero = np.zeros(slots.size)
+        lo, hi = _broad.swept_bounds(P, V, A, Rad + grow, zero, zero + self._h)
+        # the sweep whatever the scene's method: on these few inflated bodies per cell it is
+        # measured faster than the grid (same pairs; bench/bench_node.py's density)
+        I, J, _ = _broad.candidate_pairs(lo, hi, p=P, v=V, a=A, r=Rad + grow, tref=zero, t_start=0.0,
+                                         t_end=self._h, method="sweep")
+        keep = u[I] | u[J]
+        I, J = I[keep], J[keep]
+        if contacts is not None and len(contacts):
+            # slot -> local index through an array (no dict of every body per call)
+            local = np.empty(self._ids.shape[0], dtype=np.int64)
+            local[slots] = np.arange(slots.size)
+            if contacts.slot_ids is self._ids:  # no body came or went since: its slots hold
+                ca, cb = local[contacts.slot_a], local[contacts.slot_b]
+            else:
+                slot = self._slot.__getitem__
+                ca = local[np.fromiter(map(slot, contacts.id_a.tolist()), np.int64, len(contacts))]
+                cb = local[np.fromiter(map(slot, contacts.id_b.tolist()), np.int64, len(contacts))]
+            m = u[ca] | u[cb]
+            I, J = np.concatenate([I, ca[m]]), np.concatenate([J, cb[m]])
+        # local order is id order: (min, max) puts the id that sorts first in front
+        n = np.int64(slots.size)
+        key = np.minimum(I, J) * n + np.maximum(I, J)
+        key.sort()  # then drop repeats (a contact the broad phase listed too): np.unique's result
+        if key.size > 1:
+            key = key[np.concatenate(([True], key[1:] != key[:-1]))]
+        rows = None
+        if contacts is not None:
+            rows = np.full(key.size, -1, dtype=np.int64)
+            if len(contacts):
+                ckey = np.minimum(ca, cb) * n + np.maximum(ca, cb)
+                order = np.argsort(ckey, kind="stable")
+                at = np.minimum(np.searchsorted(ckey[order], key), order.size - 1)
+                same = ckey[order[at]] == key
+                rows[same] = order[at[same]]
+        return key // n, key % n, (P, V, A, Rad, C), rows
+
+    def _states_at(self, slots: np.ndarray, t_ns: np.ndarray):
+        """(P, V, C) of the bodies `slots` moved to the times t_ns (int64 ns, per body), C zero
+        for exact bodies: see states_at_rows."""
+        m = slots.shape[0]
+        D = self._dim
+        P, V, C = np.empty((m, D)), np.empty((m, D)), np.empty((m, 2 * D, 2 * D))
+        states_at_rows(self._P, self._V, self._A, self._C, self._T, self._U, slots, t_ns, P, V, C)
+        return P, V, C
+
+    def _uncertain_pair_times(self, sa: np.ndarray, sb: np.ndarray, R: int) -> np.ndarray:
+        """Pair times t_p (ns): the newer stamp of the two if it lies within UNCERTAIN_LAG_NS
+        of R, else the start of R's lag period (R - R mod UNCERTAIN_LAG_NS); R - t_p < the lag."""
+        newer = np.maximum(self._T[sa], self._T[sb])
+        lag = self.UNCERTAIN_LAG_NS
+        return np.where(newer > R - lag, newer, R - R % lag)
+
+    def _evaluate_uncertain(self, unc, sa, sb, la, lb, at_R, tp, key, threshold: float,
+                            max_evaluated: int | None, screened_first: np.ndarray) -> "_Evaluated":
+        """``unc.uncertain_pairs`` on these pairs (slots sa, sb; local indices la, lb into
+        at_R, the bodies at R; key = sa << 32 | sb), each at its t_p over [0, H] (screened,
+        within the budget; FIFO bookkeeping of the deferred, see uncertain_pairs);
+        screened_first: as ``unc.uncertain_pairs`` takes it (NaN: screen the pair)."""
+        R = self.reference_ns
+        late = np.flatnonzero(tp != R)  # t_p = R: the bodies as propagated for the listing
+        states = []
+        for s, loc in ((sa, la), (sb, lb)):
+            P, V, A, Rad = _broad.gather_states(loc, *at_R[:4])
+            C = at_R[4][loc]
+            if late.size:  # the same operations from the stamp to t_p instead
+                P[late], V[late], C[late] = self._states_at(s[late], tp[late])
+            states.append((P, V, A, Rad, C))
+        serial = self._uncertain_serial
+        waiting = self._uncertain_waiting
+        born_a, born_b = self._born[sa], self._born[sb]
+        asked = []
+
+        def waited_since(rows):  # the rows competing for the budget (called only when over it)
+            since = waiting.since_of(key[rows], born_a[rows], born_b[rows], serial)
+            asked.append((rows, since))
+            return since
+
+        if self._uncertain_memo_ref != R:
+            # a new reference time moves most pairs' inputs (their t_p follow the stamps):
+            # skip the look-ups, which can only forgo a reuse, never give a wrong one
+            self._uncertain_memo.clear()
+            self._uncertain_memo_ref = R
+        res = unc.uncertain_pairs(*states[0], *states[1], self._h, threshold, screen=True,
+                                  max_evaluated=max_evaluated, priority=waited_since,
+                                  memo=self._uncertain_memo, screened_first=screened_first)
+        deferred = (res.collision_probability_bound == unc.DEFERRED_BOUND
+                    if max_evaluated is not None else np.zeros(sa.size, dtype=bool))
+        # the deferred of the rows that competed wait on (since as looked up); the rest stop
+        rows = np.concatenate([r for r, _ in asked]) if asked else EMPTY_I
+        since = np.concatenate([w for _, w in asked]) if asked else EMPTY_I
+        still = deferred[rows]
+        rows, since = rows[still], since[still]
+        order = np.argsort(key[rows], kind="stable")  # keys are distinct: any sort gives this order
+        rows = rows[order]
+        self._uncertain_waiting = _Waiting(key[rows], born_a[rows], born_b[rows], since[order])
+        self._uncertain_serial = serial + 1
+        return _Evaluated(res.collision_probability, res.collision_probability_bound,
+                          res.plausible_time, deferred)
+
+
+class _Waiting(NamedTuple):
+    """The pairs the last uncertain evaluation deferred (the budget's FIFO), sorted by key =
+    slot_a << 32 | slot_b, with their bodies' serials (``Scene._born``: a slot another body
+    took since is another pair; a body removed and added again is a new body, its pairs wait
+    from then) and the evaluation serial since which each waits."""
+
+    key: np.ndarray
+    born_a: np.ndarray
+    born_b: np.ndarray
+    since: np.ndarray
+
+    def since_of(self, key: np.ndarray, born_a: np.ndarray, born_b: np.ndarray, default: int) -> np.ndarray:
+        """(n,) int64: since when each pair (key, born_a, born_b) waits; `default` if it does not."""
+        out = np.full(key.size, default, dtype=np.int64)
+        if self.key.size and key.size:
+            at = np.minimum(np.searchsorted(self.key, key), self.key.size - 1)
+            same = (self.key[at] == key) & (self.born_a[at] == born_a) & (self.born_b[at] == born_b)
+            out[same] = self.since[at[same]]
+        return out
+
+
+NO_WAITING = _Waiting(EMPTY_I, EMPTY_I, EMPTY_I, EMPTY_I)
+
+
+class _PairAnswers(NamedTuple):
+    """Scene.uncertain_pairs' answers of the last call, per listed pair (key = slot_a << 32 |
+    slot_b, in listing order; answered: not deferred): valid for a later call while both
+    bodies' states (serials) and t_p are unchanged."""
+
+    horizon: float
+    threshold: float
+    sv_next: int  # Scene._sv_next then: every state serial of that call is below it
+    key: np.ndarray
+    answered: np.ndarray
+    state_a: np.ndarray
+    state_b: np.ndarray
+    pair_ns: np.ndarray
+    probability: np.ndarray
+    bound: np.ndarray
+    tau: np.ndarray  # plausible time from t_p, s
+
+
+class _Evaluated(NamedTuple):
+    probability: np.ndarray
+    bound: np.ndarray
+    tau: np.ndarray
+    deferred: np.ndarray
