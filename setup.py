@@ -15,9 +15,14 @@ CONSOLE_SCRIPTS = [
     "replay = circle_collision_ros.recording.replay:main",
 ]
 
-# The one-pair entry of time_to_collision (why it is C: circle_collision_ros/core/narrow/one_pair.py).
-ONE_PAIR = Extension(f"{PACKAGE}.core.narrow.one_pair_entry", [f"{PACKAGE}/core/narrow/one_pair_entry.c"],
-                     include_dirs=[numpy.get_include()], extra_compile_args=["-O2"])
+# The one-pair entry of time_to_collision (why it is C:
+# circle_collision_ros/core/narrow/one_pair.py).
+ONE_PAIR = Extension(
+    f"{PACKAGE}.core.narrow.one_pair_entry",
+    [f"{PACKAGE}/core/narrow/one_pair_entry.c"],
+    include_dirs=[numpy.get_include()],
+    extra_compile_args=["-O2"],
+)
 
 setup(
     name=PACKAGE,

@@ -1,4 +1,5 @@
 """Shared helpers for the benchmark modules (paths, timing, markdown, plots)."""
+
 from __future__ import annotations
 
 import math

@@ -20,6 +20,7 @@ Per method x family:
 * missed / spurious: contact vs no contact against the reference, except the
   cases the reference flags ambiguous (exact minimum gap within 1e-9 R^2).
 """
+
 from __future__ import annotations
 
 import argparse
@@ -74,16 +75,24 @@ def methods() -> list[dict]:
 
     nt = numba.get_num_threads()
     return [
-        dict(key="roots_loop", name="numpy.roots loop", fn=ttc_numpy_roots_loop, loop=True, marker="v"),
-        dict(key="eigvals", name="companion eigvals (batched)", fn=ttc_companion_eigvals, loop=False,
-             marker="s"),
-        dict(key="ferrari", name="Ferrari closed form (vectorised)", fn=ttc_ferrari, loop=False, marker="D"),
-        dict(key="lecture", name="seed lecture (absolute coeffs, 1e-6 tol)", fn=ttc_lecture, loop=False,
-             marker="X"),
-        dict(key="ours_serial", name="ours (numba, serial kernel)", fn=_ours_serial, loop=False, marker="o"),
-        dict(key="ours_threaded",
-             name=f"ours (time_to_collision, {nt} threads >= {PARALLEL_MIN_ROWS} rows if a core is free)",
-             fn=_ours_threaded, loop=False, marker="*"),
+        dict(key="roots_loop", name="numpy.roots loop", fn=ttc_numpy_roots_loop, loop=True,
+             marker="v"),
+        dict(key="eigvals", name="companion eigvals (batched)", fn=ttc_companion_eigvals,
+             loop=False, marker="s"),
+        dict(key="ferrari", name="Ferrari closed form (vectorised)", fn=ttc_ferrari, loop=False,
+             marker="D"),
+        dict(key="lecture", name="seed lecture (absolute coeffs, 1e-6 tol)", fn=ttc_lecture,
+             loop=False, marker="X"),
+        dict(key="ours_serial", name="ours (numba, serial kernel)", fn=_ours_serial, loop=False,
+             marker="o"),
+        dict(
+            key="ours_threaded",
+            name=f"ours (time_to_collision, {nt} threads >= {PARALLEL_MIN_ROWS} rows if a core is "
+                 "free)",
+            fn=_ours_threaded,
+            loop=False,
+            marker="*",
+        ),
     ]
 
 
@@ -115,7 +124,7 @@ def references(cases: dict, jobs: int) -> dict:
     k = 0
     for name, (args, H, known) in cases.items():
         n = args[3].shape[0]
-        part = res[k:k + n]
+        part = res[k : k + n]
         k += n
         out[name] = (np.array([p[0] for p in part]), np.array([p[1] for p in part]),
                      np.array([p[2] for p in part], dtype=bool))
@@ -185,8 +194,10 @@ def run(quick: bool = False, cases: int | None = None, jobs: int | None = None,
     data = {name: family_cases(name, n) for name in fams}
     refs = references(data, jobs)
     t_ref = time.perf_counter() - t0
-    log(f"  references: {sum(a[3].shape[0] for a, _, _ in data.values())} cases in {t_ref:.1f} s "
-        f"({jobs} processes)")
+    log(
+        f"  references: {sum(a[3].shape[0] for a, _, _ in data.values())} cases in {t_ref:.1f} s "
+        f"({jobs} processes)"
+    )
     ms = methods()
     res: dict = {"cases_per_family": n, "families": fams, "reference_seconds": t_ref,
                  "methods": [{k: m[k] for k in ("key", "name", "marker", "loop")} for m in ms],
@@ -201,12 +212,19 @@ def run(quick: bool = False, cases: int | None = None, jobs: int | None = None,
             s = score(got, refs[name])
             s.update(time_method(m["fn"], args, H, loop=m["loop"], quick=quick))
             row[m["key"]] = s
-        row["_serial_equals_threaded"] = bool(np.array_equal(outs["ours_serial"], outs["ours_threaded"]))
+        row["_serial_equals_threaded"] = bool(
+            np.array_equal(outs["ours_serial"], outs["ours_threaded"])
+        )
         res["results"][name] = row
-        log(f"  {name:18s} " + "  ".join(f"{m['key']}={row[m['key']]['ns_per_pair']:.0f}ns/"
-                                         f"{fmt_ulp(row[m['key']]['worst_ulp'])}u/"
-                                         f"{row[m['key']]['missed']}m{row[m['key']]['spurious']}s"
-                                         for m in ms))
+        log(
+            f"  {name:18s} "
+            + "  ".join(
+                f"{m['key']}={row[m['key']]['ns_per_pair']:.0f}ns/"
+                f"{fmt_ulp(row[m['key']]['worst_ulp'])}u/"
+                f"{row[m['key']]['missed']}m{row[m['key']]['spurious']}s"
+                for m in ms
+            )
+        )
     res["totals"] = totals(res)
     return res
 
@@ -245,15 +263,18 @@ def headline_table(res: dict) -> str:
     rows = []
     for m in res["methods"]:
         t = tot[m["key"]]
-        rows.append([m["name"], fmt_ns(t["ns_per_pair"]), fmt_ns(t["ns_per_pair_median_family"]),
-                     f"{t['ns_per_pair'] / base:.2f}", f"{t['ns_per_pair_median_family'] / base_med:.2f}",
-                     fmt_ulp(t["median_ulp"]), fmt_ulp(t["worst_finite_ulp"]), t["wrong_t0"],
-                     t["over_4ulp"], t["missed"], t["spurious"]])
-    return md_table(["method", "ns/pair (mean of families)", "ns/pair (median family)", "x ours serial (mean)",
-                     "x ours serial (median family)",
-                     "median err (ulp)",
-                     "worst finite err (ulp)", "wrong t=0", "contacts > 4 ulp", "missed", "spurious"],
-                    rows)
+        rows.append(
+            [m["name"], fmt_ns(t["ns_per_pair"]), fmt_ns(t["ns_per_pair_median_family"]),
+             f"{t['ns_per_pair'] / base:.2f}", f"{t['ns_per_pair_median_family'] / base_med:.2f}",
+             fmt_ulp(t["median_ulp"]), fmt_ulp(t["worst_finite_ulp"]), t["wrong_t0"],
+             t["over_4ulp"], t["missed"], t["spurious"]]
+        )
+    return md_table(
+        ["method", "ns/pair (mean of families)", "ns/pair (median family)", "x ours serial (mean)",
+         "x ours serial (median family)", "median err (ulp)", "worst finite err (ulp)", "wrong t=0",
+         "contacts > 4 ulp", "missed", "spurious"],
+        rows,
+    )
 
 
 def family_table(res: dict) -> str:
@@ -261,20 +282,37 @@ def family_table(res: dict) -> str:
     for f in res["families"]:
         for m in res["methods"]:
             r = res["results"][f][m["key"]]
-            rows.append([f, m["name"], fmt_ns(r["ns_per_pair"]), fmt_ulp(r["median_ulp"]),
-                         fmt_ulp(r["worst_ulp"]), r["contacts"], r["missed"], r["spurious"], r["ambiguous"]])
-    return md_table(["family", "method", "ns/pair", "median err (ulp)", "worst err (ulp)", "contacts",
-                     "missed", "spurious", "ambiguous (exempt)"], rows, "llrrrrrrr")
+            rows.append(
+                [f, m["name"], fmt_ns(r["ns_per_pair"]), fmt_ulp(r["median_ulp"]),
+                 fmt_ulp(r["worst_ulp"]), r["contacts"], r["missed"], r["spurious"], r["ambiguous"]]
+            )
+    return md_table(
+        ["family", "method", "ns/pair", "median err (ulp)", "worst err (ulp)", "contacts", "missed",
+         "spurious", "ambiguous (exempt)"],
+        rows,
+        "llrrrrrrr",
+    )
 
 
 def miss_table(res: dict) -> str:
     ms = res["methods"]
     rows = []
     for f in res["families"]:
-        rows.append([f] + [f"{res['results'][f][m['key']]['missed']} / {res['results'][f][m['key']]['spurious']}"
-                           for m in ms])
-    rows.append(["**total**"] + [f"**{res['totals'][m['key']]['missed']} / {res['totals'][m['key']]['spurious']}**"
-                                 for m in ms])
+        rows.append(
+            [f]
+            + [
+                f"{res['results'][f][m['key']]['missed']} / "
+                f"{res['results'][f][m['key']]['spurious']}"
+                for m in ms
+            ]
+        )
+    rows.append(
+        ["**total**"]
+        + [
+            f"**{res['totals'][m['key']]['missed']} / {res['totals'][m['key']]['spurious']}**"
+            for m in ms
+        ]
+    )
     return md_table(["family"] + [m["name"] for m in ms], rows)
 
 
@@ -283,12 +321,18 @@ def write_markdown(res: dict, out: Path) -> Path:
     n = res["cases_per_family"]
     txt = [
         "# Run time against error\n",
-        f"{n} cases per stress family ({len(res['families'])} families, the accuracy tests' generators and "
-        "seeds), mpmath reference from the exact binary64 inputs. Error = |t - t_ref| / ulp(t_ref) x |cos| "
-        "(condition-normalised as in tests/core/test_narrow_phase_accuracy.py) over the contacts method and "
-        "reference agree on; `inf` = reported a positive time for bodies already touching at t = 0 (or the "
-        "reverse). Missed/spurious: contact vs no contact against the reference, cases whose exact minimum "
-        "gap is within 1e-9 R^2 of zero exempt. ns/pair: best of repeated calls on the family's cases "
+        f"{n} cases per stress family ({len(res['families'])} families, the accuracy tests' "
+        "generators and "
+        "seeds), mpmath reference from the exact binary64 inputs. Error = |t - t_ref| / ulp(t_ref) "
+        "x |cos| "
+        "(condition-normalised as in tests/core/test_narrow_phase_accuracy.py) over the contacts "
+        "method and "
+        "reference agree on; `inf` = reported a positive time for bodies already touching at t = 0 "
+        "(or the "
+        "reverse). Missed/spurious: contact vs no contact against the reference, cases whose exact "
+        "minimum "
+        "gap is within 1e-9 R^2 of zero exempt. ns/pair: best of repeated calls on the family's "
+        "cases "
         "tiled to >= 8192 rows (Python-loop method: fewer rows), all methods in the same run.\n",
         "## All families\n",
         headline_table(res),
@@ -350,13 +394,23 @@ def plot(res: dict, out: Path) -> list[Path]:
     leg_ax.scatter([], [], marker="o", s=60, facecolors="none", edgecolors="red", linewidths=2,
                    label="red ring: missed/spurious\ncontacts (count: m/s)")
     leg_ax.legend(loc="center", fontsize=7, frameon=False)
-    leg_ax.text(0.0, -0.05, f"0 ulp (or no contacts) drawn at {ZERO_FLOOR:g} (dotted grey);\n"
-                f"inf (wrong t=0) and >= {INF_CAP:.0e} drawn at {INF_CAP:.0e} (dotted red);\n"
-                "dashed green: 4 ulp. Bottom-left is best.", fontsize=7, transform=leg_ax.transAxes, va="top")
-    for ax in list(axes.flat)[len(fams) + 1:]:
+    leg_ax.text(
+        0.0,
+        -0.05,
+        f"0 ulp (or no contacts) drawn at {ZERO_FLOOR:g} (dotted grey);\n"
+        f"inf (wrong t=0) and >= {INF_CAP:.0e} drawn at {INF_CAP:.0e} (dotted red);\n"
+        "dashed green: 4 ulp. Bottom-left is best.",
+        fontsize=7,
+        transform=leg_ax.transAxes,
+        va="top",
+    )
+    for ax in list(axes.flat)[len(fams) + 1 :]:
         ax.axis("off")
-    fig.suptitle(f"Run time against worst error per stress family ({res['cases_per_family']} cases each, "
-                 "mpmath reference)", fontsize=11)
+    fig.suptitle(
+        f"Run time against worst error per stress family ({res['cases_per_family']} cases each, "
+        "mpmath reference)",
+        fontsize=11,
+    )
     fig.tight_layout()
     p = out / "accuracy_vs_time_families.png"
     fig.savefig(p, dpi=90)
@@ -373,8 +427,8 @@ def plot(res: dict, out: Path) -> list[Path]:
         ymed = y_of(t["median_ulp"])
         bad = t["missed"] + t["spurious"]
         ax.plot([x, x], [ymed, y], color=colors[m["key"]], lw=1.2, zorder=2)
-        ax.scatter(x, ymed, marker=m["marker"], s=70, facecolors="white", edgecolors=colors[m["key"]],
-                   linewidths=1.5, zorder=3)
+        ax.scatter(x, ymed, marker=m["marker"], s=70, facecolors="white",
+                   edgecolors=colors[m["key"]], linewidths=1.5, zorder=3)
         ax.scatter(x, y, marker=m["marker"], s=110, color=colors[m["key"]],
                    edgecolors="red" if bad else "none", linewidths=2.0 if bad else 0, zorder=4,
                    label=m["name"])
@@ -386,11 +440,16 @@ def plot(res: dict, out: Path) -> list[Path]:
                         textcoords="offset points")
     decorate(ax, "")
     ax.set_xlabel("ns per pair, mean over families (log)")
-    ax.set_ylabel("error over all families, ulp x |cos| (log)\nfilled: worst finite, hollow: median")
-    ax.set_title(f"Run time against error, {len(res['families'])} stress families x "
-                 f"{res['cases_per_family']} cases (bottom-left is best)\n"
-                 f"0 ulp drawn at {ZERO_FLOOR:g}; >= {INF_CAP:.0e} drawn at {INF_CAP:.0e} (dotted red); "
-                 "dashed: 4 ulp; red ring: missed/spurious contacts", fontsize=9)
+    ax.set_ylabel(
+        "error over all families, ulp x |cos| (log)\nfilled: worst finite, hollow: median"
+    )
+    ax.set_title(
+        f"Run time against error, {len(res['families'])} stress families x "
+        f"{res['cases_per_family']} cases (bottom-left is best)\n"
+        f"0 ulp drawn at {ZERO_FLOOR:g}; >= {INF_CAP:.0e} drawn at {INF_CAP:.0e} (dotted red); "
+        "dashed: 4 ulp; red ring: missed/spurious contacts",
+        fontsize=9,
+    )
     ax.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.01, 1.0), frameon=False)
     fig.tight_layout()
     p = out / "accuracy_vs_time.png"

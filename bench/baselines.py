@@ -4,13 +4,15 @@
 All take the same arguments as ``time_to_collision`` with 2-D/3-D row arrays
 ``(n, D)`` / ``(n,)`` and a scalar horizon, and return float64 ``(n,)``.
 They expand the contact quartic in power basis and filter roots with an
-``|imag| < tol`` test -- exactly the approaches issue #3 warns about:
+``|imag| < tol`` test -- the power-basis approaches whose loss of digits
+the accuracy benchmark shows:
 
 * ``ttc_numpy_roots_loop``, ``ttc_companion_eigvals``, ``ttc_ferrari``: the
   quartic in *relative* coordinates (to be fair), overlap at t = 0 -> 0;
 * ``ttc_lecture``: the seed lecture's formulation verbatim (coefficients
   expanded from *absolute* coordinates, 1e-6 tolerances, no overlap case).
 """
+
 from __future__ import annotations
 
 import math
@@ -107,19 +109,19 @@ def quartic_roots_ferrari(a, b, c, d, e) -> np.ndarray:
     with np.errstate(all="ignore"):
         B, C, D, E = b / a, c / a, d / a, e / a
         p = C - 0.375 * B * B
-        q = D - 0.5 * B * C + 0.125 * B ** 3
-        r = E - 0.25 * B * D + 0.0625 * B * B * C - 3.0 / 256.0 * B ** 4
+        q = D - 0.5 * B * C + 0.125 * B**3
+        r = E - 0.25 * B * D + 0.0625 * B * B * C - 3.0 / 256.0 * B**4
         # resolvent cubic m^3 + p m^2 + (p^2/4 - r) m - q^2/8, depressed by m = z - p/3
         k1 = 0.25 * p * p - r
         P = k1 - p * p / 3.0
-        Q = 2.0 * p ** 3 / 27.0 - p * k1 / 3.0 - q * q / 8.0
-        disc = (0.25 * Q * Q + P ** 3 / 27.0).astype(np.complex128)
+        Q = 2.0 * p**3 / 27.0 - p * k1 / 3.0 - q * q / 8.0
+        disc = (0.25 * Q * Q + P**3 / 27.0).astype(np.complex128)
         u = _cbrt_c(-0.5 * Q + np.sqrt(disc))
         u = np.where(u == 0, _cbrt_c((-Q).astype(np.complex128)), u)
         w = np.exp(2j * np.pi / 3.0)
         zs = []
         for k in range(3):
-            uk = u * w ** k
+            uk = u * w**k
             zs.append(np.where(uk == 0, 0.0, uk - P / (3.0 * np.where(uk == 0, 1.0, uk))))
         m = np.stack(zs, axis=1) - (p / 3.0)[:, None]
         m = m[np.arange(m.shape[0]), np.argmax(m.real, axis=1)]
@@ -194,7 +196,9 @@ def lecture_coefficients(p_a, v_a, a_a, r_a, p_b, v_b, a_b, r_b):
     ``quartic_coefficients`` (the roots are the same).  The lecture is 2-D;
     for 3-D rows the z terms are added by the same pattern as the y terms.
     """
-    P_a, V_a, A_a, P_b, V_b, A_b = (np.asarray(x, dtype=np.float64) for x in (p_a, v_a, a_a, p_b, v_b, a_b))
+    P_a, V_a, A_a, P_b, V_b, A_b = (
+        np.asarray(x, dtype=np.float64) for x in (p_a, v_a, a_a, p_b, v_b, a_b)
+    )
     o = np.asarray(r_a, dtype=np.float64)
     p = np.asarray(r_b, dtype=np.float64)
     sqr = np.square
@@ -202,16 +206,50 @@ def lecture_coefficients(p_a, v_a, a_a, r_a, p_b, v_b, a_b, r_b):
     g, h, k, l, m, n = P_a[:, 1], P_b[:, 1], V_a[:, 1], V_b[:, 1], A_a[:, 1], A_b[:, 1]  # noqa: E741
     # verbatim from the lecture (same evaluation order), "1" read as l
     A = sqr(n) - 2.0 * m * n + sqr(m) + sqr(f) - 2.0 * e * f + sqr(e)
-    B = (4.0 * l - 4.0 * k) * n + (4.0 * k - 4.0 * l) * m + (4.0 * d - 4.0 * c) * f + (4.0 * c - 4.0 * d) * e
-    C = ((4.0 * h - 4.0 * g) * n + (4.0 * g - 4.0 * h) * m + 4.0 * sqr(l) - 8.0 * k * l + 4.0 * sqr(k)
-         + (4.0 * b - 4.0 * a) * f + (4.0 * a - 4.0 * b) * e + 4.0 * sqr(d) - 8.0 * c * d + 4.0 * sqr(c))
-    D = (8.0 * h - 8.0 * g) * l + (8.0 * g - 8.0 * h) * k + (8.0 * b - 8.0 * a) * d + (8.0 * a - 8.0 * b) * c
-    E = 4.0 * sqr(h) - 8.0 * g * h + 4.0 * sqr(g) + 4.0 * sqr(b) - 8.0 * a * b + 4.0 * sqr(a) - sqr(2.0 * (p + o))
+    B = (
+        (4.0 * l - 4.0 * k) * n
+        + (4.0 * k - 4.0 * l) * m
+        + (4.0 * d - 4.0 * c) * f
+        + (4.0 * c - 4.0 * d) * e
+    )
+    C = (
+        (4.0 * h - 4.0 * g) * n
+        + (4.0 * g - 4.0 * h) * m
+        + 4.0 * sqr(l)
+        - 8.0 * k * l
+        + 4.0 * sqr(k)
+        + (4.0 * b - 4.0 * a) * f
+        + (4.0 * a - 4.0 * b) * e
+        + 4.0 * sqr(d)
+        - 8.0 * c * d
+        + 4.0 * sqr(c)
+    )
+    D = (
+        (8.0 * h - 8.0 * g) * l
+        + (8.0 * g - 8.0 * h) * k
+        + (8.0 * b - 8.0 * a) * d
+        + (8.0 * a - 8.0 * b) * c
+    )
+    E = (
+        4.0 * sqr(h)
+        - 8.0 * g * h
+        + 4.0 * sqr(g)
+        + 4.0 * sqr(b)
+        - 8.0 * a * b
+        + 4.0 * sqr(a)
+        - sqr(2.0 * (p + o))
+    )
     if P_a.shape[1] == 3:  # not in the lecture: z terms by the same pattern as y
         g, h, k, l, m, n = P_a[:, 2], P_b[:, 2], V_a[:, 2], V_b[:, 2], A_a[:, 2], A_b[:, 2]  # noqa: E741
         A = A + (sqr(n) - 2.0 * m * n + sqr(m))
         B = B + ((4.0 * l - 4.0 * k) * n + (4.0 * k - 4.0 * l) * m)
-        C = C + ((4.0 * h - 4.0 * g) * n + (4.0 * g - 4.0 * h) * m + 4.0 * sqr(l) - 8.0 * k * l + 4.0 * sqr(k))
+        C = C + (
+            (4.0 * h - 4.0 * g) * n
+            + (4.0 * g - 4.0 * h) * m
+            + 4.0 * sqr(l)
+            - 8.0 * k * l
+            + 4.0 * sqr(k)
+        )
         D = D + ((8.0 * h - 8.0 * g) * l + (8.0 * g - 8.0 * h) * k)
         E = E + (4.0 * sqr(h) - 8.0 * g * h + 4.0 * sqr(g))
     return A, B, C, D, E
@@ -233,5 +271,9 @@ def ttc_lecture(p_a, v_a, a_a, r_a, p_b, v_b, a_b, r_b, horizon=math.inf):
     if np.any(~quart):
         roots[~quart, :2] = _quadratic_roots(C[~quart], D[~quart], E[~quart])
     with np.errstate(invalid="ignore"):
-        ok = (np.abs(roots.imag) < LECTURE_TOL) & (roots.real > LECTURE_TOL) & (roots.real <= horizon)
+        ok = (
+            (np.abs(roots.imag) < LECTURE_TOL)
+            & (roots.real > LECTURE_TOL)
+            & (roots.real <= horizon)
+        )
     return np.where(ok, roots.real, np.inf).min(axis=1)

@@ -14,11 +14,13 @@ the aimed and the random half, and on the same mix with da = 0, the
 constant-velocity closed form), batched ``numpy.linalg.eigvals`` on 4x4
 companions, and a Python loop over ``numpy.roots`` (timed on every k-th
 pair, 4000 by default), each the best of several runs (ours: 2 x 25, before
-and after the others; eigvals 5; the loop 3), their ratios to ours threaded and serial, the cost of small batches (one body
+and after the others; eigvals 5; the loop 3), their ratios to ours threaded and serial, the cost of
+small batches (one body
 vs 10 neighbours: row arrays = fast path, and broadcast scalar radii =
 general path), one pair per call (with a trivial jitted call as the
 same-run baseline) and numba's cold-compile vs cached start.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -88,7 +90,7 @@ def _explicit(fn, args, **kw):
 
 
 def one_pair_costs(P, H: float, reps: int, rounds: int = 7):
-    """Seconds per call of one pair from Python (issue 17: <= 0.8 us) in each
+    """Seconds per call of one pair from Python (target: <= 0.8 us) in each
     input form, and of the same-run baselines: a trivial jitted call, and
     numba's dispatcher called directly with the pair's 15 floats (the core of
     a numba one-pair entry, which took 3.4-3.8 us per call).  Each call is
@@ -136,21 +138,28 @@ def one_pair_costs(P, H: float, reps: int, rounds: int = 7):
 
 
 def print_one_pair(t_one: dict, t_trivial: float) -> None:
-    print("one pair per call: " + ", ".join(f"{k} {v * 1e6:.2f} us ({v / t_trivial:.1f}x)"
-                                            for k, v in t_one.items())
-          + f"; (Nx): N times the same-run baseline, a trivial jitted call, {t_trivial * 1e6:.2f} us")
+    print(
+        "one pair per call: "
+        + ", ".join(f"{k} {v * 1e6:.2f} us ({v / t_trivial:.1f}x)" for k, v in t_one.items())
+        + f"; (Nx): N times the same-run baseline, a trivial jitted call, {t_trivial * 1e6:.2f} us"
+    )
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
     ap.add_argument("--pairs", type=int, default=200_000)
-    ap.add_argument("--quick", action="store_true", help="20,000 pairs, 1 repeat, small roots subsample")
+    ap.add_argument(
+        "--quick", action="store_true", help="20,000 pairs, 1 repeat, small roots subsample"
+    )
     ap.add_argument("--roots-sample", type=int, default=4000)
     ap.add_argument("--one-pair", action="store_true",
-                    help="only the one-pair-per-call figures (issue 17: <= 0.8 us)")
+                    help="only the one-pair-per-call figures (target: <= 0.8 us)")
     args = ap.parse_args()
     if args.one_pair:
         from circle_collision_ros.core import time_to_collision
+
         P = make_pairs(16)
         time_to_collision(*P, horizon=10.0)
         print_one_pair(*one_pair_costs(P, 10.0, 20000))
@@ -159,7 +168,7 @@ def main() -> None:
     # best of several runs: the machine is shared, and the minimum is the run
     # least disturbed by other processes (applied to every method alike)
     repeat = 1 if args.quick else 5
-    # ours takes milliseconds per run: many runs, in two sessions (before and
+    # ours takes milliseconds per run: many runs, in two rounds (before and
     # after the baselines), so that a burst of load on the other core of the
     # shared VM does not set the threaded figure
     repeat_ours = 1 if args.quick else 25
@@ -187,7 +196,7 @@ def main() -> None:
     aimed = tuple(np.ascontiguousarray(x[:h]) for x in P)
     rand = tuple(np.ascontiguousarray(x[h:]) for x in P)
     t_aimed = best_of(lambda: ttc_kernel_h(*aimed, H, buf[:h]), repeat)
-    t_rand = best_of(lambda: ttc_kernel_h(*rand, H, buf[:n - h]), repeat)
+    t_rand = best_of(lambda: ttc_kernel_h(*rand, H, buf[: n - h]), repeat)
     # constant relative velocity (da = 0, the closed-form path): the same
     # generator with every row's relative acceleration zeroed, serial kernel
     S = mixed_pairs(n, 2, 1, straight_fraction=1.0)
@@ -195,7 +204,7 @@ def main() -> None:
     t_straight = best_of(lambda: ttc_kernel_h(*S, H, buf), repeat_ours)
     t_eig = best_of(lambda: ttc_companion_eigvals(*P, horizon=H), repeat)
     # every k-th pair: the subsample holds aimed and random pairs alike
-    sub = tuple(np.ascontiguousarray(x[::n // nroots][:nroots]) for x in P)
+    sub = tuple(np.ascontiguousarray(x[:: n // nroots][:nroots]) for x in P)
     t_roots = best_of(lambda: ttc_numpy_roots_loop(*sub, horizon=H), 1 if args.quick else 3)
     t_ours = min(t_ours, best_of(lambda: time_to_collision(*P, horizon=H), repeat_ours))
     t_ours1 = min(t_ours1, best_of(lambda: ttc_kernel_h(*P, H, buf), repeat_ours))
@@ -222,29 +231,34 @@ def main() -> None:
                 time_to_collision(*args, horizon=h)
             best = min(best, (time.perf_counter() - t0) / reps)
         return best
+
     t_small = per_call(small)
     t_small_b = per_call(small_b)
 
     t_one, t_trivial = one_pair_costs(P, H, reps)
 
     ns = lambda t, m: 1e9 * t / m  # noqa: E731
-    rows = [
-        (f"ours (numba, {numba.get_num_threads()} threads)", ns(t_ours, n)),
-        ("ours (numba, serial kernel)", ns(t_ours1, n)),
-        ("  serial, aimed half only", ns(t_aimed, h)),
-        ("  serial, random half only", ns(t_rand, n - h)),
-        ("  serial, da = 0 (same mix, straight)", ns(t_straight, n)),
-        ("companion eigvals (batched)", ns(t_eig, n)),
-        (f"numpy.roots loop ({nroots} pairs)", ns(t_roots, nroots)),
-    ]
-    print(f"pairs: {n} (half aimed, half random), horizon {H} s, contacts: {int(hits.sum())}, "
-          f"hit/miss disagreements with eigvals: {disagree}")
+    rows = [(f"ours (numba, {numba.get_num_threads()} threads)", ns(t_ours, n)),
+            ("ours (numba, serial kernel)", ns(t_ours1, n)),
+            ("  serial, aimed half only", ns(t_aimed, h)),
+            ("  serial, random half only", ns(t_rand, n - h)),
+            ("  serial, da = 0 (same mix, straight)", ns(t_straight, n)),
+            ("companion eigvals (batched)", ns(t_eig, n)),
+            (f"numpy.roots loop ({nroots} pairs)", ns(t_roots, nroots))]
+    print(
+        f"pairs: {n} (half aimed, half random), horizon {H} s, contacts: {int(hits.sum())}, "
+        f"hit/miss disagreements with eigvals: {disagree}"
+    )
     print(f"{'method':36s} {'ns/pair':>12s} {'x vs ours thr.':>15s} {'x vs ours serial':>17s}")
     for name, v in rows:
         print(f"{name:36s} {v:12.1f} {v / rows[0][1]:15.1f} {v / rows[1][1]:17.1f}")
-    print(f"small batch (10 pairs) per call: {t_small * 1e6:.1f} us (row arrays, fast path), "
-          f"{t_small_b * 1e6:.1f} us (scalar radii, general path)")
-    print(f"constant velocity (da = 0) / accelerating rows, serial kernel: {t_straight / t_ours1:.2f}")
+    print(
+        f"small batch (10 pairs) per call: {t_small * 1e6:.1f} us (row arrays, fast path), "
+        f"{t_small_b * 1e6:.1f} us (scalar radii, general path)"
+    )
+    print(
+        f"constant velocity (da = 0) / accelerating rows, serial kernel: {t_straight / t_ours1:.2f}"
+    )
     print_one_pair(t_one, t_trivial)
     print(f"numba start (import + first call): cold compile {cold:.2f} s, cached {cached:.3f} s")
 

@@ -20,7 +20,7 @@ writes the figures for bench/results.
 
     .venv/bin/python bench/bench_node.py --targets [--seconds 10] [--json FILE]
 
-prints the issue-14 targets instead, one collision_node process per scenario:
+prints the stream scenarios against their targets instead, one collision_node process per scenario:
 300 bodies each with its own CircleState publisher at 30 Hz; 1,000 bodies in
 arrays at 30 Hz with default markers and with markers off (same run, ratio);
 5,000 bodies in arrays at 30 Hz; 10,000 at 10 Hz; a 10,000-body scene then one
@@ -34,13 +34,14 @@ Ingested / coalesced / missing come from the node's /diagnostics.
     .venv/bin/python bench/bench_node.py --covariance 0.2 [--bodies 1000] [--seconds 10]
 
 runs each size twice in the same run, without and with a covariance on every body
-(position sigma 0.2 m, velocity sigma half that), and prints both rows (issue 18).
+(position sigma 0.2 m, velocity sigma half that), and prints both rows.
 
     .venv/bin/python bench/bench_node.py --targets --covariance 0.2 [--seconds 10]
 
-runs the issue-14 target scenarios with that covariance on every body (the single-state
+runs the target scenarios with that covariance on every body (the single-state
 streams and the arrays alike); each scenario's name says "covariance sigma ..." or "exact".
 """
+
 from __future__ import annotations
 
 import argparse
@@ -96,12 +97,13 @@ class ArrayFrames:
             pos = self._buf.find(struct.pack("<iI", self._SEC0 + k, 0), pos)
             offsets.append(pos)
         stamp_at = np.array(offsets, dtype=np.int64)  # header.stamp of state k (4-aligned)
-        # after the state header: frame "map" (4 + 4 bytes), id (4 + 7), padding to 8, then the doubles
+        # after the state header: frame "map" (4 + 4 bytes), id (4 + 7), padding to 8, then the
+        # doubles
         first = stamp_at + 8 + 8 + 4 + len(self._ids[0]) + 1
         first += (-(first - 4)) % 8
         body = memoryview(self._buf)[4:]
-        self._u32 = np.frombuffer(body[:len(body) // 4 * 4], dtype=np.uint32)
-        self._f64 = np.frombuffer(body[:len(body) // 8 * 8], dtype=np.float64)
+        self._u32 = np.frombuffer(body[: len(body) // 4 * 4], dtype=np.uint32)
+        self._f64 = np.frombuffer(body[: len(body) // 8 * 8], dtype=np.float64)
         self._stamp_words = (stamp_at - 4) // 4
         self._values = (first - 4) // 8  # radius, p (3), v (3), a (3)
         self._checked = False
@@ -141,15 +143,17 @@ def body_covariance(sigma: float) -> list[float]:
     velocity sigma / 2 (empty for sigma 0: an exact state)."""
     if not sigma:
         return []
-    return np.diag([sigma ** 2] * 3 + [(sigma / 2) ** 2] * 3).ravel().tolist()
+    return np.diag([sigma**2] * 3 + [(sigma / 2) ** 2] * 3).ravel().tolist()
 
 
 def covariance_fields(n: int, sigma: float) -> dict:
     """StateBatch's covariance fields of n bodies carrying body_covariance(sigma)."""
     if not sigma:
         return {}
-    return {"covariance": np.tile(body_covariance(sigma), (n, 1)),
-            "covariance_size": np.full(n, 36, dtype=np.int64)}
+    return {
+        "covariance": np.tile(body_covariance(sigma), (n, 1)),
+        "covariance_size": np.full(n, 36, dtype=np.int64),
+    }
 
 
 def scene_bytes(scene: SyntheticScene, stamp_ns: int, sigma: float = 0.0) -> bytes:
@@ -178,8 +182,10 @@ def _percentiles(values: list[float]) -> tuple[float, float]:
 def measure(bodies: int, seconds: float, rate: float, sigma: float = 0.0) -> dict:
     """One scene size: start a node, drive it, collect latencies."""
     exe = os.path.join(sys.prefix, "lib", "circle_collision_ros", "collision_node")
-    node_proc = subprocess.Popen([exe, "--ros-args", "-p", "marker_rate:=0.0", "-p", "max_bodies:=100000",
-                                  "--log-level", "warn"])
+    node_proc = subprocess.Popen(
+        [exe, "--ros-args", "-p", "marker_rate:=0.0", "-p", "max_bodies:=100000", "--log-level",
+         "warn"]
+    )
     rclpy.init()
     client = rclpy.create_node("bench_node_client")
     latencies: list[float] = []
@@ -205,12 +211,13 @@ def measure(bodies: int, seconds: float, rate: float, sigma: float = 0.0) -> dic
                 diagnostics.update({kv.key: kv.value for kv in status.values})
 
     # Raw: only the stamp is read, so the client's own decoding adds nothing to the figures.
-    client.create_subscription(CollisionPredictionArray, "collision_predictions", on_prediction, 100,
-                               raw=True)
+    client.create_subscription(
+        CollisionPredictionArray, "collision_predictions", on_prediction, 100, raw=True
+    )
     client.create_subscription(DiagnosticArray, "/diagnostics", on_diagnostics, 10)
     pub = client.create_publisher(CircleStateArray, "circle_states",
                                   QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE))
-    # The density of the issue's scale scene (3,000 bodies per km^2): ~333 m^2 per body.
+    # The density of the scale scene (3,000 bodies per km^2): ~333 m^2 per body.
     scene = SyntheticScene(bodies, size=float(np.sqrt(bodies * 333.0)), dimensions=2, seed=bodies)
     try:
         deadline = time.monotonic() + 60
@@ -253,16 +260,14 @@ def measure(bodies: int, seconds: float, rate: float, sigma: float = 0.0) -> dic
         while time.monotonic() < end:
             rclpy.spin_once(client, timeout_sec=0.05)
         e2e50, e2e99 = _percentiles(paced)
-        return {
-            "bodies": bodies, "rate_hz": rate, "sent": sent, "answered": len(paced),
-            "e2e_p50_ms": e2e50, "e2e_p99_ms": e2e99,
-            "node_p50_ms": float(diag_paced.get("latency_ms_p50", "nan")),
-            "node_p99_ms": float(diag_paced.get("latency_ms_p99", "nan")),
-            "candidate_pairs": int(diag_paced.get("candidate_pairs", "-1")),
-            "contacts": int(diag_paced.get("contacts", "-1")),
-            "burst_sent_per_s": burst_sent / burst_time,
-            "burst_predictions_per_s": len(received) / burst_time,
-        }
+        return {"bodies": bodies, "rate_hz": rate, "sent": sent, "answered": len(paced),
+                "e2e_p50_ms": e2e50, "e2e_p99_ms": e2e99,
+                "node_p50_ms": float(diag_paced.get("latency_ms_p50", "nan")),
+                "node_p99_ms": float(diag_paced.get("latency_ms_p99", "nan")),
+                "candidate_pairs": int(diag_paced.get("candidate_pairs", "-1")),
+                "contacts": int(diag_paced.get("contacts", "-1")),
+                "burst_sent_per_s": burst_sent / burst_time,
+                "burst_predictions_per_s": len(received) / burst_time}
     finally:
         client.destroy_node()
         rclpy.try_shutdown()
@@ -274,7 +279,7 @@ def measure(bodies: int, seconds: float, rate: float, sigma: float = 0.0) -> dic
 
 
 class Targets:
-    """Issue 14's targets (ms, fractions)."""
+    """The stream scenarios' targets (ms, fractions)."""
 
     STREAM_INGESTED = 0.999
     STREAM_P99_MS = 15.0
@@ -293,9 +298,13 @@ def _single_state_template(stamp_ns: int, sigma: float = 0.0) -> tuple[bytearray
     from builtin_interfaces.msg import Time
 
     sentinel = 1234.5678125
-    msg = CircleState(header=Header(stamp=Time(sec=stamp_ns // 10**9, nanosec=stamp_ns % 10**9),
-                                    frame_id="map"), id="b00000", radius=1.0,
-                      position=Point(x=sentinel, y=0.0, z=0.0), covariance=body_covariance(sigma))
+    msg = CircleState(
+        header=Header(stamp=Time(sec=stamp_ns // 10**9, nanosec=stamp_ns % 10**9), frame_id="map"),
+        id="b00000",
+        radius=1.0,
+        position=Point(x=sentinel, y=0.0, z=0.0),
+        covariance=body_covariance(sigma),
+    )
     data = bytearray(serialize_message(msg))
     return data, bytes(data).index(struct.pack("<d", sentinel))
 
@@ -330,7 +339,8 @@ def receive_predictions(out: str) -> int:
         answers.append((_stamp_of(data), info.get("source_timestamp") or now, now))
 
     node.create_subscription(CollisionPredictionArray, "collision_predictions", on_prediction,
-                             QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE), raw=True)
+                             QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE),
+                             raw=True)
     _freeze_startup_objects()
     try:
         rclpy.spin(node)
@@ -348,18 +358,23 @@ class ScenarioRun:
 
     def __init__(self, params: dict[str, str]) -> None:
         import tempfile
+
         exe = os.path.join(sys.prefix, "lib", "circle_collision_ros", "collision_node")
         args = [exe, "--ros-args", "--log-level", "warn"]
         for key, value in params.items():
             args += ["-p", f"{key}:={value}"]
         self.proc = subprocess.Popen(args)
         self._answers_file = tempfile.NamedTemporaryFile(suffix=".json", delete=False).name
-        self.receiver = subprocess.Popen([sys.executable, __file__, "--receive", self._answers_file])
+        self.receiver = subprocess.Popen(
+            [sys.executable, __file__, "--receive", self._answers_file]
+        )
         rclpy.init()
         self.client = rclpy.create_node("bench_node_targets")
         self.lock = threading.Lock()
-        self.sent: list[tuple[int, int]] = []       # (stamp ns, wall ns at publish) in send order
-        self.answers: list[tuple[int, int, int]] = []  # (stamp ns, node publish wall ns, receipt wall ns)
+        self.sent: list[tuple[int, int]] = []  # (stamp ns, wall ns at publish) in send order
+        self.answers: list[
+            tuple[int, int, int]
+        ] = []  # (stamp ns, node publish wall ns, receipt wall ns)
         self.diagnostics: dict[str, str] = {}
         self.client.create_subscription(DiagnosticArray, "/diagnostics", self._on_diagnostics, 10)
         self.executor = SingleThreadedExecutor()
@@ -368,7 +383,10 @@ class ScenarioRun:
         self.thread.start()
         _freeze_startup_objects()
         deadline = time.monotonic() + 60
-        while self.client.count_subscribers("/collision_predictions") == 0 and time.monotonic() < deadline:
+        while (
+            self.client.count_subscribers("/collision_predictions") == 0
+            and time.monotonic() < deadline
+        ):
             time.sleep(0.1)
 
     def _collect_answers(self) -> None:
@@ -432,9 +450,10 @@ class ScenarioRun:
 
 
 def _node_counts(diag: dict[str, str]) -> dict:
-    return {k: int(diag.get(k, "-1")) for k in ("messages", "inputs_coalesced", "inputs_missing",
-                                                "predictions_published")} | {
-        "node_diag_p99_ms": float(diag.get("latency_ms_p99", "nan"))}
+    return {
+        k: int(diag.get(k, "-1"))
+        for k in ("messages", "inputs_coalesced", "inputs_missing", "predictions_published")
+    } | {"node_diag_p99_ms": float(diag.get("latency_ms_p99", "nan"))}
 
 
 def _covariance_label(sigma: float) -> str:
@@ -444,19 +463,23 @@ def _covariance_label(sigma: float) -> str:
 def run_streams(bodies: int, rate: float, seconds: float, sigma: float = 0.0) -> dict:
     """Every body has its own CircleState publisher on one single_state_topics topic; sigma > 0:
     every state carries body_covariance(sigma)."""
-    run = ScenarioRun({"single_state_topics": "['body_states']", "state_topics": "['unused']",
-                       "marker_rate": "0.0", "max_bodies": "100000"})
+    run = ScenarioRun(
+        {"single_state_topics": "['body_states']", "state_topics": "['unused']",
+         "marker_rate": "0.0", "max_bodies": "100000"}
+    )
     try:
         qos = QoSProfile(depth=10, reliability=ReliabilityPolicy.BEST_EFFORT)
         pubs = [run.client.create_publisher(CircleState, "body_states", qos) for _ in range(bodies)]
         run.wait_matched(pubs)
         template, pos_at = _single_state_template(time.time_ns(), sigma)
         id_at = bytes(template).index(b"b00000")
-        scene = SyntheticScene(bodies, size=float(np.sqrt(bodies * 333.0)), dimensions=2, seed=bodies)
+        scene = SyntheticScene(
+            bodies, size=float(np.sqrt(bodies * 333.0)), dimensions=2, seed=bodies
+        )
         messages = []
         for k in range(bodies):
             m = bytearray(template)
-            m[id_at:id_at + 6] = f"b{k:05d}".encode()
+            m[id_at : id_at + 6] = f"b{k:05d}".encode()
             messages.append(m)
         period = 1.0 / rate
         phase = np.arange(bodies) * (period / bodies)  # unsynchronised sources, evenly spread
@@ -481,10 +504,15 @@ def run_streams(bodies: int, rate: float, seconds: float, sigma: float = 0.0) ->
                 next_send[k] += period
             time.sleep(max(0.0, min(0.002, float(next_send.min()) - time.monotonic())))
         diag = run.diagnostics_after(2.2)
-        result = {"scenario": f"{bodies} bodies, own CircleState stream each, {rate:.0f} Hz"
-                              + _covariance_label(sigma),
-                  "bodies": bodies, "rate_hz": rate, "covariance_sigma": sigma, **run.latencies(),
-                  **_node_counts(diag)}
+        result = {
+            "scenario": f"{bodies} bodies, own CircleState stream each, {rate:.0f} Hz"
+            + _covariance_label(sigma),
+            "bodies": bodies,
+            "rate_hz": rate,
+            "covariance_sigma": sigma,
+            **run.latencies(),
+            **_node_counts(diag),
+        }
         result["published_total"] = published  # warm-up included, like the node's count
         result["ingested_fraction"] = result["messages"] / max(1, published)
         return result
@@ -495,13 +523,20 @@ def run_streams(bodies: int, rate: float, seconds: float, sigma: float = 0.0) ->
 def run_arrays(bodies: int, rate: float, seconds: float, marker_rate: float,
                state_reliability: str = "best_effort", sigma: float = 0.0) -> dict:
     """Arrays of every body at `rate`; sigma > 0: every state carries body_covariance(sigma)."""
-    run = ScenarioRun({"marker_rate": str(float(marker_rate)), "max_bodies": "100000",
-                       "state_reliability": state_reliability})
+    run = ScenarioRun(
+        {"marker_rate": str(float(marker_rate)), "max_bodies": "100000",
+         "state_reliability": state_reliability}
+    )
     try:
-        pub = run.client.create_publisher(CircleStateArray, "circle_states",
-                                          QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE))
+        pub = run.client.create_publisher(
+            CircleStateArray,
+            "circle_states",
+            QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE),
+        )
         run.wait_matched([pub])
-        scene = SyntheticScene(bodies, size=float(np.sqrt(bodies * 333.0)), dimensions=2, seed=bodies)
+        scene = SyntheticScene(
+            bodies, size=float(np.sqrt(bodies * 333.0)), dimensions=2, seed=bodies
+        )
         period = 1.0 / rate
         for _ in range(5):  # warm-up, not measured
             pub.publish(scene_bytes(scene, time.time_ns(), sigma))
@@ -524,12 +559,15 @@ def run_arrays(bodies: int, rate: float, seconds: float, marker_rate: float,
             time.sleep(max(0.0, min(0.002, next_send - time.monotonic())))
         diag = run.diagnostics_after(2.2)
         counts = _node_counts(diag)
-        label = f"{bodies} bodies in arrays, {rate:.0f} Hz, markers " + (
-            f"{marker_rate:g} Hz" if marker_rate else "off") + (
-            ", reliable KEEP_LAST 1" if state_reliability == "reliable" else "") + _covariance_label(sigma)
+        label = (
+            f"{bodies} bodies in arrays, {rate:.0f} Hz, markers "
+            + (f"{marker_rate:g} Hz" if marker_rate else "off")
+            + (", reliable KEEP_LAST 1" if state_reliability == "reliable" else "")
+            + _covariance_label(sigma)
+        )
         return {"scenario": label, "bodies": bodies, "rate_hz": rate, "marker_rate": marker_rate,
-                "covariance_sigma": sigma,
-                **run.latencies(), **counts, "frames": frames, "warmup_frames": 5}
+                "covariance_sigma": sigma, **run.latencies(), **counts, "frames": frames,
+                "warmup_frames": 5}
     finally:
         run.close()
 
@@ -537,17 +575,27 @@ def run_arrays(bodies: int, rate: float, seconds: float, marker_rate: float,
 def run_one_body_updates(bodies: int, rate: float, seconds: float, sigma: float = 0.0) -> dict:
     """A scene of `bodies` (one CircleStateArray), then one body per CircleState message at `rate`
     (a random body each time, stamped with the send time): the node's per-message path at scale
-    (issue 14: a one-body update re-evaluates only that body's pairs). Default markers (10 Hz);
+    (a one-body update re-evaluates only that body's pairs). Default markers (10 Hz);
     stale_timeout long enough that the scene keeps every body."""
-    run = ScenarioRun({"single_state_topics": "['body_states']", "max_bodies": "100000",
-                       "stale_timeout": "3600.0"})
+    run = ScenarioRun(
+        {"single_state_topics": "['body_states']", "max_bodies": "100000",
+         "stale_timeout": "3600.0"}
+    )
     try:
-        array_pub = run.client.create_publisher(CircleStateArray, "circle_states",
-                                                QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE))
-        pub = run.client.create_publisher(CircleState, "body_states",
-                                          QoSProfile(depth=10, reliability=ReliabilityPolicy.BEST_EFFORT))
+        array_pub = run.client.create_publisher(
+            CircleStateArray,
+            "circle_states",
+            QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE),
+        )
+        pub = run.client.create_publisher(
+            CircleState,
+            "body_states",
+            QoSProfile(depth=10, reliability=ReliabilityPolicy.BEST_EFFORT),
+        )
         run.wait_matched([array_pub, pub])
-        scene = SyntheticScene(bodies, size=float(np.sqrt(bodies * 333.0)), dimensions=2, seed=bodies)
+        scene = SyntheticScene(
+            bodies, size=float(np.sqrt(bodies * 333.0)), dimensions=2, seed=bodies
+        )
         array_pub.publish(scene_bytes(scene, time.time_ns(), sigma))
         deadline = time.monotonic() + 30
         while time.monotonic() < deadline:  # the node reports its scene size on /diagnostics (1 Hz)
@@ -565,7 +613,7 @@ def run_one_body_updates(bodies: int, rate: float, seconds: float, sigma: float 
             now = time.monotonic()
             if now >= next_send:
                 k = int(rng.integers(0, bodies))
-                data[id_at:id_at + 6] = f"b{k:05d}".encode()
+                data[id_at : id_at + 6] = f"b{k:05d}".encode()
                 stamp = _restamp(data, pos_at, scene.p[k, :2] + (now - start) * scene.v[k, :2])
                 pub.publish(bytes(data))
                 if now >= warm_until:
@@ -574,26 +622,36 @@ def run_one_body_updates(bodies: int, rate: float, seconds: float, sigma: float 
                 next_send += 1.0 / rate
             time.sleep(max(0.0, min(0.002, next_send - time.monotonic())))
         diag = run.diagnostics_after(2.2)
-        return {"scenario": f"{bodies} bodies, then one body per CircleState at {rate:.0f} Hz, markers 10 Hz"
-                            + _covariance_label(sigma),
-                "bodies": bodies, "rate_hz": rate, "covariance_sigma": sigma, "one_body": True,
-                **run.latencies(), **_node_counts(diag), "node_diag_p50_ms": float(diag.get("latency_ms_p50", "nan"))}
+        return {
+            "scenario": f"{bodies} bodies, then one body per CircleState at {rate:.0f} Hz, markers "
+                        "10 Hz"
+            + _covariance_label(sigma),
+            "bodies": bodies,
+            "rate_hz": rate,
+            "covariance_sigma": sigma,
+            "one_body": True,
+            **run.latencies(),
+            **_node_counts(diag),
+            "node_diag_p50_ms": float(diag.get("latency_ms_p50", "nan")),
+        }
     finally:
         run.close()
 
 
 def measure_qos(seconds: float) -> list[dict]:
-    """Issue 19: best-effort (+ the shipped profile) against reliable KEEP_LAST 1 inputs, same run."""
+    """Best-effort (+ the shipped profile) against reliable KEEP_LAST 1 inputs, same run."""
     rows = []
     for bodies, rate in ((1000, 30.0), (5000, 30.0), (10000, 10.0)):
         for reliability in ("best_effort", "reliable"):
-            rows.append(run_arrays(bodies, rate, seconds, marker_rate=10.0, state_reliability=reliability))
+            rows.append(
+                run_arrays(bodies, rate, seconds, marker_rate=10.0, state_reliability=reliability)
+            )
     return rows
 
 
 def measure_targets(seconds: float, sigma: float = 0.0) -> list[dict]:
-    """Issue 14's scenarios; sigma > 0: every body of every scenario carries body_covariance(sigma)
-    (issue 18: the same targets hold with covariance on)."""
+    """The stream scenarios; sigma > 0: every body of every scenario carries body_covariance(sigma)
+    (the same targets hold with covariance on)."""
     rows = [run_streams(300, 30.0, seconds, sigma)]
     rows.append(run_arrays(1000, 30.0, seconds, marker_rate=10.0, sigma=sigma))
     rows.append(run_arrays(1000, 30.0, seconds, marker_rate=0.0, sigma=sigma))
@@ -606,41 +664,64 @@ def measure_targets(seconds: float, sigma: float = 0.0) -> list[dict]:
 def targets_table(rows: list[dict]) -> str:
     """Markdown: each scenario's figures and the target it is held to."""
     by = {r["scenario"]: r for r in rows}
-    lines = ["| scenario | inputs sent | ingested by node | coalesced | missing | answered/unanswered |"
-             " p50 ms | p99 ms | max ms | node /diagnostics p99 ms | target | met |",
-             "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|---|"]
+    lines = [
+        "| scenario | inputs sent | ingested by node | coalesced | missing | answered/unanswered |"
+        " p50 ms | p99 ms | max ms | node /diagnostics p99 ms | target | met |",
+        "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|---|",
+    ]
     for r in by.values():
         if r.get("one_body"):
             ingested = f"{r['messages']}"
-            target = ("context for the one-body node-side work (bench_scene_updates.py, <= 0.3 ms): node "
-                      f"/diagnostics p50 {r['node_diag_p50_ms']:.2f} ms, receive to publish")
+            target = (
+                "context for the one-body node-side work (bench_scene_updates.py, <= 0.3 ms): node "
+                f"/diagnostics p50 {r['node_diag_p50_ms']:.2f} ms, receive to publish"
+            )
             met = r["unanswered"] == 0 and r["inputs_missing"] == 0
         elif "ingested_fraction" in r:
-            target = f">= {Targets.STREAM_INGESTED:.1%} ingested, p99 <= {Targets.STREAM_P99_MS:g} ms"
-            met = r["ingested_fraction"] >= Targets.STREAM_INGESTED and r["p99_ms"] <= Targets.STREAM_P99_MS
+            target = (
+                f">= {Targets.STREAM_INGESTED:.1%} ingested, p99 <= {Targets.STREAM_P99_MS:g} ms"
+            )
+            met = (
+                r["ingested_fraction"] >= Targets.STREAM_INGESTED
+                and r["p99_ms"] <= Targets.STREAM_P99_MS
+            )
             ingested = f"{r['messages']} ({r['ingested_fraction']:.2%})"
         else:
             ingested = f"{r['messages']}"
             every = r["unanswered"] == 0 and r["inputs_missing"] == 0
-            off = next((o for o in rows if o["bodies"] == 1000 and o.get("marker_rate") == 0.0
-                        and o.get("covariance_sigma", 0.0) == r.get("covariance_sigma", 0.0)), None)
+            off = next(
+                (
+                    o
+                    for o in rows
+                    if o["bodies"] == 1000
+                    and o.get("marker_rate") == 0.0
+                    and o.get("covariance_sigma", 0.0) == r.get("covariance_sigma", 0.0)
+                ),
+                None,
+            )
             if r["bodies"] == 1000 and r.get("marker_rate"):
                 ratio = r["p99_ms"] / off["p99_ms"] if off else float("nan")
-                target = (f"p99 <= {Targets.ARRAY_1000_P99_MS:g} ms and <= {Targets.MARKER_RATIO:.1f} x "
-                          f"markers-off (ratio {ratio:.2f})")
+                target = (
+                    f"p99 <= {Targets.ARRAY_1000_P99_MS:g} ms and <= {Targets.MARKER_RATIO:.1f} x "
+                    f"markers-off (ratio {ratio:.2f})"
+                )
                 met = r["p99_ms"] <= Targets.ARRAY_1000_P99_MS and ratio <= Targets.MARKER_RATIO
             elif r["bodies"] == 1000:
                 target, met = "reference for the markers ratio", True
             elif r["bodies"] == 5000:
-                target = f"every frame answered or coalesced, p99 <= {Targets.ARRAY_5000_P99_MS:g} ms"
+                target = (
+                    f"every frame answered or coalesced, p99 <= {Targets.ARRAY_5000_P99_MS:g} ms"
+                )
                 met = every and r["p99_ms"] <= Targets.ARRAY_5000_P99_MS
             else:
                 target = f"p99 <= {Targets.ARRAY_10000_P99_MS:g} ms"
                 met = every and r["p99_ms"] <= Targets.ARRAY_10000_P99_MS
-        lines.append(f"| {r['scenario']} | {r['sent']} | {ingested} | {r['inputs_coalesced']} |"
-                     f" {r['inputs_missing']} | {r['answers']}/{r['unanswered']} | {r['p50_ms']:.2f} |"
-                     f" {r['p99_ms']:.2f} | {r['max_ms']:.2f} | {r['node_diag_p99_ms']:.2f} | {target} |"
-                     f" {'yes' if met else 'NO'} |")
+        lines.append(
+            f"| {r['scenario']} | {r['sent']} | {ingested} | {r['inputs_coalesced']} |"
+            f" {r['inputs_missing']} | {r['answers']}/{r['unanswered']} | {r['p50_ms']:.2f} |"
+            f" {r['p99_ms']:.2f} | {r['max_ms']:.2f} | {r['node_diag_p99_ms']:.2f} | {target} |"
+            f" {'yes' if met else 'NO'} |"
+        )
     return "\n".join(lines)
 
 
@@ -653,13 +734,21 @@ def main() -> int:
     parser.add_argument("--json", help="also write the figures to this file")
     parser.add_argument("--receive", help=argparse.SUPPRESS)  # internal: the receiver process
     parser.add_argument("--targets", action="store_true",
-                        help="run the issue-14 target scenarios instead (see the module docstring)")
-    parser.add_argument("--qos", action="store_true",
-                        help="compare best-effort and reliable KEEP_LAST 1 state subscriptions at "
-                             "1,000/5,000/10,000 bodies (issue 19)")
-    parser.add_argument("--covariance", type=float, default=0.0, metavar="SIGMA",
-                        help="also run each size with a covariance on every body (position sigma, m); "
-                             "with --targets: every body of every scenario carries it")
+                        help="run the stream target scenarios instead (see the module docstring)")
+    parser.add_argument(
+        "--qos",
+        action="store_true",
+        help="compare best-effort and reliable KEEP_LAST 1 state subscriptions at "
+        "1,000/5,000/10,000 bodies",
+    )
+    parser.add_argument(
+        "--covariance",
+        type=float,
+        default=0.0,
+        metavar="SIGMA",
+        help="also run each size with a covariance on every body (position sigma, m); "
+        "with --targets: every body of every scenario carries it",
+    )
     opts = parser.parse_args()
     seconds = 3.0 if opts.quick else opts.seconds
     if opts.receive:
@@ -671,18 +760,31 @@ def main() -> int:
             Path(opts.json).write_text(json.dumps(rows, indent=2))
         return 0
     sigmas = [0.0, opts.covariance] if opts.covariance else [0.0]
-    rows = [dict(measure(n, seconds, opts.rate, sigma), covariance_sigma=sigma)
-            for n in opts.bodies for sigma in sigmas]
+    rows = [
+        dict(measure(n, seconds, opts.rate, sigma), covariance_sigma=sigma)
+        for n in opts.bodies
+        for sigma in sigmas
+    ]
     if opts.covariance:
         for r in rows:
-            r["bodies"] = f"{r['bodies']} ({'sigma ' + format(r['covariance_sigma'], 'g') + ' m' if r['covariance_sigma'] else 'exact'})"
-    print(f"| bodies | input Hz | answered/sent | end-to-end p50 ms | p99 ms | node p50 ms | node p99 ms"
-          f" | candidate pairs | burst in/s | burst out/s |")
+            r["bodies"] = (
+                f"{r['bodies']} "
+                + (f"(sigma {r['covariance_sigma']:g} m)" if r["covariance_sigma"] else "(exact)")
+            )
+    print(
+        "| bodies | input Hz | answered/sent | end-to-end p50 ms | p99 ms | node p50 ms | node p99 "
+        "ms"
+        " | candidate pairs | burst in/s | burst out/s |"
+    )
     print("|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|")
     for r in rows:
-        print(f"| {r['bodies']} | {r['rate_hz']:.0f} | {r['answered']}/{r['sent']} | {r['e2e_p50_ms']:.2f} |"
-              f" {r['e2e_p99_ms']:.2f} | {r['node_p50_ms']:.2f} | {r['node_p99_ms']:.2f} |"
-              f" {r['candidate_pairs']} | {r['burst_sent_per_s']:.0f} | {r['burst_predictions_per_s']:.0f} |")
+        print(
+            f"| {r['bodies']} | {r['rate_hz']:.0f} | {r['answered']}/{r['sent']} | "
+            f"{r['e2e_p50_ms']:.2f} |"
+            f" {r['e2e_p99_ms']:.2f} | {r['node_p50_ms']:.2f} | {r['node_p99_ms']:.2f} |"
+            f" {r['candidate_pairs']} | {r['burst_sent_per_s']:.0f} | "
+            f"{r['burst_predictions_per_s']:.0f} |"
+        )
     if opts.json:
         Path(opts.json).write_text(json.dumps(rows, indent=2))
     return 0

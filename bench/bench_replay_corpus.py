@@ -1,4 +1,5 @@
-"""Corpus replay benchmark: local workers 2 vs 1, Dask LocalCluster 2 vs 1, engine overhead, one-bag throughput.
+"""Corpus replay benchmark: local workers 2 vs 1, Dask LocalCluster 2 vs 1, engine overhead,
+one-bag throughput.
 
     .venv/bin/python bench/bench_replay_corpus.py [--corpus bench/.cache/corpus] [--bags 40]
 
@@ -17,6 +18,7 @@ interpreter start-up not). The corpus is recorded by scripts/make_corpus.py
 when missing (minutes). The machine has 2 cores shared with other work: ratios
 from the same run are what counts; the load average is printed.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -48,7 +50,8 @@ def _cpu_seconds() -> tuple[float, float]:
 
 
 def replay_wall(args: list[str]) -> tuple[float, float, int, float | None]:
-    """(wall s from replay's summary, sum of per-bag worker seconds, bags, CPU cores used) of one run.
+    """(wall s from replay's summary, sum of per-bag worker seconds, bags, CPU cores used) of one
+    run.
 
     Also prints the CPU time the run used and what the rest of the machine used
     meanwhile (local runs: the workers are the command's children).
@@ -57,16 +60,23 @@ def replay_wall(args: list[str]) -> tuple[float, float, int, float | None]:
         junit = Path(tmp) / "r.xml"
         ours0, machine0 = _cpu_seconds()
         t0 = time.monotonic()
-        run = subprocess.run(REPLAY + args + ["--junit-xml", str(junit)], capture_output=True, text=True)
+        run = subprocess.run(
+            REPLAY + args + ["--junit-xml", str(junit)], capture_output=True, text=True
+        )
         ours1, machine1 = _cpu_seconds()
         elapsed = time.monotonic() - t0
         if "--cluster" not in args:  # Dask workers are not the command's children
-            print(f"  replay {' '.join(a for a in args if not a.startswith('/'))}: {elapsed:.1f} s, "
-                  f"CPU used by it {ours1 - ours0:.1f} s, by other processes "
-                  f"{machine1 - machine0 - (ours1 - ours0):.1f} s, of {os.cpu_count() * elapsed:.1f} s",
-                  flush=True)
+            print(
+                f"  replay {' '.join(a for a in args if not a.startswith('/'))}: {elapsed:.1f} s, "
+                f"CPU used by it {ours1 - ours0:.1f} s, by other processes "
+                f"{machine1 - machine0 - (ours1 - ours0):.1f} s, of {os.cpu_count() * elapsed:.1f} "
+                "s",
+                flush=True,
+            )
         if run.returncode not in (0, 2) or "wall time" not in run.stdout:
-            raise SystemExit(f"replay failed ({run.returncode}): {run.stdout[-2000:]}{run.stderr[-2000:]}")
+            raise SystemExit(
+                f"replay failed ({run.returncode}): {run.stdout[-2000:]}{run.stderr[-2000:]}"
+            )
         wall = float(re.search(r"^wall time: ([\d.]+) s", run.stdout, re.M).group(1))
         cases = list(ET.parse(junit).getroot().iter("testcase"))
         cores = None if "--cluster" in args else (ours1 - ours0) / elapsed
@@ -84,15 +94,26 @@ def load() -> str:
 def compare(label: str, target: float, runs: dict[int, list[tuple[float, float, int]]]) -> None:
     """Best wall time per worker count; worker-seconds show how much CPU each bag got."""
     one, two = (min(runs[k], key=lambda r: r[0]) for k in (1, 2))
-    print(f"{label}, {one[2]} bags: 1 worker {one[0]:.2f} s, 2 workers {two[0]:.2f} s -> speedup "
-          f"{one[0] / two[0]:.2f}x (target >= {target}x); replay time summed over bags "
-          f"{one[1]:.1f} s vs {two[1]:.1f} s   [{load()}]", flush=True)
+    print(
+        f"{label}, {one[2]} bags: 1 worker {one[0]:.2f} s, 2 workers {two[0]:.2f} s -> speedup "
+        f"{one[0] / two[0]:.2f}x (target >= {target}x); replay time summed over bags "
+        f"{one[1]:.1f} s vs {two[1]:.1f} s   [{load()}]",
+        flush=True,
+    )
     if one[3] is not None:
         autogroup = Path("/proc/sys/kernel/sched_autogroup_enabled")
-        print(f"  CPU the run got: {one[3]:.2f} cores with 1 worker, {two[3]:.2f} cores with 2 workers"
-              + ("; the kernel shares CPU fairly between sessions (sched_autogroup_enabled=1), so on a "
-                 "machine busy with other sessions more workers in one session get no more CPU"
-                 if autogroup.exists() and autogroup.read_text().strip() == "1" else ""), flush=True)
+        print(
+            f"  CPU the run got: {one[3]:.2f} cores with 1 worker, {two[3]:.2f} cores with 2 "
+            "workers"
+            + (
+                "; the kernel shares CPU fairly between sessions (sched_autogroup_enabled=1), so "
+                "on a "
+                "machine busy with other sessions more workers in one session get no more CPU"
+                if autogroup.exists() and autogroup.read_text().strip() == "1"
+                else ""
+            ),
+            flush=True,
+        )
 
 
 def local_speedup(corpus: Path, repeat: int) -> None:
@@ -110,20 +131,30 @@ def dask_runs(corpus: Path, tiny: Path, repeat: int) -> None:
     walls = {}
     with dask.config.set({"distributed.scheduler.allowed-failures": 0}):
         for workers in (1, 2):
-            with LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
-                              dashboard_address=":0", host="127.0.0.1") as cluster, \
-                    Client(cluster.scheduler_address) as client:
-                client.run(lambda: __import__("circle_collision_ros.recording.replay"))  # warm workers
+            with (
+                LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
+                             dashboard_address=":0", host="127.0.0.1") as cluster,
+                Client(cluster.scheduler_address) as client,
+            ):
+                client.run(
+                    lambda: __import__("circle_collision_ros.recording.replay")
+                )  # warm workers
                 address = cluster.scheduler_address
                 walls[workers] = best([str(corpus), "--cluster", address], repeat)
                 if workers == 1:
                     wall, worked, bags, _ = walls[1]
-                    print(f"Dask engine overhead per bag (1 worker, recorded bags): "
-                          f"{(wall - worked) / bags * 1e3:.1f} ms", flush=True)
+                    print(
+                        f"Dask engine overhead per bag (1 worker, recorded bags): "
+                        f"{(wall - worked) / bags * 1e3:.1f} ms",
+                        flush=True,
+                    )
                     wall, worked, bags, _ = best([str(tiny), "--cluster", address], repeat)
-                    print(f"Dask engine overhead per bag (1 worker, {bags} tiny tasks): "
-                          f"{(wall - worked) / bags * 1e3:.1f} ms; per tiny task end to end "
-                          f"{wall / bags * 1e3:.1f} ms", flush=True)
+                    print(
+                        f"Dask engine overhead per bag (1 worker, {bags} tiny tasks): "
+                        f"{(wall - worked) / bags * 1e3:.1f} ms; per tiny task end to end "
+                        f"{wall / bags * 1e3:.1f} ms",
+                        flush=True,
+                    )
     compare("Dask LocalCluster", 1.5, {k: [v] for k, v in walls.items()})
 
 
@@ -139,8 +170,12 @@ def throughput(bags: list[Path], profile_bag: Path) -> None:
             report = replay_offline(records)
             times.append(time.perf_counter() - t0)
         t = min(times)
-        print(f"one-bag replay {bag.name}: {report.inputs} inputs, {report.pairs_compared} pairs in {t:.3f} s"
-              f" -> {report.inputs / t:.0f} inputs/s, {report.pairs_compared / t:.0f} pairs/s", flush=True)
+        print(
+            f"one-bag replay {bag.name}: {report.inputs} inputs, {report.pairs_compared} pairs in "
+            f"{t:.3f} s"
+            f" -> {report.inputs / t:.0f} inputs/s, {report.pairs_compared / t:.0f} pairs/s",
+            flush=True,
+        )
     _, records = load_bag(profile_bag)
     profiler = cProfile.Profile()
     profiler.enable()
@@ -151,7 +186,10 @@ def throughput(bags: list[Path], profile_bag: Path) -> None:
     groups: dict[str, float] = {}
     for (filename, _, name), (_, _, tottime, _, _) in stats.stats.items():
         groups[_group(filename, name)] = groups.get(_group(filename, name), 0.0) + tottime
-    print(f"profile of one replay of {profile_bag.name} ({total:.3f} s under cProfile), own time by part:")
+    print(
+        f"profile of one replay of {profile_bag.name} ({total:.3f} s under cProfile), own time by "
+        "part:"
+    )
     for group, seconds in sorted(groups.items(), key=lambda kv: -kv[1]):
         print(f"  {seconds / total:6.1%}  {group}")
     print("  top functions (own time):")
@@ -184,12 +222,19 @@ def main() -> int:
     opts = parser.parse_args()
     if len(list(opts.corpus.glob("*/metadata.yaml"))) < opts.bags:
         print(f"recording the corpus into {opts.corpus} (scripts/make_corpus.py) ...", flush=True)
-        subprocess.run([sys.executable, str(ROOT / "scripts" / "make_corpus.py"), str(opts.corpus),
-                        "--count", str(opts.bags)], check=True)
+        subprocess.run(
+            [sys.executable, str(ROOT / "scripts" / "make_corpus.py"), str(opts.corpus), "--count",
+             str(opts.bags)],
+            check=True,
+        )
     bags = sorted(opts.corpus.glob("*/metadata.yaml"))[: opts.bags]
     sizes = [sum(f.stat().st_size for f in b.parent.iterdir()) / 1e6 for b in bags]
-    print(f"corpus: {len(bags)} bags, {min(sizes):.2f}-{max(sizes):.2f} MB each, {sum(sizes):.0f} MB; "
-          f"{os.cpu_count()} CPUs   [{load()}]", flush=True)
+    print(
+        f"corpus: {len(bags)} bags, {min(sizes):.2f}-{max(sizes):.2f} MB each, {sum(sizes):.0f} "
+        "MB; "
+        f"{os.cpu_count()} CPUs   [{load()}]",
+        flush=True,
+    )
     with tempfile.TemporaryDirectory() as tmp:
         corpus = Path(tmp) / "corpus"
         corpus.mkdir()

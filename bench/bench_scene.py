@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""Benchmark whole-scene prediction (issue #4); prints figures, asserts exactness.
+"""Benchmark whole-scene prediction; prints figures, asserts exactness.
 
 Usage::
 
@@ -11,6 +11,7 @@ Figures: speed-up of ``predict_all_pairs`` over the narrow phase on all pairs
 ``Scene`` one-body update median, cull rates vs N and horizon, grid vs sweep,
 and a dense stress scene with peak traced memory.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -101,10 +102,14 @@ def bench_full(n, side, h, rng, repeat):
     p, v, a, r = make_scene(n, side, rng)
     for m in ("grid", "sweep"):
         predict_all_pairs(p, v, a, r, h, method=m)
-        tb, tm, (res, st) = best_of(lambda: predict_all_pairs(p, v, a, r, h, method=m,
-                                                              return_stats=True), repeat)
-        print(f"{m:5s}: best {tb * 1e3:.1f} ms, median {tm * 1e3:.1f} ms; "
-              f"bound pairs {st['n_box']}, narrow-phase pairs {st['n_candidates']}, contacts {len(res)}")
+        tb, tm, (res, st) = best_of(
+            lambda: predict_all_pairs(p, v, a, r, h, method=m, return_stats=True), repeat
+        )
+        print(
+            f"{m:5s}: best {tb * 1e3:.1f} ms, median {tm * 1e3:.1f} ms; "
+            f"bound pairs {st['n_box']}, narrow-phase pairs {st['n_candidates']}, contacts "
+            f"{len(res)}"
+        )
     # broad phase alone, both generators
     lo, hi = bp.swept_bounds(p, v, a, r, 0.0, h)
     kw = dict(p=p, v=v, a=a, r=r, tref=np.zeros(n), t_start=0.0, t_end=h)
@@ -139,15 +144,22 @@ def bench_scene_update(n, side, h, rng, updates):
         t2 = time.perf_counter()
         ts_up.append(t1 - t0)
         ts_all.append(t2 - t0)
-    print(f"update only (upsert + re-pair): median {statistics.median(ts_up) * 1e3:.3f} ms, "
-          f"p90 {np.percentile(ts_up, 90) * 1e3:.3f} ms")
-    print(f"update + predictions(): median {statistics.median(ts_all) * 1e3:.3f} ms, "
-          f"p90 {np.percentile(ts_all, 90) * 1e3:.3f} ms")
+    print(
+        f"update only (upsert + re-pair): median {statistics.median(ts_up) * 1e3:.3f} ms, "
+        f"p90 {np.percentile(ts_up, 90) * 1e3:.3f} ms"
+    )
+    print(
+        f"update + predictions(): median {statistics.median(ts_all) * 1e3:.3f} ms, "
+        f"p90 {np.percentile(ts_all, 90) * 1e3:.3f} ms"
+    )
     t0 = time.perf_counter()
     stamp = (stamp // sc._slack_ns + 1) * sc._slack_ns
     sc.upsert(ids_all[0], q[0], w[0], e[0], s[0], stamp_ns=stamp)
     sc.predictions()
-    print(f"epoch roll (full rebuild, every {sc.slack:g} s of stamp time): {(time.perf_counter() - t0) * 1e3:.1f} ms")
+    print(
+        f"epoch roll (full rebuild, every {sc.slack:g} s of stamp time): "
+        f"{(time.perf_counter() - t0) * 1e3:.1f} ms"
+    )
     assert _same(sc.predictions(), sc.full_recomputation()), "incremental != full recomputation"
     print("incremental == full recomputation: yes")
     return statistics.median(ts_all)
@@ -174,25 +186,36 @@ def bench_stream(n, side, h, rng, ticks, frac):
         sc.upsert_many(ids_all[ids].tolist(), q, w, e, s, stamps)
         res = sc.predictions()
         ts.append(time.perf_counter() - t0)
-    print(f"tick median {statistics.median(ts) * 1e3:.1f} ms, max {max(ts) * 1e3:.1f} ms "
-          f"({len(res)} contacts)")
+    print(
+        f"tick median {statistics.median(ts) * 1e3:.1f} ms, max {max(ts) * 1e3:.1f} ms "
+        f"({len(res)} contacts)"
+    )
 
 
 def _same(x, y):
-    return (len(x) == len(y) and list(x.id_a) == list(y.id_a) and list(x.id_b) == list(y.id_b)
-            and np.array_equal(x.ttc, y.ttc))
+    return (
+        len(x) == len(y)
+        and list(x.id_a) == list(y.id_a)
+        and list(x.id_b) == list(y.id_b)
+        and np.array_equal(x.ttc, y.ttc)
+    )
 
 
 def bench_cull(ns, hs, side, rng):
     section(f"cull rate = narrow-phase pairs / all pairs ({side:g} m square)")
-    print(f"{'N':>7} {'horizon':>8} {'bound pairs':>12} {'narrow pairs':>13} {'rate':>10} {'contacts':>9}")
+    print(
+        f"{'N':>7} {'horizon':>8} {'bound pairs':>12} {'narrow pairs':>13} {'rate':>10} "
+        f"{'contacts':>9}"
+    )
     for n in ns:
         p, v, a, r = make_scene(n, side, rng)
         for h in hs:
             res, st = predict_all_pairs(p, v, a, r, h, return_stats=True)
             allp = n * (n - 1) // 2
-            print(f"{n:7d} {h:8g} {st['n_box']:12d} {st['n_candidates']:13d} "
-                  f"{st['n_candidates'] / allp:10.2e} {len(res):9d}")
+            print(
+                f"{n:7d} {h:8g} {st['n_box']:12d} {st['n_candidates']:13d} "
+                f"{st['n_candidates'] / allp:10.2e} {len(res):9d}"
+            )
 
 
 def bench_generators(rng, quick):
@@ -230,7 +253,10 @@ def bench_generators(rng, quick):
             tb, _, (I, J, _) = best_of(lambda: bp.candidate_pairs(lo, hi, method=meth, **kw), 5)
             out[meth] = (tb, I.size)
         assert out["grid"][1] == out["sweep"][1]
-        print(f"{name:28s} {m:6d} {out['grid'][0] * 1e3:8.2f} {out['sweep'][0] * 1e3:8.2f} {out['grid'][1]:8d}")
+        print(
+            f"{name:28s} {m:6d} {out['grid'][0] * 1e3:8.2f} {out['sweep'][0] * 1e3:8.2f} "
+            f"{out['grid'][1]:8d}"
+        )
 
 
 def bench_dense(n, side, h, rng, check):
@@ -244,9 +270,11 @@ def bench_dense(n, side, h, rng, check):
     _, peak = tracemalloc.get_traced_memory()
     tracemalloc.stop()
     allp = n * (n - 1) // 2
-    print(f"time {t * 1e3:.0f} ms; bound pairs {st['n_box']} ({st['n_box'] / allp:.0%}), "
-          f"narrow pairs {st['n_candidates']}, contacts {len(res)}; "
-          f"peak traced memory {peak / 2**20:.1f} MiB")
+    print(
+        f"time {t * 1e3:.0f} ms; bound pairs {st['n_box']} ({st['n_box'] / allp:.0%}), "
+        f"narrow pairs {st['n_candidates']}, contacts {len(res)}; "
+        f"peak traced memory {peak / 2**20:.1f} MiB"
+    )
     if check:
         t0 = time.perf_counter()
         I, J, T = all_pairs_narrow(p, v, a, r, h)
@@ -283,7 +311,9 @@ def main(argv=None):
         section("3-D: N=3000 in a 300 m cube")
         p, v, a, r = make_scene(3000, 300.0, rng, dim=3)
         predict_all_pairs(p, v, a, r, 5.0)
-        tb, tm, (res, st) = best_of(lambda: predict_all_pairs(p, v, a, r, 5.0, return_stats=True), 5)
+        tb, tm, (res, st) = best_of(
+            lambda: predict_all_pairs(p, v, a, r, 5.0, return_stats=True), 5
+        )
         print(f"best {tb * 1e3:.1f} ms; narrow pairs {st['n_candidates']}, contacts {len(res)}")
     print(f"\ntotal bench time {time.perf_counter() - t_start:.1f} s")
     return 0

@@ -9,7 +9,7 @@ CollisionPredictor.predict (incremental scene query) and ScenePrediction.to_cdr
 (compiled encoder) -- the bytes the node publishes.
 
 Printed figures (same run, so ratios are comparable on a busy machine):
-1. one-body update in an N-body scene (issue 14 target: <= 0.3 ms at N = 10,000),
+1. one-body update in an N-body scene (target: <= 0.3 ms at N = 10,000),
    as a per-body stream sends it: a CircleState with a newer stamp (the
    reference time moves, the cached pair times shift), updates back to back with
    the next message built in between (a stream's steady state); also split by stage;
@@ -34,6 +34,7 @@ glue), and encoding (ScenePrediction.to_cdr).  "--keep-previous" keeps each pred
 referenced until the next one (as the node's marker thread may), so the scene
 must preserve the states that prediction captured.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -107,6 +108,7 @@ class StageTimers:
                 return original(*args, **kwargs)
             finally:
                 spent[stage] += time.thread_time() - t0
+
         self._patches.append((owner, attr, original))
         setattr(owner, attr, timed)
 
@@ -136,7 +138,10 @@ class StageTimers:
 
 def _ms(values) -> str:
     a = np.array(values) * 1e3
-    return f"median {np.median(a):.3f} ms, p90 {np.percentile(a, 90):.3f} ms, p99 {np.percentile(a, 99):.3f} ms"
+    return (
+        f"median {np.median(a):.3f} ms, p90 {np.percentile(a, 90):.3f} ms, "
+        f"p99 {np.percentile(a, 99):.3f} ms"
+    )
 
 
 def main() -> int:
@@ -145,8 +150,11 @@ def main() -> int:
     parser.add_argument("--updates", type=int, default=300)
     parser.add_argument("--arrays", type=int, default=10)
     parser.add_argument("--quick", action="store_true", help="2,000 bodies, fewer repetitions")
-    parser.add_argument("--keep-previous", action="store_true",
-                        help="keep each prediction referenced until the next one (as the marker thread may)")
+    parser.add_argument(
+        "--keep-previous",
+        action="store_true",
+        help="keep each prediction referenced until the next one (as the marker thread may)",
+    )
     opts = parser.parse_args()
     n, updates, arrays = (2000, 60, 3) if opts.quick else (opts.bodies, opts.updates, opts.arrays)
     load = os.getloadavg()[0]
@@ -156,13 +164,17 @@ def main() -> int:
     predictor = CollisionPredictor(config)
     predictor.warm_up()
     slack_ns = int(round(config.horizon / 4 * 1e9))
-    start = (1_700_000_000 * 1_000_000_000 // slack_ns + 1) * slack_ns + 10 * MS  # just after an epoch start
+    start = (
+        1_700_000_000 * 1_000_000_000 // slack_ns + 1
+    ) * slack_ns + 10 * MS  # just after an epoch start
     stamp = start
     node_side(predictor, scene_bytes(scene, stamp), CircleStateArray, stamp)  # fill the scene
     first = node_side(predictor, scene_bytes(scene, stamp + 1), CircleStateArray, stamp + 1)[1]
     stamp += 1
-    print(f"scene: {n} bodies, {len(first.contacts)} contacts within {config.horizon:g} s, "
-          f"{predictor.stats.candidate_pairs} pairs evaluated on the full path")
+    print(
+        f"scene: {n} bodies, {len(first.contacts)} contacts within {config.horizon:g} s, "
+        f"{predictor.stats.candidate_pairs} pairs evaluated on the full path"
+    )
     gc.collect()
     gc.freeze()  # as collision_node does after start-up (node/collision_node.py, _started_node)
 
@@ -185,7 +197,9 @@ def main() -> int:
     for k, body in enumerate(rng.integers(0, n, 30 * 3).tolist()):
         stamp += MS
         scene.p[body] += scene.v[body] * 1e-3
-        times, prediction, _ = node_side(predictor, _state_bytes(scene, body, stamp), CircleState, stamp)
+        times, prediction, _ = node_side(
+            predictor, _state_bytes(scene, body, stamp), CircleState, stamp
+        )
         if k % 3 == 1:
             cold.append(times)
         if k % 3 == 0:
@@ -193,18 +207,27 @@ def main() -> int:
             t0 = time.perf_counter()
             full = predictor._scene.full_recomputation()
             full_s.append(time.perf_counter() - t0)
-            assert inc.id_a.tolist() == full.id_a.tolist() and inc.id_b.tolist() == full.id_b.tolist()
-            assert np.array_equal(inc.ttc, full.ttc) and np.array_equal(inc.contact_ns, full.contact_ns)
+            assert (
+                inc.id_a.tolist() == full.id_a.tolist() and inc.id_b.tolist() == full.id_b.tolist()
+            )
+            assert np.array_equal(inc.ttc, full.ttc) and np.array_equal(
+                inc.contact_ns, full.contact_ns
+            )
         del prediction
     assert stamp < start + slack_ns, "the one-body runs must stay inside one epoch"
     st = np.array(stages)
-    print(f"\n1. one-body update, N = {n} (CircleState, newer stamp): decode + receive_batch + predict + to_cdr")
+    print(
+        f"\n1. one-body update, N = {n} (CircleState, newer stamp): decode + receive_batch + "
+        "predict + to_cdr"
+    )
     print(f"   total:        {_ms(st[:, 4])}   (target <= 0.3 ms at N = 10,000)")
     print(f"   total CPU:    {_ms(st[:, 5])}")
     for name, col in (("decode", 0), ("receive_batch", 1), ("predict", 2), ("to_cdr", 3)):
         print(f"   {name:13s} {_ms(st[:, col])}")
-    print(f"   narrow-phase pairs per update: median {statistics.median(evaluated):.0f} "
-          f"(the body's candidate pairs + the pairs whose contact began before R, evaluated at R)")
+    print(
+        f"   narrow-phase pairs per update: median {statistics.median(evaluated):.0f} "
+        f"(the body's candidate pairs + the pairs whose contact began before R, evaluated at R)"
+    )
     # the finer split: a second pass of one-body updates with timers around each stage
     timers = StageTimers()
     cpu = []
@@ -217,23 +240,32 @@ def main() -> int:
             cpu.append(time.thread_time() - c0)
             kept = kept_now if opts.keep_previous else None
             del kept_now
-    assert stamp < start + slack_ns, "the timed one-body runs must stay inside one epoch (fewer --updates)"
+    assert stamp < start + slack_ns, (
+        "the timed one-body runs must stay inside one epoch (fewer --updates)"
+    )
     total = sum(cpu)
     print(f"   by stage (thread CPU, {updates} more updates with timers; mean per update):")
     for name in StageTimers.STAGES[:-2]:
         print(f"     {name:17s} {timers.spent[name] / updates * 1e3:.3f} ms")
     rest = total - sum(timers.spent.values())
-    print(f"     {'the rest':17s} {max(rest, 0.0) / updates * 1e3:.3f} ms  (uncertain-pair query, prediction "
-          "wrapper, glue)")
+    print(
+        f"     {'the rest':17s} {max(rest, 0.0) / updates * 1e3:.3f} ms  (uncertain-pair query, "
+        "prediction "
+        "wrapper, glue)"
+    )
     print(f"     {'encode':17s} {timers.spent['encode'] / updates * 1e3:.3f} ms")
     print(f"     {'all':17s} {total / updates * 1e3:.3f} ms")
     del kept
     print(f"\n2. the same scene recomputed from scratch (Scene.full_recomputation): {_ms(full_s)}")
-    print(f"   full / incremental (medians): {np.median(full_s) / np.median(st[:, 4]):.0f}x; "
-          f"results bit-identical: yes ({len(full_s)} checks)")
+    print(
+        f"   full / incremental (medians): {np.median(full_s) / np.median(st[:, 4]):.0f}x; "
+        f"results bit-identical: yes ({len(full_s)} checks)"
+    )
     ct = np.array(cold)
-    print(f"   one-body update right after a recomputation (caches evicted): {_ms(ct[:, 4])}; "
-          f"/ back to back (medians): {np.median(ct[:, 4]) / np.median(st[:, 4]):.1f}x")
+    print(
+        f"   one-body update right after a recomputation (caches evicted): {_ms(ct[:, 4])}; "
+        f"/ back to back (medians): {np.median(ct[:, 4]) / np.median(st[:, 4]):.1f}x"
+    )
 
     # 3: whole tracker arrays.
     arr = []
@@ -247,7 +279,10 @@ def main() -> int:
     print(f"   total CPU:    {_ms(at[:, 5])}")
     for name, col in (("decode", 0), ("receive_batch", 1), ("predict", 2), ("to_cdr", 3)):
         print(f"   {name:13s} {_ms(at[:, col])}")
-    print(f"   one-body update / whole array (medians): {np.median(st[:, 4]) / np.median(at[:, 4]):.4f}")
+    print(
+        "   one-body update / whole array (medians): "
+        f"{np.median(st[:, 4]) / np.median(at[:, 4]):.4f}"
+    )
 
     # 4: the epoch roll.
     roll, after = [], []
@@ -259,10 +294,17 @@ def main() -> int:
         body = int(rng.integers(0, n))
         after.append(node_side(predictor, _state_bytes(scene, body, stamp), CircleState, stamp)[0])
     roll, after = np.array(roll), np.array(after)
-    print(f"\n4. one-body update crossing an epoch boundary (every {slack_ns / 1e9:g} s of stamp time): "
-          f"median {np.median(roll[:, 4]) * 1e3:.1f} ms (CPU {np.median(roll[:, 5]) * 1e3:.1f} ms); "
-          f"the next update: median {np.median(after[:, 4]) * 1e3:.1f} ms (CPU {np.median(after[:, 5]) * 1e3:.1f} ms)")
-    print(f"   crossing / one-body update (CPU medians): {np.median(roll[:, 5]) / np.median(st[:, 5]):.0f}x")
+    print(
+        f"\n4. one-body update crossing an epoch boundary (every {slack_ns / 1e9:g} s of stamp "
+        "time): "
+        f"median {np.median(roll[:, 4]) * 1e3:.1f} ms (CPU {np.median(roll[:, 5]) * 1e3:.1f} ms); "
+        f"the next update: median {np.median(after[:, 4]) * 1e3:.1f} ms (CPU "
+        f"{np.median(after[:, 5]) * 1e3:.1f} ms)"
+    )
+    print(
+        "   crossing / one-body update (CPU medians): "
+        f"{np.median(roll[:, 5]) / np.median(st[:, 5]):.0f}x"
+    )
     print(f"\nload average at end {os.getloadavg()[0]:.2f}")
     return 0
 

@@ -1,6 +1,7 @@
-"""Issue 18 figure: collision probability, ours vs plain Monte Carlo, per pair.
+"""Collision probability, ours vs plain Monte Carlo, per pair.
 
-    .venv/bin/python bench/bench_uncertainty.py [--pairs N] [--quick] [--out docs/uncertainty_bench.png]
+    .venv/bin/python bench/bench_uncertainty.py [--pairs N] [--quick] [--out
+    docs/uncertainty_bench.png]
 
 Families (``FAMILIES``; 2-D unless marked 3-D, horizon 3 s, each with N
 random variations of the geometry and of a correlated position/velocity
@@ -25,6 +26,7 @@ the reference's own noise cannot be checked below that); ours >= 100x
 faster per pair than MC with 1e5 samples while our error (|ours - ref|)
 is no larger than MC 1e5's.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -91,8 +93,8 @@ def _family(name, rng, D=2):
 
 
 FAMILIES = [("head-on", 2), ("crossing", 2), ("near-miss", 2), ("overlap at start", 2),
-            ("large sigma", 2), ("tiny sigma", 2), ("accelerating", 2),
-            ("head-on 3-D", 3), ("crossing 3-D", 3)]
+            ("large sigma", 2), ("tiny sigma", 2), ("accelerating", 2), ("head-on 3-D", 3),
+            ("crossing 3-D", 3)]
 
 
 def monte_carlo(pair, n, seed, repeat=1):
@@ -110,13 +112,17 @@ def _monte_carlo_once(pair, n, seed):
     D = pa.shape[0]
     t0 = time.perf_counter()
     rng = np.random.default_rng(seed)
-    L = np.linalg.cholesky(ca + cb + 1e-300 * np.eye(2 * D)) if np.any(ca + cb) else np.zeros((2 * D, 2 * D))
+    L = (
+        np.linalg.cholesky(ca + cb + 1e-300 * np.eye(2 * D))
+        if np.any(ca + cb)
+        else np.zeros((2 * D, 2 * D))
+    )
     y = rng.standard_normal((n, 2 * D)) @ L.T
     dp = (pa - pb) + y[:, :D]
     dv = (va - vb) + y[:, D:]
     zeros = np.zeros((n, D))
-    t = time_to_collision(dp, dv, np.broadcast_to(aa - ab, (n, D)), np.full(n, ra + rb),
-                          zeros, zeros, zeros, np.zeros(n), H)
+    t = time_to_collision(dp, dv, np.broadcast_to(aa - ab, (n, D)), np.full(n, ra + rb), zeros,
+                          zeros, zeros, np.zeros(n), H)
     p = float(np.count_nonzero(t <= H)) / n
     return p, time.perf_counter() - t0
 
@@ -143,8 +149,10 @@ def run(pairs: int, seed: int = 18):
             se_ref = math.sqrt(max(ref * (1 - ref), 1.0 / REF_SIZE) / REF_SIZE)
             p, b, t_ours = ours(pair)
             mc = [monte_carlo(pair, n, seed=20_000 + 97 * fi + k + n, repeat=3) for n in MC_SIZES]
-            recs.append(dict(ref=ref, se_ref=se_ref, ours=p, bound=b, t_ours=t_ours,
-                             mc=[(abs(q - ref), t) for q, t in mc]))
+            recs.append(
+                dict(ref=ref, se_ref=se_ref, ours=p, bound=b, t_ours=t_ours,
+                     mc=[(abs(q - ref), t) for q, t in mc])
+            )
         rows.append((name, recs))
     return rows
 
@@ -163,13 +171,18 @@ def summarize(rows):
         speed = mc_t[2] / t_o
         ok_speed = speed >= 100 and err <= max(mc_err[2], 3 * max(r["se_ref"] for r in recs))
         refs = [r["ref"] for r in recs]
-        table.append([name, f"{min(refs):.4f}-{max(refs):.4f}", f"{t_o * 1e6:,.0f}", f"{err:.1e}",
-                      f"{bound:.1e}"]
-                     + [f"{t * 1e6:,.0f} / {e:.1e}" for t, e in zip(mc_t, mc_err)]
-                     + [f"{speed:,.0f}x"])
+        table.append(
+            [name, f"{min(refs):.4f}-{max(refs):.4f}", f"{t_o * 1e6:,.0f}", f"{err:.1e}",
+             f"{bound:.1e}"]
+            + [f"{t * 1e6:,.0f} / {e:.1e}" for t, e in zip(mc_t, mc_err)]
+            + [f"{speed:,.0f}x"]
+        )
         checks.append((name, ok_acc, ok_bound, ok_speed))
-    header = (["family", "P (ref, 1e6 MC)", "ours us/pair", "ours max err", "ours max bound"]
-              + [f"MC {n:.0e} us/pair / max err" for n in MC_SIZES] + ["MC 1e5 / ours"])
+    header = (
+        ["family", "P (ref, 1e6 MC)", "ours us/pair", "ours max err", "ours max bound"]
+        + [f"MC {n:.0e} us/pair / max err" for n in MC_SIZES]
+        + ["MC 1e5 / ours"]
+    )
     return md_table(header, table), checks
 
 
@@ -185,14 +198,19 @@ def plot(rows, path: Path):
         for j, n in enumerate(MC_SIZES):
             t = np.mean([r["mc"][j][1] for r in recs]) * 1e6
             e = max(max(r["mc"][j][0] for r in recs), 1e-6)
-            ax.scatter([t], [e], marker=m, color=f"C{j + 1}", label=f"MC {n:.0e}" if fi == 0 else None)
+            ax.scatter(
+                [t], [e], marker=m, color=f"C{j + 1}", label=f"MC {n:.0e}" if fi == 0 else None
+            )
     ax.axhline(0.005, color="grey", ls="--", lw=0.8)
     ax.set_xscale("log")
     ax.set_yscale("log")
     ax.set_xlabel("time per pair [us] (same run)")
     ax.set_ylabel("max |P - P_ref| per family (floor 1e-6)")
-    ax.set_title("Collision probability within 3 s: ours vs plain Monte Carlo\n"
-                 "(marker = family; reference: 1e6-sample MC)", fontsize=10)
+    ax.set_title(
+        "Collision probability within 3 s: ours vs plain Monte Carlo\n"
+        "(marker = family; reference: 1e6-sample MC)",
+        fontsize=10,
+    )
     ax.grid(True, alpha=0.3)
     ax.legend(fontsize=8)
     fig.tight_layout()
@@ -203,7 +221,9 @@ def plot(rows, path: Path):
 
 
 def main(argv=None):
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
     ap.add_argument("--pairs", type=int, default=5, help="random pairs per family (default 5)")
     ap.add_argument("--quick", action="store_true", help="2 pairs per family")
     ap.add_argument("--out", type=Path, default=ROOT / "docs" / "uncertainty_bench.png")
@@ -225,10 +245,16 @@ def main(argv=None):
     # MC took much longer per sample than usual overstates the ratios
     for D in (2, 3):
         t = [r["mc"][2][1] for name, recs in rows for r in recs if dict(FAMILIES)[name] == D]
-        print(f"MC 1e5 in {D}-D: {np.median(t) / MC_SIZES[2] * 1e9:.0f} ns per sample (median over pairs)")
+        print(
+            f"MC 1e5 in {D}-D: {np.median(t) / MC_SIZES[2] * 1e9:.0f} ns per sample (median over "
+            "pairs)"
+        )
     for name, ok_acc, ok_bound, ok_speed in checks:
-        print(f"{name:18s} accuracy {'PASS' if ok_acc else 'FAIL'}  bound {'PASS' if ok_bound else 'FAIL'}"
-              f"  >=100x MC1e5 at <= its error {'PASS' if ok_speed else 'FAIL'}")
+        print(
+            f"{name:18s} accuracy {'PASS' if ok_acc else 'FAIL'}  bound "
+            f"{'PASS' if ok_bound else 'FAIL'}"
+            f"  >=100x MC1e5 at <= its error {'PASS' if ok_speed else 'FAIL'}"
+        )
     print(f"plot: {plot(rows, a.out)}")
     return 0 if all(all(c[1:]) for c in checks) else 1
 

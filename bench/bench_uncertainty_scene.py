@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""Issue 18 scene figure: a 1,000-body scene with covariance on every body vs the same scene exact.
+"""A 1,000-body scene with covariance on every body vs the same scene exact.
 
     .venv/bin/python bench/bench_uncertainty_scene.py [--bodies 1000] [--frames 30] [--sigma 0.2]
                                                       [--velocity-sigma 0.1] [--horizon 5]
@@ -21,7 +21,8 @@ evaluated and reported. --cpu-time times each step by the thread's CPU time
 (time.thread_time) instead of the wall clock, with numba's threads off (their work would not
 be counted): on a shared machine the wall-clock medians swing with other processes' load,
 the CPU time much less. --budget is the node's ``uncertain_pair_budget`` (default: the node's
-default; 0: every pair gets the full evaluation); the deferred pairs are counted. The node latency with covariance through DDS is
+default; 0: every pair gets the full evaluation); the deferred pairs are counted. The node latency
+with covariance through DDS is
 ``bench/bench_node.py --covariance SIGMA`` (same run, on and off).
 
     .venv/bin/python bench/bench_uncertainty_scene.py --stream [--bodies 300] [--updates 600]
@@ -32,6 +33,7 @@ with covariance interleaved; prints the median and p99 node-side time per update
 predict + to_cdr), the ratio, and how many uncertain pairs each update gave the core (only
 the updated body's pairs: Scene.uncertain_pairs keeps every other pair's answer).
 """
+
 from __future__ import annotations
 
 import argparse
@@ -55,26 +57,36 @@ NODE_BUDGET = SPECS["uncertain_pair_budget"].default
 
 def covariance_rows(n: int, sigma: float, velocity_sigma: float) -> np.ndarray:
     """(n, 36): diagonal position variance sigma^2 and velocity variance velocity_sigma^2."""
-    return np.tile(np.diag([sigma ** 2] * 3 + [velocity_sigma ** 2] * 3).ravel(), (n, 1))
+    return np.tile(np.diag([sigma**2] * 3 + [velocity_sigma**2] * 3).ravel(), (n, 1))
 
 
 def frame(scene: SyntheticScene, stamp_ns: int, covariance: np.ndarray | None) -> StateBatch:
     n = scene.count
-    return StateBatch(ids=[f"b{k:05d}" for k in range(n)], frames=["map"] * n,
-                      stamp_ns=np.full(n, stamp_ns, dtype=np.int64), radius=scene.radii.copy(),
-                      position=scene.p.copy(), velocity=scene.v.copy(), acceleration=scene.a.copy(),
-                      remove=np.zeros(n, dtype=bool), covariance=covariance,
-                      covariance_size=None if covariance is None else np.full(n, 36, dtype=np.int64))
+    return StateBatch(
+        ids=[f"b{k:05d}" for k in range(n)],
+        frames=["map"] * n,
+        stamp_ns=np.full(n, stamp_ns, dtype=np.int64),
+        radius=scene.radii.copy(),
+        position=scene.p.copy(),
+        velocity=scene.v.copy(),
+        acceleration=scene.a.copy(),
+        remove=np.zeros(n, dtype=bool),
+        covariance=covariance,
+        covariance_size=None if covariance is None else np.full(n, 36, dtype=np.int64),
+    )
 
 
-def stream(n: int, updates: int, sigma: float, velocity_sigma: float, horizon: float,
-           budget: int) -> None:
+def stream(
+    n: int, updates: int, sigma: float, velocity_sigma: float, horizon: float, budget: int
+) -> None:
     """One-body updates in an n-body scene, exact and with covariance interleaved."""
     scene = SyntheticScene(n, size=float(np.sqrt(n * 333.0)), dimensions=2, seed=n)
     config = PredictorConfig(horizon=horizon, max_bodies=max(10_000, n), stale_timeout=3600.0,
                              uncertain_pair_budget=budget)
-    runs = {"exact": (CollisionPredictor(config), None),
-            "covariance": (CollisionPredictor(config), covariance_rows(n, sigma, velocity_sigma))}
+    runs = {
+        "exact": (CollisionPredictor(config), None),
+        "covariance": (CollisionPredictor(config), covariance_rows(n, sigma, velocity_sigma)),
+    }
     for predictor, c in runs.values():
         predictor.receive_batch(frame(scene, BASE_NS, c), BASE_NS)
         predictor.predict().to_cdr()
@@ -99,20 +111,29 @@ def stream(n: int, updates: int, sigma: float, velocity_sigma: float, horizon: f
                     deferred.append(prediction.uncertainty.deferred)
     med = {k: statistics.median(v) * 1e3 for k, v in times.items()}
     p99 = {k: float(np.percentile(v, 99)) * 1e3 for k, v in times.items()}
-    print(f"{n} bodies, one-body updates (new stamp each), {len(times['exact'])} timed, horizon {horizon} s, "
-          f"covariance: position sigma {sigma} m, velocity sigma {velocity_sigma} m/s on every body; "
-          f"uncertain_pair_budget {budget}")
+    print(
+        f"{n} bodies, one-body updates (new stamp each), {len(times['exact'])} timed, horizon "
+        f"{horizon} s, "
+        f"covariance: position sigma {sigma} m, velocity sigma {velocity_sigma} m/s on every body; "
+        f"uncertain_pair_budget {budget}"
+    )
     print("| per update | exact ms | covariance ms | ratio |")
     print("|---|---:|---:|---:|")
     for label, d in (("median", med), ("p99", p99)):
-        print(f"| {label} | {d['exact']:.3f} | {d['covariance']:.3f} | {d['covariance'] / d['exact']:.1f}x |")
-    print(f"uncertain pairs listed (median): {statistics.median(listed):.0f}; given to the core per update: "
-          f"median {statistics.median(given):.0f}, max {max(given)}; deferred (median) "
-          f"{statistics.median(deferred):.0f}")
+        print(
+            f"| {label} | {d['exact']:.3f} | {d['covariance']:.3f} | "
+            f"{d['covariance'] / d['exact']:.1f}x |"
+        )
+    print(
+        f"uncertain pairs listed (median): {statistics.median(listed):.0f}; given to the core per "
+        "update: "
+        f"median {statistics.median(given):.0f}, max {max(given)}; deferred (median) "
+        f"{statistics.median(deferred):.0f}"
+    )
 
 
-def run_frames(frames, scene, exact, uncertain, cov, times, core_s, core_per_frame, evaluated, deferred,
-               reported, contacts, clock) -> None:
+def run_frames(frames, scene, exact, uncertain, cov, times, core_s, core_per_frame, evaluated,
+               deferred, reported, contacts, clock) -> None:
     """The timed frames: exact and covariance interleaved frame by frame (see the docstring)."""
     for k in range(frames + 2):  # two warm-up frames (numba caches, first allocation), not counted
         stamp = BASE_NS + k * 33_000_000
@@ -145,18 +166,24 @@ def main() -> int:
     parser.add_argument("--sigma", type=float, default=0.2, help="position sigma, m (every axis)")
     parser.add_argument("--velocity-sigma", type=float, default=0.1, help="velocity sigma, m/s")
     parser.add_argument("--horizon", type=float, default=5.0)
-    parser.add_argument("--budget", type=int, default=None,
-                        help="uncertain_pair_budget (default: the node parameter's default; 0: no limit)")
+    parser.add_argument(
+        "--budget",
+        type=int,
+        default=None,
+        help="uncertain_pair_budget (default: the node parameter's default; 0: no limit)",
+    )
     parser.add_argument("--quick", action="store_true", help="5 frames")
     parser.add_argument("--cpu-time", action="store_true",
                         help="time by the thread's CPU time, numba threads off (see the docstring)")
-    parser.add_argument("--stream", action="store_true", help="one-body updates (see the docstring)")
+    parser.add_argument(
+        "--stream", action="store_true", help="one-body updates (see the docstring)"
+    )
     parser.add_argument("--updates", type=int, default=600, help="with --stream")
     opts = parser.parse_args()
     budget = NODE_BUDGET if opts.budget is None else opts.budget
     if opts.stream:
-        stream(300 if opts.bodies == 1000 and "--bodies" not in sys.argv else opts.bodies, opts.updates,
-               opts.sigma, opts.velocity_sigma, opts.horizon, budget)
+        stream(300 if opts.bodies == 1000 and "--bodies" not in sys.argv else opts.bodies,
+               opts.updates, opts.sigma, opts.velocity_sigma, opts.horizon, budget)
         return 0
     frames = 5 if opts.quick else opts.frames
     n = opts.bodies
@@ -166,7 +193,8 @@ def main() -> int:
                              uncertain_pair_budget=budget)
     exact, uncertain = CollisionPredictor(config), CollisionPredictor(config)
     cov = covariance_rows(n, opts.sigma, opts.velocity_sigma)
-    times = {"exact scene": [], "covariance scene": [], "exact pipeline": [], "covariance pipeline": []}
+    times = {"exact scene": [], "covariance scene": [], "exact pipeline": [],
+             "covariance pipeline": []}
     core_per_frame: list[float] = []
     evaluated, reported, contacts, deferred = [], [], [], []
     core_s = [0.0]
@@ -182,25 +210,33 @@ def main() -> int:
 
     uncertainty.uncertain_pairs = timed_core
     with threads_forced(False) if opts.cpu_time else contextlib.nullcontext():
-        run_frames(frames, scene, exact, uncertain, cov, times, core_s, core_per_frame, evaluated, deferred,
-                   reported, contacts, clock)
+        run_frames(frames, scene, exact, uncertain, cov, times, core_s, core_per_frame, evaluated,
+                   deferred, reported, contacts, clock)
     med = {k: statistics.median(v) * 1e3 for k, v in times.items()}
-    print(f"{n} bodies, {frames} frames (every body moved and restamped each frame), horizon "
-          f"{opts.horizon} s, covariance: position sigma {opts.sigma} m, velocity sigma "
-          f"{opts.velocity_sigma} m/s on every body; uncertain_pair_budget {budget}"
-          + ("; thread CPU time, numba threads off" if opts.cpu_time else ""))
+    print(
+        f"{n} bodies, {frames} frames (every body moved and restamped each frame), horizon "
+        f"{opts.horizon} s, covariance: position sigma {opts.sigma} m, velocity sigma "
+        f"{opts.velocity_sigma} m/s on every body; uncertain_pair_budget {budget}"
+        + ("; thread CPU time, numba threads off" if opts.cpu_time else "")
+    )
     print("| step | exact ms (median) | covariance ms (median) | ratio | target |")
     print("|---|---:|---:|---:|---:|")
     for step in ("scene", "pipeline"):
         e, c = med[f"exact {step}"], med[f"covariance {step}"]
         print(f"| {step} | {e:.2f} | {c:.2f} | {c / e:.2f}x | <= 3x |")
     core_ms = statistics.median(core_per_frame) * 1e3
-    print(f"of the covariance scene step: core.uncertainty.uncertain_pairs {core_ms:.2f} ms, the rest "
-          f"(exact path + inflated broad phase + propagation + rows) {med['covariance scene'] - core_ms:.2f} ms "
-          f"= {(med['covariance scene'] - core_ms) / med['exact scene']:.2f}x the exact step")
-    print(f"uncertain pairs evaluated per frame (median): {statistics.median(evaluated):.0f}; rows "
-          f"published: {statistics.median(reported):.0f} (of which mean contacts "
-          f"{statistics.median(contacts):.0f}); deferred (budget) {statistics.median(deferred):.0f}")
+    print(
+        f"of the covariance scene step: core.uncertainty.uncertain_pairs {core_ms:.2f} ms, the "
+        "rest "
+        "(exact path + inflated broad phase + propagation + rows) "
+        f"{med['covariance scene'] - core_ms:.2f} ms "
+        f"= {(med['covariance scene'] - core_ms) / med['exact scene']:.2f}x the exact step"
+    )
+    print(
+        f"uncertain pairs evaluated per frame (median): {statistics.median(evaluated):.0f}; rows "
+        f"published: {statistics.median(reported):.0f} (of which mean contacts "
+        f"{statistics.median(contacts):.0f}); deferred (budget) {statistics.median(deferred):.0f}"
+    )
     return 0
 
 

@@ -3,13 +3,14 @@
     .venv/bin/python bench/node_latency.py [--quick] [--out DIR] [--targets]
 
 (normally driven by ``bench/run_all.py``). ``--targets`` also runs
-``bench_node.py --targets`` (issue 14's stream scenarios: per-body streams,
+``bench_node.py --targets`` (the stream scenarios: per-body streams,
 markers on/off in the same run, 5,000 and 10,000 bodies) and adds that table
 to node.md.  Drives ``bench/bench_node.py``
 as a subprocess (``--json``), one collision_node process per scene size, in
 an environment with ``ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST`` (localhost
 discovery only; ``ROS_DOMAIN_ID`` is passed through from the caller).
 """
+
 from __future__ import annotations
 
 import argparse
@@ -47,8 +48,8 @@ def run(quick: bool = False, bodies=None, seconds=None, rate: float = RATE_HZ, l
                    "--seconds", str(seconds), "--rate", str(rate), "--json", str(js)]
             t0 = time.perf_counter()
             try:
-                proc = subprocess.run(cmd, env=env, cwd=str(_common.ROOT), capture_output=True, text=True,
-                                      timeout=120 + 4 * seconds)
+                proc = subprocess.run(cmd, env=env, cwd=str(_common.ROOT), capture_output=True,
+                                      text=True, timeout=120 + 4 * seconds)
                 ok = proc.returncode == 0 and js.exists()
                 msg = (proc.stderr or proc.stdout)[-800:]
             except subprocess.TimeoutExpired as e:
@@ -58,9 +59,13 @@ def run(quick: bool = False, bodies=None, seconds=None, rate: float = RATE_HZ, l
                 for r in json.loads(js.read_text()):
                     r["wall_s"] = wall
                     rows.append(r)
-                    log(f"  N={n:5d}: e2e p50 {r['e2e_p50_ms']:.2f} ms, p99 {r['e2e_p99_ms']:.2f} ms, "
-                        f"answered {r['answered']}/{r['sent']}, burst out {r['burst_predictions_per_s']:.0f}/s "
-                        f"({wall:.0f} s)")
+                    log(
+                        f"  N={n:5d}: e2e p50 {r['e2e_p50_ms']:.2f} ms, p99 {r['e2e_p99_ms']:.2f} "
+                        "ms, "
+                        f"answered {r['answered']}/{r['sent']}, burst out "
+                        f"{r['burst_predictions_per_s']:.0f}/s "
+                        f"({wall:.0f} s)"
+                    )
             else:
                 errors.append(dict(bodies=n, error=msg))
                 log(f"  N={n}: FAILED: {msg}")
@@ -75,8 +80,8 @@ def run_targets(seconds: float, log=print) -> dict:
     env.pop("ROS_STATIC_PEERS", None)
     with tempfile.TemporaryDirectory() as tmp:
         js = Path(tmp) / "targets.json"
-        cmd = [sys.executable, str(_common.HERE / "bench_node.py"), "--targets", "--seconds", str(seconds),
-               "--json", str(js)]
+        cmd = [sys.executable, str(_common.HERE / "bench_node.py"), "--targets", "--seconds",
+               str(seconds), "--json", str(js)]
         proc = subprocess.run(cmd, env=env, cwd=str(_common.ROOT), capture_output=True, text=True,
                               timeout=600 + 10 * seconds)
         if proc.returncode != 0 or not js.exists():
@@ -94,39 +99,56 @@ def _f(x):
 def table(res: dict) -> str:
     rows = []
     for r in res["rows"]:
-        rows.append([r["bodies"], f"{r['rate_hz']:.0f}", f"{r['answered']}/{r['sent']}", _f(r["e2e_p50_ms"]),
-                     _f(r["e2e_p99_ms"]), _f(r["node_p50_ms"]), _f(r["node_p99_ms"]), r["candidate_pairs"],
-                     f"{r['burst_sent_per_s']:.0f}", f"{r['burst_predictions_per_s']:.0f}"])
+        rows.append(
+            [r["bodies"], f"{r['rate_hz']:.0f}", f"{r['answered']}/{r['sent']}",
+             _f(r["e2e_p50_ms"]), _f(r["e2e_p99_ms"]), _f(r["node_p50_ms"]), _f(r["node_p99_ms"]),
+             r["candidate_pairs"], f"{r['burst_sent_per_s']:.0f}",
+             f"{r['burst_predictions_per_s']:.0f}"]
+        )
     for e in res["errors"]:
         rows.append([e["bodies"], "failed", "-", "-", "-", "-", "-", "-", "-", "-"])
-    return md_table(["bodies", "input Hz", "answered/sent", "end-to-end p50 ms", "end-to-end p99 ms",
-                     "node p50 ms", "node p99 ms", "candidate pairs", "burst in/s", "burst out/s"], rows)
+    return md_table(
+        ["bodies", "input Hz", "answered/sent", "end-to-end p50 ms", "end-to-end p99 ms",
+         "node p50 ms", "node p99 ms", "candidate pairs", "burst in/s", "burst out/s"],
+        rows,
+    )
 
 
 def write_markdown(res: dict, out: Path) -> Path:
     p = out / "node.md"
     txt = [
         "# Node: latency and sustained rate through real DDS (localhost)\n",
-        f"bench/bench_node.py per scene size: collision_node as its own process, a client publishing "
-        f"CircleStateArray at {res['rate_hz']:.0f} Hz for {res['seconds']:g} s (density 3,000 bodies/km^2), "
-        "stamped with the send time. End-to-end = prediction received - input stamp (publisher -> DDS -> "
-        "node -> DDS -> subscriber); node = the node's own callback-to-publish figure from /diagnostics. "
-        "Burst: inputs published as fast as the Python client can build them, predictions received per "
+        "bench/bench_node.py per scene size: collision_node as its own process, a client "
+        "publishing "
+        f"CircleStateArray at {res['rate_hz']:.0f} Hz for {res['seconds']:g} s (density 3,000 "
+        "bodies/km^2), "
+        "stamped with the send time. End-to-end = prediction received - input stamp (publisher -> "
+        "DDS -> "
+        "node -> DDS -> subscriber); node = the node's own callback-to-publish figure from "
+        "/diagnostics. "
+        "Burst: inputs published as fast as the Python client can build them, predictions received "
+        "per "
         "second (sustained rate; limited by the client when burst in/s ~ burst out/s).\n",
         table(res),
     ]
     if res["errors"]:
         txt.append("\nFailures:\n")
-        txt += [f"- N={e['bodies']}: `{e['error'].strip().splitlines()[-1] if e['error'].strip() else '?'}`"
-                for e in res["errors"]]
+        txt += [
+            f"- N={e['bodies']}: "
+            f"`{e['error'].strip().splitlines()[-1] if e['error'].strip() else '?'}`"
+            for e in res["errors"]
+        ]
     if res.get("targets", {}).get("table"):
-        txt += ["\n## Issue 14 targets (bench/bench_node.py --targets)\n",
-                "Per input: client publish call -> the node's publication of the first prediction that "
-                "answers it (rmw source timestamp of the prediction; inbound DDS hop, queue wait and "
-                "coalescing included). Ingested/coalesced/missing: the node's /diagnostics. The 1,000-body "
-                "rows run markers on and off in the same run; the ratio is of their p99s. This machine "
-                "(2 cores) is shared: read ratios, not absolute figures.\n",
-                res["targets"]["table"]]
+        txt += [
+            "\n## Stream scenarios against their targets (bench/bench_node.py --targets)\n",
+            "Per input: client publish call -> the node's publication of the first prediction that "
+            "answers it (rmw source timestamp of the prediction; inbound DDS hop, queue wait and "
+            "coalescing included). Ingested/coalesced/missing: the node's /diagnostics. The "
+            "1,000-body "
+            "rows run markers on and off in the same run; the ratio is of their p99s. This machine "
+            "(2 cores) is shared: read ratios, not absolute figures.\n",
+            res["targets"]["table"],
+        ]
     txt.append("\n![node latency](node.png)\n")
     p.write_text("\n".join(txt))
     return p
@@ -137,7 +159,8 @@ def plot(res: dict, out: Path) -> list[Path]:
     fig, (ax1, ax2) = plt.subplots(1, 2, figsize=(11, 4.2))
     rows = sorted(res["rows"], key=lambda r: r["bodies"])
     n = [r["bodies"] for r in rows]
-    for key, style, lab in (("e2e_p50_ms", "o-", "end-to-end p50"), ("e2e_p99_ms", "o--", "end-to-end p99"),
+    for key, style, lab in (("e2e_p50_ms", "o-", "end-to-end p50"),
+                            ("e2e_p99_ms", "o--", "end-to-end p99"),
                             ("node_p50_ms", "s-", "node p50"), ("node_p99_ms", "s--", "node p99")):
         ys = [r[key] for r in rows]
         ax1.plot(n, ys, style, label=lab)
@@ -156,7 +179,7 @@ def main(argv=None) -> int:
     ap.add_argument("--bodies", type=int, nargs="+")
     ap.add_argument("--seconds", type=float)
     ap.add_argument("--out", default=str(_common.HERE / "results"))
-    ap.add_argument("--targets", action="store_true", help="also run issue 14's target scenarios")
+    ap.add_argument("--targets", action="store_true", help="also run the stream target scenarios")
     a = ap.parse_args(argv)
     out = Path(a.out)
     out.mkdir(parents=True, exist_ok=True)

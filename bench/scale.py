@@ -24,6 +24,7 @@
 
 ``--n 5000 20000`` runs only those body counts and writes nothing.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -45,14 +46,14 @@ from bench_scene import all_pairs_narrow, make_scene
 from circle_collision_ros.core.scene.all_pairs import predict_all_pairs
 from circle_collision_ros.core.scene import Scene
 
-# bodies per km^2: the issue's scale scene (3,000 bodies in 1 km^2) and 10x that
+# bodies per km^2: the scale scene (3,000 bodies in 1 km^2) and 10x that
 DENSITIES = {"3k/km2": 3000.0, "30k/km2": 30000.0}
 HORIZONS = (1.0, 5.0)
 NS_FULL = (100, 300, 1000, 3000, 10000, 20000)
 NS_QUICK = (100, 300, 1000)
 ALL_PAIRS_MAX = 3000
 ALL_PAIRS_MAX_QUICK = 1000
-NODE_FRAME_BODIES = 5000  #: the node frame of issue 17's broad-phase share
+NODE_FRAME_BODIES = 5000  #: the node frame of the broad phase's share
 
 
 def _status_kb(field: str) -> int:
@@ -97,16 +98,19 @@ def stage_split(p, v, a, r, h, repeat: int) -> dict:
     time_to_collision), the rest (hit filter, sort, contact details)."""
     from circle_collision_ros.core import broad as bp
     from circle_collision_ros.core.scene import all_pairs as pp
+
     n = r.shape[0]
     tref = np.zeros(n)
 
     def broad():
         lo, hi = bp.swept_bounds(p, v, a, r, 0.0, h)
         return bp.candidate_pairs(lo, hi, p=p, v=v, a=a, r=r, tref=tref, t_start=0.0, t_end=h)
+
     I, J, _ = broad()
 
     def narrow():
         return pp.narrow_on_pairs(*pp._pair_rows(p, v, a, r, I, J), h)
+
     ttc = narrow()
     tb = best_of(broad, repeat)[0]
     tn = best_of(narrow, repeat)[0]
@@ -146,8 +150,8 @@ def node_frame_split(n: int = 5000, frames: int = 30) -> dict:
     the scene: CollisionPredictor.receive_batch), broad phase (swept bounds +
     candidate pairs inside the scene's prediction, timed by wrapping those two
     broad_phase functions), the rest of the prediction (narrow phase, pair
-    records, order) and encoding (ScenePrediction.to_cdr).  Issue 17 asks that
-    the broad phase not be the largest share of this frame at 5,000 bodies."""
+    records, order) and encoding (ScenePrediction.to_cdr).  The target: the
+    broad phase is not the largest share of this frame at 5,000 bodies."""
     from circle_collision_msgs.msg import CircleStateArray
     from circle_collision_ros.core import broad as bp
     from circle_collision_ros.demo.demo_scene import SyntheticScene
@@ -180,9 +184,12 @@ def node_frame_split(n: int = 5000, frames: int = 30) -> dict:
                 return fn(*args, **kwargs)
             finally:
                 broad_s[0] += time.perf_counter() - t
+
         return call
 
-    stages = {name: [] for name in ("decode", "intake", "broad phase", "rest of prediction", "encode")}
+    stages = {
+        name: [] for name in ("decode", "intake", "broad phase", "rest of prediction", "encode")
+    }
     bp.swept_bounds, bp.candidate_pairs = (timed(f) for f in originals)
     try:
         for k, msg in enumerate(data):
@@ -197,7 +204,9 @@ def node_frame_split(n: int = 5000, frames: int = 30) -> dict:
             prediction.to_cdr()
             t4 = time.perf_counter()
             if k >= warm:
-                for name, sec in zip(stages, (t1 - t0, t2 - t1, broad_s[0], t3 - t2 - broad_s[0], t4 - t3)):
+                for name, sec in zip(
+                    stages, (t1 - t0, t2 - t1, broad_s[0], t3 - t2 - broad_s[0], t4 - t3)
+                ):
                     stages[name].append(sec * 1e3)
     finally:
         bp.swept_bounds, bp.candidate_pairs = originals
@@ -210,8 +219,10 @@ def node_frame_split(n: int = 5000, frames: int = 30) -> dict:
 
 def node_frame_line(nf: dict) -> str:
     parts = ", ".join(f"{k} {v:.2f}" for k, v in nf["stage_ms"].items())
-    return (f"node frame, {nf['n']} moving bodies (median of {nf['frames']}): {parts} ms; "
-            f"broad-phase share {nf['broad_share']:.0%}, largest stage: {nf['largest']}")
+    return (
+        f"node frame, {nf['n']} moving bodies (median of {nf['frames']}): {parts} ms; "
+        f"broad-phase share {nf['broad_share']:.0%}, largest stage: {nf['largest']}"
+    )
 
 
 def run(quick: bool = False, log=print, ns=None) -> dict:
@@ -235,65 +246,93 @@ def run(quick: bool = False, log=print, ns=None) -> dict:
                 rss, traced = peak_memory(lambda: predict_all_pairs(p, v, a, r, h))
                 row = dict(density=dname, horizon=h, n=n, side_m=side, all_pairs=allp,
                            broad_ms=tb * 1e3, broad_median_ms=tm * 1e3, bound_pairs=st["n_box"],
-                           candidates=st["n_candidates"], cull_rate=st["n_candidates"] / max(allp, 1),
-                           contacts=len(res), broad_peak_rss_mib=rss, broad_traced_mib=traced)
+                           candidates=st["n_candidates"],
+                           cull_rate=st["n_candidates"] / max(allp, 1), contacts=len(res),
+                           broad_peak_rss_mib=rss, broad_traced_mib=traced)
                 if n <= ap_max:
                     t0 = time.perf_counter()
                     I, J, T = all_pairs_narrow(p, v, a, r, h)
                     t_all = time.perf_counter() - t0
                     if n < 1000:
-                        t_all = min(t_all, best_of(lambda: all_pairs_narrow(p, v, a, r, h), repeat)[0])
-                    row.update(all_pairs_ms=t_all * 1e3,
-                               identical=bool(np.array_equal(res.i, I) and np.array_equal(res.j, J)
-                                              and np.array_equal(res.ttc, T)))
+                        t_all = min(
+                            t_all, best_of(lambda: all_pairs_narrow(p, v, a, r, h), repeat)[0]
+                        )
+                    row.update(
+                        all_pairs_ms=t_all * 1e3,
+                        identical=bool(
+                            np.array_equal(res.i, I)
+                            and np.array_equal(res.j, J)
+                            and np.array_equal(res.ttc, T)
+                        ),
+                    )
                 else:
                     row.update(all_pairs_ms=None, identical=None)
                 row.update(scene_update(p, v, a, r, h, rng, updates))
                 row.update(stage_split(p, v, a, r, h, repeat))
                 rows.append(row)
                 st = row
-                log(f"  {dname:8s} h={h:g} N={n:6d}: predict_all_pairs {tb * 1e3:8.2f} ms"
+                log(
+                    f"  {dname:8s} h={h:g} N={n:6d}: predict_all_pairs {tb * 1e3:8.2f} ms"
                     + (f", all pairs {row['all_pairs_ms']:9.1f} ms" if row["all_pairs_ms"] else "")
-                    + f", cull {row['cull_rate']:.2e}, rss +{rss:.1f} MiB, update {row['update_median_ms']:.3f} ms"
-                    + f" | stages: broad {st['stage_broad_ms']:.2f} ms, narrow {st['stage_narrow_ms']:.2f} ms"
+                    + f", cull {row['cull_rate']:.2e}, rss +{rss:.1f} MiB, update "
+                      f"{row['update_median_ms']:.3f} ms"
+                    + f" | stages: broad {st['stage_broad_ms']:.2f} ms, narrow "
+                      f"{st['stage_narrow_ms']:.2f} ms"
                     + f", rest {st['stage_rest_ms']:.2f} ms (broad share "
-                    + f"{st['stage_broad_ms'] / max(st['stage_total_ms'], 1e-9):.0%})")
+                    + f"{st['stage_broad_ms'] / max(st['stage_total_ms'], 1e-9):.0%})"
+                )
     nf = node_frame_split(NODE_FRAME_BODIES, 10 if quick else 30)
     log("  " + node_frame_line(nf))
-    return dict(rows=rows, all_pairs_max=ap_max, densities=DENSITIES, horizons=list(HORIZONS), ns=list(ns),
-                repeat=repeat, updates=updates, node_frame=nf)
+    return dict(rows=rows, all_pairs_max=ap_max, densities=DENSITIES, horizons=list(HORIZONS),
+                ns=list(ns), repeat=repeat, updates=updates, node_frame=nf)
 
 
 def table(res: dict) -> str:
     rows = []
     for r in res["rows"]:
-        speed = (f"{r['all_pairs_ms'] / r['broad_ms']:.1f}" if r["all_pairs_ms"] else "-")
-        rows.append([r["density"], f"{r['horizon']:g}", r["n"], fmt_ms(r["all_pairs_ms"]) if r["all_pairs_ms"] else "-",
-                     fmt_ms(r["broad_ms"]), speed, f"{r['cull_rate']:.2e}", r["candidates"], r["contacts"],
-                     f"{r['broad_peak_rss_mib']:.1f}", f"{r['broad_traced_mib']:.1f}",
-                     fmt_ms(r["update_median_ms"]), fmt_ms(r["update_p90_ms"]),
-                     {True: "yes", False: "NO", None: "-"}[r["identical"]]])
-    return md_table(["density", "horizon s", "N", "all-pairs narrow ms", "predict_all_pairs ms",
-                     "speed-up", "cull rate", "narrow-phase pairs", "contacts", "peak RSS rise MiB",
-                     "traced peak MiB", "1-body update ms (median)", "(p90)", "same result"],
-                    rows, "lrrrrrrrrrrrrl")
+        speed = f"{r['all_pairs_ms'] / r['broad_ms']:.1f}" if r["all_pairs_ms"] else "-"
+        rows.append(
+            [r["density"], f"{r['horizon']:g}", r["n"],
+             fmt_ms(r["all_pairs_ms"]) if r["all_pairs_ms"] else "-", fmt_ms(r["broad_ms"]), speed,
+             f"{r['cull_rate']:.2e}", r["candidates"], r["contacts"],
+             f"{r['broad_peak_rss_mib']:.1f}", f"{r['broad_traced_mib']:.1f}",
+             fmt_ms(r["update_median_ms"]), fmt_ms(r["update_p90_ms"]),
+             {True: "yes", False: "NO", None: "-"}[r["identical"]]]
+        )
+    return md_table(
+        ["density", "horizon s", "N", "all-pairs narrow ms", "predict_all_pairs ms", "speed-up",
+         "cull rate", "narrow-phase pairs", "contacts", "peak RSS rise MiB", "traced peak MiB",
+         "1-body update ms (median)", "(p90)", "same result"],
+        rows,
+        "lrrrrrrrrrrrrl",
+    )
 
 
 def write_markdown(res: dict, out: Path) -> Path:
     p = out / "scale.md"
     txt = [
         "# Scale: whole-scene prediction against N\n",
-        f"Uniform scenes (bench/bench_scene.make_scene: r 0.3-2 m, |v| <= 3 m/s, |a| <= 0.5 m/s^2) at "
-        f"{' and '.join(res['densities'])} bodies, horizons {' and '.join(f'{h:g} s' for h in res['horizons'])}. "
-        f"All-pairs narrow phase (every i < j pair through time_to_collision, chunked) is run only up to "
-        f"N = {res['all_pairs_max']} (O(N^2)); predict_all_pairs is best of {res['repeat']}. Cull rate = "
-        "pairs given to the narrow phase / all pairs. Peak RSS rise: VmHWM after one predict_all_pairs call "
-        "minus RSS before (after malloc_trim; VmHWM reset via /proc/self/clear_refs; includes numba allocations); traced peak: "
-        "tracemalloc (Python/numpy heap only). 1-body update: Scene.upsert of one body + predictions(), "
-        f"over {res['updates']} updates. 'same result': pair set and times bitwise equal to all pairs.\n",
+        "Uniform scenes (bench/bench_scene.make_scene: r 0.3-2 m, |v| <= 3 m/s, |a| <= 0.5 m/s^2) "
+        "at "
+        f"{' and '.join(res['densities'])} bodies, horizons "
+        f"{' and '.join(f'{h:g} s' for h in res['horizons'])}. "
+        "All-pairs narrow phase (every i < j pair through time_to_collision, chunked) is run only "
+        "up to "
+        f"N = {res['all_pairs_max']} (O(N^2)); predict_all_pairs is best of {res['repeat']}. Cull "
+        "rate = "
+        "pairs given to the narrow phase / all pairs. Peak RSS rise: VmHWM after one "
+        "predict_all_pairs call "
+        "minus RSS before (after malloc_trim; VmHWM reset via /proc/self/clear_refs; includes "
+        "numba allocations); traced peak: "
+        "tracemalloc (Python/numpy heap only). 1-body update: Scene.upsert of one body + "
+        "predictions(), "
+        f"over {res['updates']} updates. 'same result': pair set and times bitwise equal to all "
+        "pairs.\n",
         table(res),
         "\nWhere a node frame's time goes (bench/scale.py node_frame_split: in process, no DDS; "
-        "the scene of bench_node.py's array targets): " + node_frame_line(res["node_frame"]) + ".\n",
+        "the scene of bench_node.py's array targets): "
+        + node_frame_line(res["node_frame"])
+        + ".\n",
         "\n![scale](scale.png)\n",
     ]
     p.write_text("\n".join(txt))
@@ -311,17 +350,22 @@ def plot(res: dict, out: Path) -> list[Path]:
         n = [r["n"] for r in rows]
         c = colors[k % len(colors)]
         lab = f"{d}, {h:g} s"
-        ax_t.plot(n, [r["broad_ms"] for r in rows], "o-", color=c, label=f"predict_all_pairs, {lab}")
+        ax_t.plot(
+            n, [r["broad_ms"] for r in rows], "o-", color=c, label=f"predict_all_pairs, {lab}"
+        )
         ap = [(r["n"], r["all_pairs_ms"]) for r in rows if r["all_pairs_ms"]]
         if ap:
             ax_t.plot(*zip(*ap), "s--", color=c, alpha=0.7, label=f"all-pairs narrow, {lab}")
         ax_c.plot(n, [r["cull_rate"] for r in rows], "o-", color=c, label=lab)
-        ax_m.plot(n, [max(r["broad_peak_rss_mib"], 0.05) for r in rows], "o-", color=c, label=f"RSS rise, {lab}")
+        ax_m.plot(n, [max(r["broad_peak_rss_mib"], 0.05) for r in rows], "o-", color=c,
+                  label=f"RSS rise, {lab}")
         ax_m.plot(n, [max(r["broad_traced_mib"], 0.05) for r in rows], "^:", color=c, alpha=0.7,
                   label=f"tracemalloc, {lab}")
         ax_u.plot(n, [r["update_median_ms"] for r in rows], "o-", color=c, label=f"median, {lab}")
         ax_u.plot(n, [r["update_p90_ms"] for r in rows], "v:", color=c, alpha=0.6)
-    ax_t.set_title(f"scene prediction time (all-pairs only up to N = {res['all_pairs_max']})", fontsize=10)
+    ax_t.set_title(
+        f"scene prediction time (all-pairs only up to N = {res['all_pairs_max']})", fontsize=10
+    )
     ax_t.set_ylabel("ms (best of runs)")
     ax_c.set_title("cull rate = narrow-phase pairs / all pairs", fontsize=10)
     ax_m.set_title("peak memory of one predict_all_pairs call (floor 0.05 MiB)", fontsize=10)
@@ -335,7 +379,9 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true")
     ap.add_argument("--out", default=str(_common.HERE / "results"))
-    ap.add_argument("--n", type=int, nargs="*", help="only these body counts (printed, nothing written)")
+    ap.add_argument(
+        "--n", type=int, nargs="*", help="only these body counts (printed, nothing written)"
+    )
     a = ap.parse_args(argv)
     if a.n:
         run(a.quick, ns=tuple(a.n))

@@ -15,6 +15,7 @@ counts the frames it receives. Rows compare, in the same run:
 each with a best-effort subscriber (the node's default) and a reliable KEEP_LAST 1
 subscriber. This is the transport alone: the subscriber does no work.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -61,13 +62,15 @@ def publish(bodies: int, count: int, rate: float, wait_s: float, topic: str = TO
 
     rclpy.init()
     node = rclpy.create_node("transport_probe_publisher")
-    pub = node.create_publisher(CircleStateArray, topic,
-                                QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE))
+    pub = node.create_publisher(
+        CircleStateArray, topic, QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
+    )
     rng = np.random.default_rng(1)
     batch = StateBatch(ids=[f"b{k:05d}" for k in range(bodies)], frames=["map"] * bodies,
                        stamp_ns=np.ones(bodies, dtype=np.int64), radius=np.full(bodies, 0.3),
-                       position=rng.uniform(0, 100, (bodies, 3)), velocity=rng.normal(size=(bodies, 3)),
-                       acceleration=np.zeros((bodies, 3)), remove=np.zeros(bodies, dtype=bool))
+                       position=rng.uniform(0, 100, (bodies, 3)),
+                       velocity=rng.normal(size=(bodies, 3)), acceleration=np.zeros((bodies, 3)),
+                       remove=np.zeros(bodies, dtype=bool))
     template = encode_state_array(batch, 0, "map")
     frames = []
     for k in range(1, count + 1):  # only header.stamp differs: patch it into a copy
@@ -91,7 +94,8 @@ def publish(bodies: int, count: int, rate: float, wait_s: float, topic: str = TO
 
 
 def subscribe(reliable: bool, seconds: float) -> None:
-    """Subscriber role: count distinct frames (by header stamp) until SIGINT or `seconds`, print JSON.
+    """Subscriber role: count distinct frames (by header stamp) until SIGINT or `seconds`, print
+    JSON.
 
     Also feeds the node's InputLossMonitor, so each row shows whether the node's
     loss signal accounts for every frame that did not arrive.
@@ -107,10 +111,13 @@ def subscribe(reliable: bool, seconds: float) -> None:
     rclpy.init()
     node = rclpy.create_node("transport_probe_subscriber")
     if reliable:
-        qos = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1, reliability=ReliabilityPolicy.RELIABLE)
+        qos = QoSProfile(
+            history=HistoryPolicy.KEEP_LAST, depth=1, reliability=ReliabilityPolicy.RELIABLE
+        )
     else:
-        qos = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=50,
-                         reliability=ReliabilityPolicy.BEST_EFFORT)
+        qos = QoSProfile(
+            history=HistoryPolicy.KEEP_LAST, depth=50, reliability=ReliabilityPolicy.BEST_EFFORT
+        )
     seen: set[int] = set()
     monitor = InputLossMonitor()
 
@@ -126,8 +133,13 @@ def subscribe(reliable: bool, seconds: float) -> None:
     except KeyboardInterrupt:  # the publisher is done: report
         pass
     first, last = (min(seen), max(seen)) if seen else (0, 0)
-    print(json.dumps({"received": len(seen), "detected_missing": monitor.missing,
-                      "first": first, "last": last}), flush=True)
+    print(
+        json.dumps(
+            {"received": len(seen), "detected_missing": monitor.missing, "first": first,
+             "last": last}
+        ),
+        flush=True,
+    )
     node.destroy_node()
     rclpy.shutdown()
 
@@ -138,7 +150,7 @@ class Delivery(NamedTuple):
     sent: int
     received: int
     detected_missing: int  # gaps in the writer's sequence numbers seen by InputLossMonitor
-    undetectable: int      # lost before the first or after the last received frame
+    undetectable: int  # lost before the first or after the last received frame
 
     @property
     def accounted(self) -> bool:
@@ -146,15 +158,22 @@ class Delivery(NamedTuple):
         return self.received + self.detected_missing + self.undetectable == self.sent
 
 
-def run_pair(size_kb: float, count: int, rate: float, pub_profile: bool, sub_profile: bool,
-             reliable: bool) -> Delivery:
+def run_pair(
+    size_kb: float, count: int, rate: float, pub_profile: bool, sub_profile: bool, reliable: bool
+) -> Delivery:
     """One measurement: both roles as separate processes."""
     bodies = max(1, int(size_kb * 1000 / BYTES_PER_BODY))
     me = [sys.executable, str(Path(__file__).resolve())]
-    sub = subprocess.Popen(me + ["--role", "sub", "--seconds", "600"] + (["--reliable"] if reliable else []),
-                           env=_profile_env(sub_profile), stdout=subprocess.PIPE, text=True)
-    pub = subprocess.Popen(me + ["--role", "pub", "--bodies", str(bodies), "--count", str(count),
-                                 "--rate", str(rate)], env=_profile_env(pub_profile))
+    sub = subprocess.Popen(
+        me + ["--role", "sub", "--seconds", "600"] + (["--reliable"] if reliable else []),
+        env=_profile_env(sub_profile),
+        stdout=subprocess.PIPE,
+        text=True,
+    )
+    pub = subprocess.Popen(
+        me + ["--role", "pub", "--bodies", str(bodies), "--count", str(count), "--rate", str(rate)],
+        env=_profile_env(pub_profile),
+    )
     pub.wait(timeout=count / rate + 120)
     sub.send_signal(signal.SIGINT)
     out, _ = sub.communicate(timeout=30)
@@ -188,7 +207,9 @@ def main() -> int:
               ("shipped profile, subscriber only", False, True),
               ("shipped profile, publisher only", True, False)]
     rows = []
-    print("| message | set-up | best-effort reader | reliable KEEP_LAST 1 reader |\n|---|---|---|---|")
+    print(
+        "| message | set-up | best-effort reader | reliable KEEP_LAST 1 reader |\n|---|---|---|---|"
+    )
 
     def cell(d: Delivery) -> str:
         check = "" if d.accounted else " (loss count off!)"
@@ -198,8 +219,10 @@ def main() -> int:
         for label, pub_profile, sub_profile in setups:
             best = run_pair(size, opts.count, opts.rate, pub_profile, sub_profile, reliable=False)
             rel = run_pair(size, opts.count, opts.rate, pub_profile, sub_profile, reliable=True)
-            rows.append({"size_kb": size, "setup": label, "best_effort": best._asdict(),
-                         "reliable": rel._asdict()})
+            rows.append(
+                {"size_kb": size, "setup": label, "best_effort": best._asdict(),
+                 "reliable": rel._asdict()}
+            )
             print(f"| {size:g} KB | {label} | {cell(best)} | {cell(rel)} |", flush=True)
     if opts.json:
         Path(opts.json).write_text(json.dumps(rows, indent=1))

@@ -46,10 +46,11 @@ class TransportProfile:
 
     @classmethod
     def path(cls) -> Path | None:
-        """The installed profile: the package's share/ (colcon or venv), else the source tree's config/."""
+        """The installed profile: the package's share/ (colcon or venv), else the source config/."""
         candidates = []
         try:
             from ament_index_python.packages import get_package_share_directory
+
             candidates.append(Path(get_package_share_directory(cls.PACKAGE)) / "config")
         except (ImportError, LookupError, KeyError, ValueError, OSError):
             pass  # no ament index in this environment (e.g. AMENT_PREFIX_PATH unset)
@@ -88,13 +89,13 @@ def use_large_scene_transport() -> str | None:
 
 
 def apply_ros_environment_defaults() -> None:
-    """What every executable of this package sets before rclpy.init: local discovery, large-scene transport."""
+    """What every executable sets before rclpy.init: local discovery, large-scene transport."""
     keep_ros_traffic_local()
     use_large_scene_transport()
 
 
 class ShutdownSignal:
-    """How long a spinning executable may take to notice Ctrl-C/SIGTERM, s (its wait is cut to this)."""
+    """Seconds a spinning executable may take to notice Ctrl-C/SIGTERM (its wait is cut to this)."""
 
     POLL_S = 0.1
 

@@ -1,7 +1,9 @@
 #!/usr/bin/env bash
-# Regenerate the benchmark tables and plots (issue #7): set up (idempotent), then run
-# bench/run_all.py. Arguments go to run_all.py, e.g. scripts/bench.sh --quick
-# (see .venv/bin/python bench/run_all.py --help). Results: bench/results/.
+# Regenerate the benchmark tables and plots: set up (idempotent), then run bench/run_all.py,
+# which writes every result under bench/results/ (summary.md first). Arguments go to it:
+#   scripts/bench.sh --quick                 # small sizes, a few minutes -> bench/results/quick/
+#   scripts/bench.sh --only uncertainty node # some sections (--list: the sections and their files)
+# What each section measures: docs/benchmarks.md.
 set -euo pipefail
 ROOT=$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)
 "$ROOT/scripts/bootstrap.sh"

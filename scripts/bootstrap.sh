@@ -3,7 +3,8 @@
 # and installed into it, circle_collision_ros installed (editable) with the ROS
 # layout (<venv>/lib/circle_collision_ros/<executable>, share/...).
 # Each step re-runs only when its inputs changed (content hashes in .venv/.bootstrap/).
-# Usage: scripts/bootstrap.sh [--freeze]    (PYTHON=python3.12 to choose the interpreter)
+# Usage: scripts/bootstrap.sh [--kernels | --freeze]    (PYTHON=python3.12 to choose the interpreter)
+#   --kernels  also compile every numba kernel into its cache (scripts/test.sh does)
 set -euo pipefail
 
 ROOT=$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)
@@ -37,7 +38,7 @@ if [ "${1:-}" = "--freeze" ]; then
 import importlib.metadata as md
 rows = {f'{d.metadata["Name"].lower().replace("_", "-")}=={d.version}'
         for d in md.distributions()
-        if (d.read_text("INSTALLER") or "").strip() == "pip" and d.metadata["Name"]
+        if (d.read_text("INSTALLER") or "").strip() in ("pip", "uv") and d.metadata["Name"]
         and d.metadata["Name"].lower() not in ("pip", "circle-collision-ros")}
 print("# Full pin set of the venv; regenerate with: scripts/bootstrap.sh --freeze. Used with pip -c.")
 print("\n".join(sorted(rows)))
@@ -48,8 +49,15 @@ REQS=(requirements.txt requirements-build.txt requirements-test.txt constraints.
 h=$(inputs_hash "${REQS[@]}")
 if ! is_current deps "$h"; then
   say "installing pinned dependencies"
-  "${PIP[@]}" install -r "$ROOT/requirements.txt" -r "$ROOT/requirements-build.txt" \
-    -r "$ROOT/requirements-test.txt" -c "$ROOT/constraints.txt"
+  # uv (pinned in constraints.txt) installs the same pins as pip in a fraction of the time;
+  # pip stays the fallback where uv cannot be had.
+  if "${PIP[@]}" install "uv" -c "$ROOT/constraints.txt" 2>/dev/null && [ -x "$VENV/bin/uv" ]; then
+    "$VENV/bin/uv" pip install --quiet --python "$PY" -r "$ROOT/requirements.txt" \
+      -r "$ROOT/requirements-build.txt" -r "$ROOT/requirements-test.txt" -c "$ROOT/constraints.txt"
+  else
+    "${PIP[@]}" install -r "$ROOT/requirements.txt" -r "$ROOT/requirements-build.txt" \
+      -r "$ROOT/requirements-test.txt" -c "$ROOT/constraints.txt"
+  fi
   mark deps "$h"
   rm -f "$STAMPS/msgs"  # a new ROS wheel set means the interfaces must be rebuilt
 fi
@@ -162,36 +170,9 @@ if [ "$current" != "$block" ] || ! grep -q "$HOOKED" "$ACTIVATE"; then
   printf '%s\n' "$block" >> "$ACTIVATE"
 fi
 
-# 5. Compile the numba kernels once into their on-disk cache (__pycache__), so that the
-# first node start or test does not pay the compile; re-runs when the core changes.
-# Old cache files go first: numba checks only the source file of the function it
-# loads, so a kernel cached before a change in a module it calls would be reused.
-h=$(inputs_hash $(cd "$ROOT" && find circle_collision_ros/core -name "*.py" | sort) constraints.txt)
-if ! is_current numba "$h"; then
-  say "compiling the numba kernels into their cache"
-  find "$ROOT/circle_collision_ros" \( -name '*.nbi' -o -name '*.nbc' \) -delete
-  (cd "$ROOT" && "$PY" -c '
-import numpy as np
-from circle_collision_ros.core import contact_details, predict_all_pairs, time_to_collision
-from circle_collision_ros.core.narrow.batch import PARALLEL_MIN_ROWS
-for d in (2, 3):
-    z = np.zeros((2, d))
-    predict_all_pairs(np.eye(2, d), z, z, np.ones(2), 1.0)
-    contact_details(z, z, z, np.ones(2), z, z, z, np.ones(2), np.ones(2))  # the rows kernel (scene batches)
-    time_to_collision(z[0], z[0], z[0], 1.0, z[1], z[1], z[1], 1.0, 1.0)
-    # the threaded kernels (large batches), one float and per-row horizons
-    zz = np.zeros((PARALLEL_MIN_ROWS, d))
-    r = np.ones(PARALLEL_MIN_ROWS)
-    time_to_collision(zz, zz, zz, r, zz + 3.0, zz, zz, r, 1.0)
-    time_to_collision(zz, zz, zz, r, zz + 3.0, zz, zz, r, r)
-    # the uncertain path (issue 18): one uncertain pair and the broad-phase inflation
-    from circle_collision_ros.core.uncertainty import inflation_radius, uncertain_pairs
-    c = np.eye(2 * d)[None] * 0.01
-    uncertain_pairs(z[:1], z[:1], z[:1], np.ones(1), c, z[:1] + 1.5, z[:1], z[:1], np.ones(1), c, 1.0, 0.01)
-    inflation_radius(c, 1.0)
-    # the node path: the scene, its stream passes, decoding and encoding messages
-    from circle_collision_ros.pipeline.predictor import CollisionPredictor, PredictorConfig
-    CollisionPredictor(PredictorConfig(dimensions=d)).warm_up()
-')
-  mark numba "$h"
+# 5. (--kernels) Compile every numba kernel path, both dimensions, into numba's on-disk cache,
+# in parallel processes (one per core): what the test command needs. A node compiles only
+# the paths it needs at its first start (pipeline/kernels.py), so the demo skips this step.
+if [ "${1:-}" = "--kernels" ]; then
+  (cd "$ROOT" && "$PY" -m circle_collision_ros.pipeline.kernels) || die "compiling the numba kernels failed"
 fi

@@ -23,10 +23,16 @@ ROOT = Path(__file__).resolve().parents[1]
 
 
 def load_old():
-    source = subprocess.run(["git", "-C", str(ROOT), "show", f"{OLD}:circle_collision_ros/recording/bag_reader.py"],
-                            check=True, capture_output=True, text=True).stdout
+    source = subprocess.run(
+        ["git", "-C", str(ROOT), "show", f"{OLD}:circle_collision_ros/recording/bag_reader.py"],
+        check=True,
+        capture_output=True,
+        text=True,
+    ).stdout
     path = Path(tempfile.mkdtemp()) / "old_bag_reader.py"
-    path.write_text(source.replace("from .bag_recorder", "from circle_collision_ros.recording.bag_recorder"))
+    path.write_text(
+        source.replace("from .bag_recorder", "from circle_collision_ros.recording.bag_recorder")
+    )
     spec = importlib.util.spec_from_file_location("old_bag_reader", path)
     module = importlib.util.module_from_spec(spec)
     sys.modules["old_bag_reader"] = module  # dataclasses look their module up
@@ -45,7 +51,7 @@ def main() -> int:
     old = load_old()
     source = next((ROOT / "tests/data/plain_2d").glob("*.mcap")).read_bytes()
     rng = random.Random(15)
-    cases = [source[:rng.randrange(len(source))] for _ in range(30)]
+    cases = [source[: rng.randrange(len(source))] for _ in range(30)]
     for _ in range(200):
         data = bytearray(source)
         for _ in range(3):
@@ -59,9 +65,13 @@ def main() -> int:
         for tolerant in (False, True):
             if outcome(old, path, tolerant) != outcome(new, path, tolerant):
                 differ += 1
-                print(f"case {k} ({'cut' if k < 30 else '3 bits flipped'}, tolerant={tolerant}) differs")
-    print(f"{len(cases)} damaged copies of plain_2d (30 cuts, 200 x 3 flipped bits), strict and tolerant: "
-          f"{2 * len(cases) - differ} of {2 * len(cases)} reads identical (same records or both BagError)")
+                kind = "cut" if k < 30 else "3 bits flipped"
+                print(f"case {k} ({kind}, tolerant={tolerant}) differs")
+    print(
+        f"{len(cases)} damaged copies of plain_2d (30 cuts, 200 x 3 flipped bits), strict and "
+        f"tolerant: {2 * len(cases) - differ} of {2 * len(cases)} reads identical (same records "
+        "or both BagError)"
+    )
     return 1 if differ else 0
 
 

@@ -41,8 +41,8 @@ class RunSpec(NamedTuple):
 
     def args(self) -> list[str]:
         area = 40.0 * (self.count / 25) ** (1 / self.dimensions)  # similar density at every size
-        return ["--count", str(self.count), "--seed", str(self.seed), "--duration", str(self.duration),
-                "--dimensions", str(self.dimensions), "--area", f"{area:.1f}",
+        return ["--count", str(self.count), "--seed", str(self.seed), "--duration",
+                str(self.duration), "--dimensions", str(self.dimensions), "--area", f"{area:.1f}",
                 "--bad-fraction", str(self.bad_fraction)]
 
 
@@ -51,10 +51,11 @@ def plan(count: int) -> list[RunSpec]:
     contacts), every 5th run with bad inputs."""
     specs = []
     for k in range(count):
-        specs.append(RunSpec(name=f"run_{k:03d}", seed=100 + k, count=25 + (k * 7) % 46,
-                             duration=4.0 + (k * 5) % 7 + (2 if k % 4 == 3 else 0),
-                             dimensions=3 if k % 4 == 3 else 2,
-                             bad_fraction=0.03 if k % 5 == 4 else 0.0))
+        specs.append(
+            RunSpec(name=f"run_{k:03d}", seed=100 + k, count=25 + (k * 7) % 46,
+                    duration=4.0 + (k * 5) % 7 + (2 if k % 4 == 3 else 0),
+                    dimensions=3 if k % 4 == 3 else 2, bad_fraction=0.03 if k % 5 == 4 else 0.0)
+        )
     return specs
 
 
@@ -65,15 +66,21 @@ def record(spec: RunSpec, out: Path, domain: int) -> str:
     shutil.rmtree(bag, ignore_errors=True)
     env = {**os.environ, "ROS_DOMAIN_ID": str(domain), "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST"}
     runs = out / f"_runs_{spec.name}"
-    run = subprocess.run([sys.executable, "-m", "circle_collision_ros.demo.run", "--runs-dir", str(runs),
-                          "--bag", str(bag), *spec.args()], capture_output=True, text=True, env=env)
+    run = subprocess.run(
+        [sys.executable, "-m", "circle_collision_ros.demo.run", "--runs-dir", str(runs), "--bag",
+         str(bag), *spec.args()],
+        capture_output=True,
+        text=True,
+        env=env,
+    )
     shutil.rmtree(runs, ignore_errors=True)
     if run.returncode != 0:
         shutil.rmtree(bag, ignore_errors=True)
         return f"{bag}: FAILED ({run.returncode}): {run.stderr.strip().splitlines()[-1:]}"
     size = sum(f.stat().st_size for f in bag.iterdir()) / 1e6
     note = "" if SIZE_RANGE_MB[0] <= size <= SIZE_RANGE_MB[1] else "  (outside 0.5-5 MB)"
-    return f"{bag}: {size:.2f} MB, {spec.count} bodies, {spec.duration:.0f} s, {spec.dimensions}-D{note}"
+    return (f"{bag}: {size:.2f} MB, {spec.count} bodies, {spec.duration:.0f} s, "
+            f"{spec.dimensions}-D{note}")
 
 
 def main() -> int:
@@ -83,11 +90,13 @@ def main() -> int:
     parser.add_argument("--parallel", type=int, default=2, help="runs at once (default 2)")
     opts = parser.parse_args()
     opts.out.mkdir(parents=True, exist_ok=True)
-    domains = [int(os.environ["ROS_DOMAIN_ID"])] + [_claim_domain_id() for _ in range(opts.parallel - 1)]
+    domains = [int(os.environ["ROS_DOMAIN_ID"])] + [
+        _claim_domain_id() for _ in range(opts.parallel - 1)
+    ]
     specs = plan(opts.count)
     failed = 0
     with ThreadPoolExecutor(opts.parallel) as pool:
-        lanes = [specs[i::opts.parallel] for i in range(opts.parallel)]
+        lanes = [specs[i :: opts.parallel] for i in range(opts.parallel)]
 
         def lane(index: int) -> None:
             nonlocal failed

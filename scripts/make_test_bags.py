@@ -17,11 +17,9 @@ import sys
 from pathlib import Path
 
 DATA = Path(__file__).resolve().parents[1] / "tests" / "data"
-BAGS = {
-    "plain_2d": ["--count", "25", "--seed", "3"],
-    "bad_inputs_2d": ["--count", "25", "--seed", "4", "--bad-fraction", "0.05"],
-    "spheres_3d": ["--count", "25", "--seed", "5", "--dimensions", "3", "--area", "15"],
-}
+BAGS = {"plain_2d": ["--count", "25", "--seed", "3"],
+        "bad_inputs_2d": ["--count", "25", "--seed", "4", "--bad-fraction", "0.05"],
+        "spheres_3d": ["--count", "25", "--seed", "5", "--dimensions", "3", "--area", "15"]}
 
 
 def main() -> int:
@@ -29,9 +27,12 @@ def main() -> int:
     for name, args in BAGS.items():
         bag = DATA / name
         shutil.rmtree(bag, ignore_errors=True)
-        run = subprocess.run([sys.executable, "-m", "circle_collision_ros.demo.run", "--duration", "3",
-                              "--runs-dir", str(DATA / "_runs"), "--bag", str(bag), *args],
-                             capture_output=True, text=True)
+        run = subprocess.run(
+            [sys.executable, "-m", "circle_collision_ros.demo.run", "--duration", "3", "--runs-dir",
+             str(DATA / "_runs"), "--bag", str(bag), *args],
+            capture_output=True,
+            text=True,
+        )
         if run.returncode != 0:
             print(run.stdout, run.stderr, file=sys.stderr)
             return run.returncode

@@ -102,33 +102,52 @@ def soak(seconds: float, bodies: int, rate: float, warmup: float, log_dir: Path,
     coalesced = int(diag.get("inputs_coalesced", 0))
     received = len(client.predictions)
     result = {
-        "command": " ".join([sys.executable, "scripts/soak.py", "--seconds", str(seconds), "--bodies",
-                             str(bodies), "--rate", str(rate), "--marker-rate", str(marker_rate)]),
+        "command": " ".join(
+            [sys.executable, "scripts/soak.py", "--seconds", str(seconds), "--bodies", str(bodies),
+             "--rate", str(rate), "--marker-rate", str(marker_rate)]
+        ),
         "marker_rate_hz": marker_rate,
-        "seconds": seconds, "bodies": bodies, "rate_hz": rate, "warmup_s": warmup,
-        "cpu_count": os.cpu_count(), "loadavg_end": list(os.getloadavg()),
-        "inputs_sent": sent.get("messages", 0), "publisher_late_ticks": sent.get("late_ticks", 0),
+        "seconds": seconds,
+        "bodies": bodies,
+        "rate_hz": rate,
+        "warmup_s": warmup,
+        "cpu_count": os.cpu_count(),
+        "loadavg_end": list(os.getloadavg()),
+        "inputs_sent": sent.get("messages", 0),
+        "publisher_late_ticks": sent.get("late_ticks", 0),
         "inputs_received_by_node": node_messages,
         "dropped_inputs": sent.get("messages", 0) - node_messages,
         "states_accepted": int(diag.get("states_accepted", 0)),
-        "predictions_published": published, "predictions_received": received,
+        "predictions_published": published,
+        "predictions_received": received,
         "dropped_output": published - received,
         "inputs_coalesced": coalesced,
         # <= 0: expiry may publish without a new input
         "inputs_without_prediction": node_messages - published - coalesced,
         "max_gap_s": round(float(gaps.max()), 3),
-        "latency_all": _percentiles(lat_w), "latency_first_third": first, "latency_last_third": last,
+        "latency_all": _percentiles(lat_w),
+        "latency_first_third": first,
+        "latency_last_third": last,
         "node_latency_ms_p50_p99": [diag.get("latency_ms_p50"), diag.get("latency_ms_p99")],
-        "rss_kb_start": rss_start, "rss_kb_end": rss_end, "rss_kb_max": max(kb for _, kb in rss),
-        "rss_growth_pct": round(growth, 2), "rss_samples": rss,
-        "node_alive_at_end": alive, "node_exit_code": code, "node_errors": int(diag.get("errors", 0)),
+        "rss_kb_start": rss_start,
+        "rss_kb_end": rss_end,
+        "rss_kb_max": max(kb for _, kb in rss),
+        "rss_growth_pct": round(growth, 2),
+        "rss_samples": rss,
+        "node_alive_at_end": alive,
+        "node_exit_code": code,
+        "node_errors": int(diag.get("errors", 0)),
     }
     checks = {
         "node_survived": alive and code == 0,
         "rss_growth_below_limit": growth < rss_limit_pct,
-        "no_dropped_output": result["dropped_output"] == 0 and result["inputs_without_prediction"] <= 0,
-        "no_latency_drift": bool(first["p50_ms"] is not None and last["p50_ms"] is not None
-                                 and last["p50_ms"] <= 2.0 * first["p50_ms"] + 10.0),
+        "no_dropped_output": result["dropped_output"] == 0
+        and result["inputs_without_prediction"] <= 0,
+        "no_latency_drift": bool(
+            first["p50_ms"] is not None
+            and last["p50_ms"] is not None
+            and last["p50_ms"] <= 2.0 * first["p50_ms"] + 10.0
+        ),
         "predictions_flowed": received > 0.5 * sent.get("messages", 0) > 0,
     }
     result["checks"] = checks
@@ -146,13 +165,17 @@ def main() -> int:
     ap.add_argument("--seconds", type=float, default=600.0)
     ap.add_argument("--bodies", type=int, default=1000)
     ap.add_argument("--rate", type=float, default=30.0)
-    ap.add_argument("--warmup", type=float, default=None, help="s excluded from the checks (default 10%%, >= 5 s)")
-    ap.add_argument("--marker-rate", type=float, default=10.0, help="node marker_rate (default: the node's 10 Hz)")
+    ap.add_argument("--warmup", type=float, default=None,
+                    help="s excluded from the checks (default 10%%, >= 5 s)")
+    ap.add_argument("--marker-rate", type=float, default=10.0,
+                    help="node marker_rate (default: the node's 10 Hz)")
     ap.add_argument("--json", type=Path, help="write the figures here")
     opts = ap.parse_args()
     warmup = opts.warmup if opts.warmup is not None else max(5.0, 0.1 * opts.seconds)
     with tempfile.TemporaryDirectory(prefix="soak_") as tmp:
-        result = soak(opts.seconds, opts.bodies, opts.rate, warmup, Path(tmp), marker_rate=opts.marker_rate)
+        result = soak(
+            opts.seconds, opts.bodies, opts.rate, warmup, Path(tmp), marker_rate=opts.marker_rate
+        )
         if not result["checks"]["node_survived"]:
             print(Path(tmp, "collision_node.log").read_text()[-3000:], file=sys.stderr)
     summary = {k: v for k, v in result.items() if k != "rss_samples"}
@@ -160,8 +183,15 @@ def main() -> int:
     if opts.json:
         opts.json.parent.mkdir(parents=True, exist_ok=True)
         opts.json.write_text(json.dumps(result, indent=1))
-    print("soak: " + ("OK" if result["ok"] else "FAILED: " + ", ".join(k for k, v in result["checks"].items() if not v)),
-          file=sys.stderr)
+    print(
+        "soak: "
+        + (
+            "OK"
+            if result["ok"]
+            else "FAILED: " + ", ".join(k for k, v in result["checks"].items() if not v)
+        ),
+        file=sys.stderr,
+    )
     return 0 if result["ok"] else 1
 
 

@@ -36,7 +36,9 @@ def _claim_domain_id() -> int:
 
 
 _HELD_LOCKS: list[int] = []
-if "CIRCLE_COLLISION_TEST_DOMAIN_ID" not in os.environ:
+# Each pytest-xdist worker is a session of its own on the wire: its own domain id, so
+# two workers' nodes never see each other (the controller's id is not inherited).
+if "CIRCLE_COLLISION_TEST_DOMAIN_ID" not in os.environ or "PYTEST_XDIST_WORKER" in os.environ:
     os.environ["CIRCLE_COLLISION_TEST_DOMAIN_ID"] = str(_claim_domain_id())
 os.environ["ROS_DOMAIN_ID"] = os.environ["CIRCLE_COLLISION_TEST_DOMAIN_ID"]
 
@@ -50,3 +52,26 @@ use_large_scene_transport()
 @pytest.fixture(scope="session")
 def ros_domain_id() -> int:
     return int(os.environ["ROS_DOMAIN_ID"])
+
+
+def pytest_addoption(parser: pytest.Parser) -> None:
+    parser.addoption("--stress", action="store_true",
+                     help="also run the long stress, soak and reference runs (marker 'stress') and "
+                          "the full hypothesis example counts; CI runs them")
+
+
+def pytest_configure(config: pytest.Config) -> None:
+    # Read by tests/stress.py when the test modules are imported (after this hook).
+    stress = config.getoption("--stress") or "stress" in (config.getoption("-m") or "")
+    os.environ["CIRCLE_COLLISION_STRESS"] = "1" if stress else "0"
+
+
+def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
+    """Without --stress (or a -m naming it), the stress tests are deselected, not skipped:
+    the default run is the suite that answers quickly whether a change broke something."""
+    if os.environ.get("CIRCLE_COLLISION_STRESS") == "1":
+        return
+    kept = [item for item in items if item.get_closest_marker("stress") is None]
+    if len(kept) < len(items):
+        config.hook.pytest_deselected(items=[item for item in items if item not in kept])
+        items[:] = kept

@@ -5,7 +5,8 @@ caches, no incremental bookkeeping -- only the narrow phase
 (`time_to_collision`) applied as the rule in circle_collision_ros/core/scene.py
 states it:
 
-    R = newest stamp accepted since the scene was last empty, E = R - (R mod S), t_p = max(E, T_a, T_b);
+    R = newest stamp accepted since the scene was last empty, E = R - (R mod S), t_p = max(E, T_a,
+    T_b);
     tau = narrow phase of both states propagated to t_p, horizon H + S;
     ttc = tau if t_p == R, else tau - (R - t_p) if that is > 0,
           else the narrow phase of both states propagated to R, horizon H;

@@ -21,7 +21,9 @@ def _module_name(path: Path) -> str:
 
 
 def _modules() -> dict[str, ast.Module]:
-    return {_module_name(p): ast.parse(p.read_text(), str(p)) for p in sorted(PACKAGE.rglob("*.py"))}
+    return {
+        _module_name(p): ast.parse(p.read_text(), str(p)) for p in sorted(PACKAGE.rglob("*.py"))
+    }
 
 
 def _imports(name: str, tree: ast.Module, modules: dict) -> list[tuple[str, str | None, int]]:
@@ -35,11 +37,13 @@ def _imports(name: str, tree: ast.Module, modules: dict) -> list[tuple[str, str 
             base = node.module or ""
             if node.level:
                 pkg = name.split(".") if is_pkg else name.split(".")[:-1]
-                pkg = pkg[:len(pkg) - node.level + 1]
+                pkg = pkg[: len(pkg) - node.level + 1]
                 base = ".".join(pkg + ([base] if base else []))
             for a in node.names:
                 sub = f"{base}.{a.name}"
-                out.append((sub, None, node.lineno) if sub in modules else (base, a.name, node.lineno))
+                out.append(
+                    (sub, None, node.lineno) if sub in modules else (base, a.name, node.lineno)
+                )
     return [x for x in out if x[0] == NAME or x[0].startswith(NAME + ".")]
 
 
@@ -105,18 +109,25 @@ def test_no_import_cycles():
 
 def test_no_private_name_is_imported_from_another_module():
     modules = _modules()
-    bad = [f"{name}:{line} imports {mod}.{imp}"
-           for name, tree in modules.items()
-           for mod, imp, line in _imports(name, tree, modules)
-           if imp is not None and imp.startswith("_") and not imp.startswith("__")
-           or imp is None and any(p.startswith("_") and not p.startswith("__")
-                                  for p in mod.split(".")[1:-1])]
+    bad = [
+        f"{name}:{line} imports {mod}.{imp}"
+        for name, tree in modules.items()
+        for mod, imp, line in _imports(name, tree, modules)
+        if imp is not None
+        and imp.startswith("_")
+        and not imp.startswith("__")
+        or imp is None
+        and any(p.startswith("_") and not p.startswith("__") for p in mod.split(".")[1:-1])
+    ]
     assert bad == []
 
 
 def test_every_subpackage_declares_all():
-    missing = [str(p.relative_to(PACKAGE.parent)) for p in PACKAGE.rglob("__init__.py")
-               if "__all__" not in p.read_text()]
+    missing = [
+        str(p.relative_to(PACKAGE.parent))
+        for p in PACKAGE.rglob("__init__.py")
+        if "__all__" not in p.read_text()
+    ]
     assert missing == []
 
 
@@ -127,13 +138,21 @@ def test_core_imports_neither_ros_nor_the_rest_of_the_package():
         if not name.startswith(f"{NAME}.core"):
             continue
         for node in ast.walk(tree):
-            roots = ([a.name for a in node.names] if isinstance(node, ast.Import)
-                     else [node.module or ""] if isinstance(node, ast.ImportFrom) and not node.level
-                     else [])
+            roots = (
+                [a.name for a in node.names]
+                if isinstance(node, ast.Import)
+                else [node.module or ""]
+                if isinstance(node, ast.ImportFrom) and not node.level
+                else []
+            )
             for r in roots:
                 top = r.split(".")[0]
-                if top in ("rclpy", "rosidl_runtime_py", "builtin_interfaces", "std_msgs",
-                           "circle_collision_msgs", "nav_msgs", "geometry_msgs") \
-                        or r.startswith(NAME + ".") and not r.startswith(f"{NAME}.core"):
+                if (
+                    top
+                    in ("rclpy", "rosidl_runtime_py", "builtin_interfaces", "std_msgs",
+                        "circle_collision_msgs", "nav_msgs", "geometry_msgs")
+                    or r.startswith(NAME + ".")
+                    and not r.startswith(f"{NAME}.core")
+                ):
                     bad.append(f"{name}:{node.lineno} imports {r}")
     assert bad == []

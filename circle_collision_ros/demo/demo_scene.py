@@ -27,7 +27,8 @@ from circle_collision_ros.cli import parse_args, spin_node
 class BadInput:
     """Malformed-state classes, applied in turn when `bad_fraction` > 0."""
 
-    KINDS = ("nan_position", "negative_radius", "empty_id", "wrong_frame", "zero_stamp", "inf_velocity")
+    KINDS = ("nan_position", "negative_radius", "empty_id", "wrong_frame", "zero_stamp",
+             "inf_velocity")
 
     @staticmethod
     def apply(kind: str, state: CircleState) -> None:
@@ -48,9 +49,8 @@ class BadInput:
 class SyntheticScene:
     """The demo's motion model, ROS-free: arrays of N bodies in a square of `size` m."""
 
-    def __init__(self, count: int, size: float, dimensions: int, seed: int,
-                 max_speed: float = 3.0, max_accel: float = 0.5,
-                 radius_range: tuple[float, float] = (0.3, 2.0)) -> None:
+    def __init__(self, count: int, size: float, dimensions: int, seed: int, max_speed: float = 3.0,
+                 max_accel: float = 0.5, radius_range: tuple[float, float] = (0.3, 2.0)) -> None:
         self.rng = np.random.default_rng(seed)
         self.count, self.size, self.dimensions = count, size, dimensions
         self.max_speed, self.max_accel, self.radius_range = max_speed, max_accel, radius_range
@@ -75,8 +75,11 @@ class SyntheticScene:
         speed = np.linalg.norm(self.v, axis=1, keepdims=True)
         too_fast = speed[:, 0] > self.max_speed  # keep accelerating bodies plausible
         self.v[too_fast] *= self.max_speed / speed[too_fast]
-        out = np.any((self.p < 0.0) | (self.p > self.size), axis=1) if self.dimensions == 3 else \
-            np.any((self.p[:, :2] < 0.0) | (self.p[:, :2] > self.size), axis=1)
+        out = (
+            np.any((self.p < 0.0) | (self.p > self.size), axis=1)
+            if self.dimensions == 3
+            else np.any((self.p[:, :2] < 0.0) | (self.p[:, :2] > self.size), axis=1)
+        )
         for k in np.flatnonzero(out):
             self._reseed(k)
 
@@ -109,15 +112,19 @@ DEMO_PARAMS: tuple[DemoParam, ...] = (
     DemoParam("rate", 30.0, "messages per second (Hz)"),
     DemoParam("frame_id", "map", "frame of every state"),
     DemoParam("topic", "circle_states", "CircleStateArray topic to publish on"),
-    DemoParam("bad_fraction", 0.0, "fraction of states made malformed (0..1), to exercise input checks"),
+    DemoParam(
+        "bad_fraction", 0.0, "fraction of states made malformed (0..1), to exercise input checks"
+    ),
 )
 
 
 def _help_epilog() -> str:
     rows = "\n".join(f"  {p.name:<13} {p.default!r:<16} {p.meaning}" for p in DEMO_PARAMS)
-    return ("ROS parameters (set after --ros-args with -p name:=value):\n"
-            f"  {'name':<13} {'default':<16} meaning\n{rows}\n\n"
-            "Example: demo_scene --ros-args -p count:=200 -p rate:=10.0")
+    return (
+        "ROS parameters (set after --ros-args with -p name:=value):\n"
+        f"  {'name':<13} {'default':<16} meaning\n{rows}\n\n"
+        "Example: demo_scene --ros-args -p count:=200 -p rate:=10.0"
+    )
 
 
 class DemoScenePublisher(Node):
@@ -133,13 +140,18 @@ class DemoScenePublisher(Node):
         self._bad_rng = np.random.default_rng(g("seed") + 1)
         self._bad_kind = 0
         self.publisher = self.create_publisher(
-            CircleStateArray, g("topic"), QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE))
+            CircleStateArray,
+            g("topic"),
+            QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE),
+        )
         self.ticks = 0
         self.create_timer(1.0 / self.rate, self._tick)
         # One line, so whoever started the demo knows what to subscribe to.
         self.get_logger().info(
-            f"publishing {self.scene.count} {self.scene.dimensions}-D bodies as CircleStateArray on "
-            f"{self.publisher.topic_name} (frame '{self.frame_id}') at {self.rate:g} Hz")
+            f"publishing {self.scene.count} {self.scene.dimensions}-D bodies as "
+            "CircleStateArray on "
+            f"{self.publisher.topic_name} (frame '{self.frame_id}') at {self.rate:g} Hz"
+        )
 
     def _tick(self) -> None:
         if self.ticks:
@@ -149,17 +161,24 @@ class DemoScenePublisher(Node):
         s = self.scene
         circles = []
         for k in range(s.count):
-            circles.append(CircleState(
-                header=Header(stamp=stamp, frame_id=self.frame_id), id=f"body_{k:04d}",
-                radius=float(s.radii[k]),
-                position=Point(x=float(s.p[k, 0]), y=float(s.p[k, 1]), z=float(s.p[k, 2])),
-                velocity=Vector3(x=float(s.v[k, 0]), y=float(s.v[k, 1]), z=float(s.v[k, 2])),
-                acceleration=Vector3(x=float(s.a[k, 0]), y=float(s.a[k, 1]), z=float(s.a[k, 2]))))
+            circles.append(
+                CircleState(
+                    header=Header(stamp=stamp, frame_id=self.frame_id),
+                    id=f"body_{k:04d}",
+                    radius=float(s.radii[k]),
+                    position=Point(x=float(s.p[k, 0]), y=float(s.p[k, 1]), z=float(s.p[k, 2])),
+                    velocity=Vector3(x=float(s.v[k, 0]), y=float(s.v[k, 1]), z=float(s.v[k, 2])),
+                    acceleration=Vector3(
+                        x=float(s.a[k, 0]), y=float(s.a[k, 1]), z=float(s.a[k, 2])
+                    ),
+                )
+            )
             if self.bad_fraction > 0.0 and self._bad_rng.random() < self.bad_fraction:
                 BadInput.apply(BadInput.KINDS[self._bad_kind % len(BadInput.KINDS)], circles[-1])
                 self._bad_kind += 1
-        self.publisher.publish(CircleStateArray(header=Header(stamp=stamp, frame_id=self.frame_id),
-                                                circles=circles))
+        self.publisher.publish(
+            CircleStateArray(header=Header(stamp=stamp, frame_id=self.frame_id), circles=circles)
+        )
 
 
 def main(args: list[str] | None = None) -> int:

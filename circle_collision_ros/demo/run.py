@@ -22,8 +22,11 @@ from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 
-from circle_collision_msgs.msg import CircleStateArray, CollisionPrediction, CollisionPredictionArray
+from circle_collision_msgs.msg import (CircleStateArray, CollisionPrediction,
+                                       CollisionPredictionArray)
 from circle_collision_ros.cli import apply_ros_environment_defaults, parse_args
+
+_STARTED = time.monotonic()  # module import: the demo process's start, for "first prediction after"
 
 STARTUP_TIMEOUT_S = 120.0
 STATUS_NAMES = {CollisionPrediction.NO_CONTACT: "none", CollisionPrediction.CONTACT: "contact",
@@ -40,8 +43,9 @@ class DemoListener(Node):
         self.prediction_count = 0
         self.create_subscription(CircleStateArray, "circle_states", self._on_scene,
                                  QoSProfile(depth=5, reliability=ReliabilityPolicy.BEST_EFFORT))
-        self.create_subscription(CollisionPredictionArray, "collision_predictions",
-                                 self._on_predictions, 10)
+        self.create_subscription(
+            CollisionPredictionArray, "collision_predictions", self._on_predictions, 10
+        )
 
     def _on_scene(self, msg: CircleStateArray) -> None:
         self.scene = msg
@@ -54,23 +58,33 @@ class DemoListener(Node):
 def format_table(predictions: CollisionPredictionArray | None, elapsed: float, duration: float,
                  count: int, rows: int = 10) -> list[str]:
     """The live view as lines of text."""
-    head = f"circle_collision_ros demo  {elapsed:5.1f}/{duration:.0f} s  predictions received: {count}"
+    head = (
+        f"circle_collision_ros demo  {elapsed:5.1f}/{duration:.0f} s  predictions received: {count}"
+    )
     if predictions is None:
         return [head, "waiting for collision_predictions ..."]
     contacts = [p for p in predictions.predictions if p.status != CollisionPrediction.NO_CONTACT]
-    lines = [head, f"{len(contacts)} contacts within {predictions.horizon:.1f} s; soonest:",
-             f"{'body a':>10} {'body b':>10} {'status':>8} {'ttc [s]':>8} {'closing [m/s]':>13}  contact point [m]"]
+    lines = [
+        head,
+        f"{len(contacts)} contacts within {predictions.horizon:.1f} s; soonest:",
+        f"{'body a':>10} {'body b':>10} {'status':>8} {'ttc [s]':>8} "
+        f"{'closing [m/s]':>13}  contact point [m]",
+    ]
     for p in contacts[:rows]:
         pt = p.contact_point
-        lines.append(f"{p.id_a:>10} {p.id_b:>10} {STATUS_NAMES[p.status]:>8} {p.time_to_collision:8.3f}"
-                     f" {p.closing_speed:13.2f}  ({pt.x:7.2f}, {pt.y:7.2f})")
+        lines.append(
+            f"{p.id_a:>10} {p.id_b:>10} {STATUS_NAMES[p.status]:>8} {p.time_to_collision:8.3f}"
+            f" {p.closing_speed:13.2f}  ({pt.x:7.2f}, {pt.y:7.2f})"
+        )
     return lines
 
 
-def draw_scene(scene: CircleStateArray | None, predictions: CollisionPredictionArray | None,
-               path: Path) -> None:
+def draw_scene(
+    scene: CircleStateArray | None, predictions: CollisionPredictionArray | None, path: Path
+) -> None:
     """PNG of the bodies, their velocities and the predicted contact points."""
     import matplotlib
+
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
     from matplotlib.patches import Circle
@@ -79,15 +93,24 @@ def draw_scene(scene: CircleStateArray | None, predictions: CollisionPredictionA
     soon: dict[str, float] = {}
     contacts = []
     if predictions is not None:
-        contacts = [p for p in predictions.predictions if p.status != CollisionPrediction.NO_CONTACT]
+        contacts = [
+            p for p in predictions.predictions if p.status != CollisionPrediction.NO_CONTACT
+        ]
         for p in contacts:
             for body in (p.id_a, p.id_b):
                 soon[body] = min(soon.get(body, math.inf), p.time_to_collision)
     if scene is not None:
         for c in scene.circles:
             ttc = soon.get(c.id, math.inf)
-            colour = "tab:red" if ttc < 1 else "tab:orange" if ttc < 3 else "gold" if ttc < math.inf \
+            colour = (
+                "tab:red"
+                if ttc < 1
+                else "tab:orange"
+                if ttc < 3
+                else "gold"
+                if ttc < math.inf
                 else "tab:blue"
+            )
             ax.add_patch(Circle((c.position.x, c.position.y), c.radius, color=colour, alpha=0.5))
             ax.arrow(c.position.x, c.position.y, c.velocity.x, c.velocity.y, width=0.05,
                      head_width=0.4, color="k", alpha=0.6, length_includes_head=True)
@@ -99,8 +122,11 @@ def draw_scene(scene: CircleStateArray | None, predictions: CollisionPredictionA
     ax.autoscale_view()
     ax.set_xlabel("x [m]")
     ax.set_ylabel("y [m]")
-    ax.set_title("bodies (colour: time to first contact <1 s red, <3 s orange, later gold, none blue);"
-                 "\narrows: velocity over 1 s", fontsize=9)
+    ax.set_title(
+        "bodies (colour: time to first contact <1 s red, <3 s orange, later gold, none blue);"
+        "\narrows: velocity over 1 s",
+        fontsize=9,
+    )
     fig.tight_layout()
     fig.savefig(path)
     plt.close(fig)
@@ -108,15 +134,27 @@ def draw_scene(scene: CircleStateArray | None, predictions: CollisionPredictionA
 
 def _add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--duration", type=float, default=10.0, help="seconds to run (default 10)")
-    parser.add_argument("--count", type=int, default=40, help="bodies in the demo scene (default 40)")
+    parser.add_argument(
+        "--count", type=int, default=40, help="bodies in the demo scene (default 40)"
+    )
     parser.add_argument("--seed", type=int, default=1, help="scene seed (default 1)")
-    parser.add_argument("--area", type=float, default=60.0, help="side of the scene's square/cube in m")
-    parser.add_argument("--rate", type=float, default=30.0, help="scene publish rate in Hz (default 30)")
-    parser.add_argument("--horizon", type=float, default=5.0, help="prediction horizon in s (default 5)")
-    parser.add_argument("--runs-dir", default="runs", help="where each run's folder goes (default runs/)")
+    parser.add_argument(
+        "--area", type=float, default=60.0, help="side of the scene's square/cube in m"
+    )
+    parser.add_argument(
+        "--rate", type=float, default=30.0, help="scene publish rate in Hz (default 30)"
+    )
+    parser.add_argument(
+        "--horizon", type=float, default=5.0, help="prediction horizon in s (default 5)"
+    )
+    parser.add_argument(
+        "--runs-dir", default="runs", help="where each run's folder goes (default runs/)"
+    )
     parser.add_argument("--no-record", action="store_true", help="do not record the run to MCAP")
     parser.add_argument("--bag", help="bag directory to record to (default: <run folder>/bag)")
-    parser.add_argument("--dimensions", type=int, choices=(2, 3), default=2, help="2 circles, 3 spheres")
+    parser.add_argument(
+        "--dimensions", type=int, choices=(2, 3), default=2, help="2 circles, 3 spheres"
+    )
     parser.add_argument("--bad-fraction", type=float, default=0.0,
                         help="fraction of malformed states mixed into the scene (default 0)")
 
@@ -145,10 +183,12 @@ def main(args: list[str] | None = None) -> int:
         node_args[:0] = ["-p", f"record_path:={bag}"]
     children = [
         _start("circle_collision_ros.node.collision_node", node_args),
-        _start("circle_collision_ros.demo.demo_scene",
-               ["-p", f"count:={opts.count}", "-p", f"seed:={opts.seed}", "-p", f"rate:={opts.rate}",
-                "-p", f"area_size:={opts.area}",
-                "-p", f"dimensions:={opts.dimensions}", "-p", f"bad_fraction:={opts.bad_fraction}"]),
+        _start(
+            "circle_collision_ros.demo.demo_scene",
+            ["-p", f"count:={opts.count}", "-p", f"seed:={opts.seed}", "-p", f"rate:={opts.rate}",
+             "-p", f"area_size:={opts.area}", "-p", f"dimensions:={opts.dimensions}", "-p",
+             f"bad_fraction:={opts.bad_fraction}"],
+        ),
     ]
     rclpy.init()
     listener = DemoListener()
@@ -164,6 +204,8 @@ def main(args: list[str] | None = None) -> int:
             executor.spin_once(timeout_sec=0.1)
             if not _all_running(children):
                 return 1
+        if listener.prediction_count:
+            print(f"first prediction after {time.monotonic() - _STARTED:.1f} s", flush=True)
         started = time.monotonic()
         next_print = 0.0
         while (elapsed := time.monotonic() - started) < opts.duration:
@@ -171,8 +213,9 @@ def main(args: list[str] | None = None) -> int:
             if not _all_running(children):
                 return 1
             if elapsed >= next_print:
-                lines = format_table(listener.predictions, elapsed, opts.duration,
-                                     listener.prediction_count)
+                lines = format_table(
+                    listener.predictions, elapsed, opts.duration, listener.prediction_count
+                )
                 if tty:  # redraw in place: cursor home, clear screen
                     sys.stdout.write("\x1b[H\x1b[2J" + "\n".join(lines) + "\n")
                 else:
@@ -193,8 +236,13 @@ def main(args: list[str] | None = None) -> int:
         executor.shutdown()
         listener.destroy_node()
         rclpy.try_shutdown()
-    print("\n".join(format_table(listener.predictions, opts.duration, opts.duration,
-                                 listener.prediction_count)))
+    print(
+        "\n".join(
+            format_table(
+                listener.predictions, opts.duration, opts.duration, listener.prediction_count
+            )
+        )
+    )
     picture = run_dir / "scene.png"
     draw_scene(listener.scene, listener.predictions, picture)
     print(f"scene picture: {os.path.abspath(picture)}")

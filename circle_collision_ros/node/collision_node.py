@@ -56,7 +56,9 @@ from visualization_msgs.msg import MarkerArray
 from circle_collision_msgs.msg import CircleState, CircleStateArray, CollisionPredictionArray
 from circle_collision_msgs.srv import PredictCollisions
 from circle_collision_ros.node import parameters as node_parameters
-from circle_collision_ros.recording.bag_recorder import BagRecorder, RecordingError, qos_profiles_yaml
+from circle_collision_ros.recording.bag_recorder import (BagRecorder, RecordingError,
+                                                         qos_profiles_yaml)
+from circle_collision_ros.pipeline import kernels
 from circle_collision_ros.pipeline.cdr import CdrError
 from circle_collision_ros.pipeline.state_codec import decode_states
 from circle_collision_ros.pipeline.odometry import odometry_batch, odometry_sources
@@ -65,8 +67,8 @@ from circle_collision_ros.pipeline.state_groups import ingest_single_states
 from circle_collision_ros.cli import TransportProfile, parse_args, spin_node
 from circle_collision_ros.node.input_loss import InputLossMonitor
 from circle_collision_ros.node.markers import MarkerPublisher
-from circle_collision_ros.pipeline.predictor import (RUNTIME_FIELDS, CollisionPredictor, IntakeReport,
-                                                      PredictorConfig, predict_once)
+from circle_collision_ros.pipeline.predictor import (RUNTIME_FIELDS, CollisionPredictor,
+                                                     IntakeReport, PredictorConfig, predict_once)
 
 
 class Qos:
@@ -96,14 +98,19 @@ class Qos:
     def single_states(reliability: str) -> QoSProfile:
         # One topic carries every body's own stream (300 bodies at 30 Hz: 9,000/s); the queue
         # must outlast a prediction cycle or KEEP_LAST overwrites states before they are taken.
-        policy = ReliabilityPolicy.RELIABLE if reliability == "reliable" else ReliabilityPolicy.BEST_EFFORT
+        policy = (
+            ReliabilityPolicy.RELIABLE
+            if reliability == "reliable"
+            else ReliabilityPolicy.BEST_EFFORT
+        )
         return QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=2000, reliability=policy,
                           durability=DurabilityPolicy.VOLATILE)
 
     @staticmethod
     def predictions() -> QoSProfile:
-        return QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=10,
-                          reliability=ReliabilityPolicy.RELIABLE)
+        return QoSProfile(
+            history=HistoryPolicy.KEEP_LAST, depth=10, reliability=ReliabilityPolicy.RELIABLE
+        )
 
     @staticmethod
     def services() -> QoSProfile:
@@ -115,8 +122,9 @@ class Qos:
 
     @staticmethod
     def markers() -> QoSProfile:
-        return QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1,
-                          reliability=ReliabilityPolicy.RELIABLE)
+        return QoSProfile(
+            history=HistoryPolicy.KEEP_LAST, depth=1, reliability=ReliabilityPolicy.RELIABLE
+        )
 
 
 @dataclass
@@ -180,12 +188,15 @@ class CollisionNode(Node):
         self.add_post_set_parameters_callback(self._apply_parameters)
         p = lambda name: node_parameters.value_of(self, name)  # noqa: E731
 
-        self.predictor = CollisionPredictor(PredictorConfig(
-            horizon=p("horizon"), dimensions=p("dimensions"), frame_id=p("frame_id"),
-            stale_timeout=p("stale_timeout"), report_all_pairs=p("report_all_pairs"),
-            max_bodies=p("max_bodies"), probability_threshold=p("probability_threshold"),
-            uncertain_pair_budget=p("uncertain_pair_budget")))
-        self.predictor.warm_up()  # pay numba's compile/cache load before the first message
+        self.predictor = CollisionPredictor(
+            PredictorConfig(horizon=p("horizon"), dimensions=p("dimensions"),
+                            frame_id=p("frame_id"), stale_timeout=p("stale_timeout"),
+                            report_all_pairs=p("report_all_pairs"), max_bodies=p("max_bodies"),
+                            probability_threshold=p("probability_threshold"),
+                            uncertain_pair_budget=p("uncertain_pair_budget"))
+        )
+        # numba's compile (first start) or cache load, before the first message can arrive
+        kernels.prepare(self.predictor, log=self.get_logger().info)
         self.counters = Counters()
         # Receive (rmw timestamp of the oldest input answered) to publish, s.
         self.latencies_s: deque[float] = deque(maxlen=self.LATENCY_WINDOW)
@@ -193,29 +204,36 @@ class CollisionNode(Node):
         self._last_drain_ns = 0
         self.input_loss = InputLossMonitor()
         # What Fast DDS loaded at rclpy.init (cli.use_large_scene_transport sets it before).
-        self._transport_profile = (os.environ.get(TransportProfile.ENV)
-                                   or os.environ.get(TransportProfile.DEPRECATED_ENV) or "")
+        self._transport_profile = (
+            os.environ.get(TransportProfile.ENV)
+            or os.environ.get(TransportProfile.DEPRECATED_ENV)
+            or ""
+        )
         self._unmatched_publishers: list[str] = []
-        self._publisher_info: dict[str, tuple[int, float, dict[str, int]]] = {}  # (count, read at, kinds)
+        # (count, read at, kinds)
+        self._publisher_info: dict[str, tuple[int, float, dict[str, int]]] = {}
         self._last_warning: dict[str, float] = {}
 
         overrides = QoSOverridingOptions.with_default_policies()
-        self._predictions_pub = self.create_publisher(
-            CollisionPredictionArray, "collision_predictions", Qos.predictions(),
-            qos_overriding_options=overrides)
+        self._predictions_pub = self.create_publisher(CollisionPredictionArray,
+                                                      "collision_predictions", Qos.predictions(),
+                                                      qos_overriding_options=overrides)
         self._markers_pub = self.create_publisher(MarkerArray, "~/markers", Qos.markers())
         self.markers = MarkerPublisher(p("dimensions"), p("marker_rate"), self._markers_pub.publish,
                                        on_error=lambda text: self._warn("markers", text))
-        self._diagnostics_pub = self.create_publisher(DiagnosticArray, "/diagnostics",
-                                                      qos_profile_system_default)
+        self._diagnostics_pub = self.create_publisher(
+            DiagnosticArray, "/diagnostics", qos_profile_system_default
+        )
         self._inputs: list[InputTopic] = []
         for topic in p("state_topics"):
             self._subscribe(topic, CircleStateArray, Qos.states(p("state_reliability")))
         for topic in p("single_state_topics"):
             self._subscribe(topic, CircleState, Qos.single_states(p("state_reliability")))
         self._odometry_sources = odometry_sources(
-            [self.resolve_topic_name(t) for t in p("odometry_topics")], p("odometry_radius"),
-            p("odometry_radii"))
+            [self.resolve_topic_name(t) for t in p("odometry_topics")],
+            p("odometry_radius"),
+            p("odometry_radii"),
+        )
         for topic, source in self._odometry_sources.items():
             self._subscribe(topic, Odometry, Qos.states(p("state_reliability")),
                             functools.partial(odometry_batch, source=source))
@@ -227,9 +245,11 @@ class CollisionNode(Node):
         # would leave bodies "received in the future" that never expire and make every
         # new state look late: the scene is cleared instead (docs/reliability.md).
         self._clock_jump_handle = self.get_clock().create_jump_callback(
-            JumpThreshold(min_forward=None, min_backward=Duration(nanoseconds=-1),
-                          on_clock_change=True),
-            post_callback=self._on_clock_jump)
+            JumpThreshold(
+                min_forward=None, min_backward=Duration(nanoseconds=-1), on_clock_change=True
+            ),
+            post_callback=self._on_clock_jump,
+        )
         self._recorder: BagRecorder | None = None
         self._recording_error = ""
         if p("record_path"):
@@ -241,7 +261,9 @@ class CollisionNode(Node):
         self.create_timer(1.0, self._publish_diagnostics)
         self.get_logger().info(
             f"predicting for {p('dimensions')}-D bodies on {list(p('state_topics'))}"
-            f" + {list(p('single_state_topics'))} + odometry {list(self._odometry_sources)}, horizon {p('horizon')} s")
+            f" + {list(p('single_state_topics'))} + odometry {list(self._odometry_sources)}"
+            f", horizon {p('horizon')} s"
+        )
 
     # -- inputs ---------------------------------------------------------------------------------
     def _subscribe(self, topic: str, msg_type: type, qos: QoSProfile,
@@ -249,13 +271,19 @@ class CollisionNode(Node):
         """Subscribe to raw bytes of `msg_type`; `decode` turns them into a StateBatch
         (default: the CircleState/CircleStateArray decoder)."""
         resolved = self.resolve_topic_name(topic)  # one name for warnings, recording, replay
-        source = InputTopic(resolved, msg_type,
-                            decode or functools.partial(decode_states, msg_type=msg_type))
+        source = InputTopic(
+            resolved, msg_type, decode or functools.partial(decode_states, msg_type=msg_type)
+        )
         # raw=True: the exact received bytes are what a recording must keep; the two-argument
         # callback receives the rmw MessageInfo (receive timestamp, writer sequence number).
         source.subscription = self.create_subscription(
-            msg_type, resolved, functools.partial(self._on_input, source), qos, raw=True,
-            qos_overriding_options=QoSOverridingOptions.with_default_policies())
+            msg_type,
+            resolved,
+            functools.partial(self._on_input, source),
+            qos,
+            raw=True,
+            qos_overriding_options=QoSOverridingOptions.with_default_policies(),
+        )
         self._inputs.append(source)
 
     def _on_input(self, source: InputTopic, data: bytes, info: dict) -> None:
@@ -287,7 +315,8 @@ class CollisionNode(Node):
                 handle = source.subscription.handle
                 room = budget - (len(taken) - before)
                 try:
-                    with handle:  # held for the whole run of takes (entering costs more than a take)
+                    # held for the whole run of takes (entering costs more than a take)
+                    with handle:
                         take = handle.take_message
                         msg_type = source.msg_type
                         while room > 0:
@@ -303,7 +332,10 @@ class CollisionNode(Node):
             budget -= len(taken) - before
 
     def _ingest_all(self, taken: list, now_ns: int) -> None:
-        """Record every taken input in order, then merge: arrays one by one, runs of single states together."""
+        """Record every taken input in order, then merge.
+
+        Arrays are merged one by one, runs of single states together.
+        """
         run: list = []
         for source, data, info in taken:
             received_ns = (info or {}).get("received_timestamp") or time.time_ns()
@@ -320,7 +352,9 @@ class CollisionNode(Node):
             self._ingest_message(source, data, received_ns, now_ns)
         self._ingest_run(run, now_ns)
 
-    def _ingest_message(self, source: InputTopic, data: bytes, received_ns: int, now_ns: int) -> None:
+    def _ingest_message(
+        self, source: InputTopic, data: bytes, received_ns: int, now_ns: int
+    ) -> None:
         topic, changed = source.topic, False
         try:
             report = self.predictor.receive_batch(source.decode(data), now_ns)
@@ -335,7 +369,7 @@ class CollisionNode(Node):
         self._unanswered.note(received_ns, changed)
 
     def _ingest_run(self, run: list, now_ns: int) -> None:
-        """Consecutive single-state messages of one drain, merged as one group (pipeline/state_groups)."""
+        """Consecutive single-state messages of one drain, merged as one group (state_groups)."""
         if not run:
             return
         changed = False
@@ -345,8 +379,13 @@ class CollisionNode(Node):
                 if error is not None:
                     self.counters.rejected += 1
                     self._warn(source.topic, f"{source.topic}: rejected CircleState: {error}")
-                elif report.accepted or report.removed or report.ignored or report.rejected \
-                        or report.expired:  # (a wave's counts sit on its first message)
+                elif (
+                    report.accepted
+                    or report.removed
+                    or report.ignored
+                    or report.rejected
+                    or report.expired
+                ):  # (a wave's counts sit on its first message)
                     changed = changed or report.changed
                     self._account(source.topic, report)
         except Exception as exc:  # a bug must cost these messages, not the node
@@ -395,8 +434,10 @@ class CollisionNode(Node):
             data = prediction.to_cdr()
         except Exception as exc:  # never let one bad scene stop the stream
             self.counters.errors += 1
-            self._warn("predict", f"prediction failed, scene of {self.predictor.bodies} "
-                                  f"bodies skipped: {exc!r}")
+            self._warn(
+                "predict",
+                f"prediction failed, scene of {self.predictor.bodies} bodies skipped: {exc!r}",
+            )
             return
         self._predictions_pub.publish(data)
         published_ns = time.time_ns()  # the rmw receive timestamps are system-clock times too
@@ -411,22 +452,32 @@ class CollisionNode(Node):
         self._unanswered = Unanswered()
         self.markers.offer(prediction)
 
-    def _on_predict_request(self, request: PredictCollisions.Request,
-                            response: PredictCollisions.Response) -> PredictCollisions.Response:
+    def _on_predict_request(
+        self, request: PredictCollisions.Request, response: PredictCollisions.Response
+    ) -> PredictCollisions.Response:
         try:
             ok, message, prediction = predict_once(
-                request.circles, self.predictor.config, request.horizon,
-                request_time_ns=self.get_clock().now().nanoseconds)
+                request.circles,
+                self.predictor.config,
+                request.horizon,
+                request_time_ns=self.get_clock().now().nanoseconds,
+            )
             response.success, response.message = ok, message
-            response.predictions = prediction.to_message().predictions if prediction is not None else []
+            response.predictions = (
+                prediction.to_message().predictions if prediction is not None else []
+            )
         except Exception as exc:  # the caller gets an answer, never a dead service
             response.success, response.message = False, f"internal error: {exc!r}"
         return response
 
     def _on_clock_jump(self, jump) -> None:
-        backwards = jump.delta.nanoseconds < 0 and jump.clock_change == ClockChange.ROS_TIME_NO_CHANGE
-        if not backwards and jump.clock_change not in (ClockChange.ROS_TIME_ACTIVATED,
-                                                       ClockChange.ROS_TIME_DEACTIVATED):
+        backwards = (
+            jump.delta.nanoseconds < 0 and jump.clock_change == ClockChange.ROS_TIME_NO_CHANGE
+        )
+        if not backwards and jump.clock_change not in (
+            ClockChange.ROS_TIME_ACTIVATED,
+            ClockChange.ROS_TIME_DEACTIVATED,
+        ):
             return
         bodies = self.predictor.bodies
         self.predictor.clear()
@@ -435,19 +486,26 @@ class CollisionNode(Node):
             self.counters.clock_jumps_back += 1
             self.get_logger().warning(
                 f"clock jumped back by {-jump.delta.nanoseconds * 1e-9:.3f} s: scene of {bodies} "
-                "bodies cleared, predicting again from the next states")
+                "bodies cleared, predicting again from the next states"
+            )
 
     def _publish_diagnostics(self) -> None:
         c, s = self.counters, self.predictor.stats
         lat = np.array(self.latencies_s) if self.latencies_s else np.zeros(1)
         level = DiagnosticStatus.OK if c.errors == 0 else DiagnosticStatus.WARN
         values = {
-            "bodies": self.predictor.bodies, "messages": c.messages,
-            "states_accepted": c.accepted, "states_rejected": c.rejected,
-            "states_ignored_not_newer": c.ignored, "bodies_removed": c.removed,
-            "bodies_expired": c.expired, "predictions_published": c.published,
-            "inputs_coalesced": c.coalesced, "inputs_missing": self.input_loss.missing,
-            "candidate_pairs": s.candidate_pairs, "contacts": s.contacts,
+            "bodies": self.predictor.bodies,
+            "messages": c.messages,
+            "states_accepted": c.accepted,
+            "states_rejected": c.rejected,
+            "states_ignored_not_newer": c.ignored,
+            "bodies_removed": c.removed,
+            "bodies_expired": c.expired,
+            "predictions_published": c.published,
+            "inputs_coalesced": c.coalesced,
+            "inputs_missing": self.input_loss.missing,
+            "candidate_pairs": s.candidate_pairs,
+            "contacts": s.contacts,
             "uncertain_pairs_deferred": s.uncertain_deferred,
             "compute_ms_last": f"{s.compute_s * 1e3:.3f}",
             # From the rmw receive timestamp of the oldest input answered to publication:
@@ -457,7 +515,8 @@ class CollisionNode(Node):
             "latency_ms_max": f"{lat.max() * 1e3:.3f}",
             "markers_drawn": self.markers.drawn,
             "marker_ms_last": f"{self.markers.last_cost_s * 1e3:.3f}",
-            "errors": c.errors, "clock_jumps_back": c.clock_jumps_back,
+            "errors": c.errors,
+            "clock_jumps_back": c.clock_jumps_back,
         }
         values.update(self._transport_values())
         self.input_loss.forget_silent(time.time_ns())
@@ -466,7 +525,9 @@ class CollisionNode(Node):
             self._warn("input_loss", line)
         # A failed recording must show where operators look, not only once in the log
         # (tests/reliability/test_faults_recording.py::test_recording_directory_removed).
-        recording_error = self._recording_error or (self._recorder.error if self._recorder else None)
+        recording_error = self._recording_error or (
+            self._recorder.error if self._recorder else None
+        )
         if self._recorder is None:
             values["recording"] = "off"
         elif recording_error:
@@ -480,15 +541,16 @@ class CollisionNode(Node):
         if losses or self._unmatched_publishers:
             level = DiagnosticStatus.WARN
             problems += losses + self._unmatched_publishers
-        status = DiagnosticStatus(
-            level=level, name=f"{self.get_name()}: collision prediction",
-            message="; ".join(problems) or "ok",
-            hardware_id=self.get_fully_qualified_name(),
-            values=[KeyValue(key=k, value=str(v)) for k, v in values.items()])
-        self._diagnostics_pub.publish(DiagnosticArray(header=Header(stamp=self.get_clock().now().to_msg()), status=[status]))
+        status = DiagnosticStatus(level=level, name=f"{self.get_name()}: collision prediction",
+                                  message="; ".join(problems) or "ok",
+                                  hardware_id=self.get_fully_qualified_name(),
+                                  values=[KeyValue(key=k, value=str(v)) for k, v in values.items()])
+        self._diagnostics_pub.publish(
+            DiagnosticArray(header=Header(stamp=self.get_clock().now().to_msg()), status=[status])
+        )
 
     def _transport_values(self) -> dict[str, str]:
-        """What the transport delivers: profile in force, largest input, input publishers and their QoS.
+        """What the transport delivers: profile in force, largest input, publishers and their QoS.
 
         Also sets _unmatched_publishers: best-effort publishers a reliable subscription
         (state_reliability:=reliable) can never receive from.
@@ -500,13 +562,14 @@ class CollisionNode(Node):
             shown = ", ".join(f"{n} {k}" for k, n in sorted(kinds.items())) or "none"
             summary.append(f"{source.topic}: {shown}")
             if reliable and kinds.get("best_effort"):
-                unmatched.append(f"{source.topic}: {kinds['best_effort']} best-effort publisher(s) cannot "
-                                 "reach this node's reliable subscription (state_reliability)")
+                unmatched.append(
+                    f"{source.topic}: {kinds['best_effort']} best-effort publisher(s) cannot "
+                    "reach this node's reliable subscription (state_reliability)"
+                )
         self._unmatched_publishers = unmatched
         largest = max((t.largest_bytes for t in self.input_loss.topics.values()), default=0)
         return {"transport_profile": self._transport_profile or "Fast DDS defaults",
-                "largest_input_kb": f"{largest / 1024:.1f}",
-                "input_publishers": "; ".join(summary)}
+                "largest_input_kb": f"{largest / 1024:.1f}", "input_publishers": "; ".join(summary)}
 
     #: Publisher QoS lists older than this are read again even if the count is unchanged, s.
     PUBLISHER_INFO_REFRESH_S = 10.0
@@ -532,25 +595,31 @@ class CollisionNode(Node):
         try:
             self._recorder = BagRecorder(path)
             for source in self._inputs:
-                self._recorder.add_topic(source.topic, _ros_type_name(source.msg_type),
-                                         self._offered_qos(source.topic))
+                self._recorder.add_topic(
+                    source.topic, _ros_type_name(source.msg_type), self._offered_qos(source.topic)
+                )
             self._recorder.add_topic(self._predictions_pub.topic_name,
                                      _ros_type_name(CollisionPredictionArray),
                                      qos_profiles_yaml([self._predictions_pub.qos_profile]))
             # Recorded, not published: offered as `ros2 bag play` should replay it.
-            self._recorder.add_topic(self._config_topic, "std_msgs/msg/String",
-                                     qos_profiles_yaml([Qos.predictions()]))
+            self._recorder.add_topic(
+                self._config_topic, "std_msgs/msg/String", qos_profiles_yaml([Qos.predictions()])
+            )
         except RecordingError as exc:
             raise ValueError(f"record_path: {exc}") from exc
         # Input publishers may appear after start: look for them off the message path.
         self._qos_unknown = {s.topic for s in self._inputs if not self._offered_qos(s.topic)}
-        self._qos_timer = self.create_timer(1.0, self._record_offered_qos) if self._qos_unknown else None
+        self._qos_timer = (
+            self.create_timer(1.0, self._record_offered_qos) if self._qos_unknown else None
+        )
         self._record_config()
         self.get_logger().info(f"recording to {self._recorder.path}")
 
     def _offered_qos(self, topic: str) -> str:
         """rosbag2's offered_qos_profiles of the publishers on `topic` now ("" if none)."""
-        return qos_profiles_yaml([info.qos_profile for info in self.get_publishers_info_by_topic(topic)])
+        return qos_profiles_yaml(
+            [info.qos_profile for info in self.get_publishers_info_by_topic(topic)]
+        )
 
     def _record_offered_qos(self) -> None:
         """Timer while recording: fill offered_qos_profiles once a topic's publishers are seen."""
@@ -584,8 +653,9 @@ class CollisionNode(Node):
         except RecordingError as exc:
             self._recording_error = self._recording_error or str(exc)
 
-    def _record(self, topic: str, data: bytes, log_time_ns: int,
-                publish_time_ns: int | None = None) -> None:
+    def _record(
+        self, topic: str, data: bytes, log_time_ns: int, publish_time_ns: int | None = None
+    ) -> None:
         """publish_time_ns: the writer's source timestamp of an input, when rmw gives it."""
         if self._recorder is None or self._recording_error:
             return

@@ -60,7 +60,7 @@ class InputLossMonitor:
         self._reported_missing: dict[str, int] = {}
 
     def observe(self, topic: str, size_bytes: int, info: dict | None, received_ns: int) -> int:
-        """Account one received sample; returns how many of its publisher's samples it shows missing.
+        """Account one received sample; return how many of its publisher's samples it shows missing.
 
         info : the rmw MessageInfo of the sample (None or without sequence numbers: size only).
         """
@@ -94,8 +94,11 @@ class InputLossMonitor:
     def forget_silent(self, now_ns: int) -> None:
         """Drop publishers not heard from within LossThresholds.FORGET_AFTER_NS."""
         for stats in self.topics.values():
-            silent = [k for k, p in stats.publishers.items()
-                      if now_ns - p.last_heard_ns > LossThresholds.FORGET_AFTER_NS]
+            silent = [
+                k
+                for k, p in stats.publishers.items()
+                if now_ns - p.last_heard_ns > LossThresholds.FORGET_AFTER_NS
+            ]
             for key in silent:
                 del stats.publishers[key]
 
@@ -112,14 +115,20 @@ class InputLossMonitor:
             if new <= 0:
                 continue
             self._reported_missing[topic] = stats.missing
-            line = (f"{topic}: {new} input message(s) published but never received "
-                    f"({stats.missing} of {stats.missing + stats.received} in all)")
+            line = (
+                f"{topic}: {new} input message(s) published but never received "
+                f"({stats.missing} of {stats.missing + stats.received} in all)"
+            )
             if stats.missing_large:
-                line += (f"; frames up to {stats.largest_bytes / 1e6:.2f} MB are larger than Fast DDS's"
-                         " default shared-memory segment carries: load config/fastdds_large_scenes.xml"
-                         " in the publishers too (export FASTDDS_DEFAULT_PROFILES_FILE=...; README,"
-                         " 'Large scenes')")
+                line += (
+                    f"; frames up to {stats.largest_bytes / 1e6:.2f} MB are larger than Fast DDS's"
+                    " default shared-memory segment carries: load config/fastdds_large_scenes.xml"
+                    " in the publishers too (export FASTDDS_DEFAULT_PROFILES_FILE=...; README,"
+                    " 'Large scenes')"
+                )
             else:
-                line += "; the node may be falling behind its input queue, or the network drops frames"
+                line += (
+                    "; the node may be falling behind its input queue, or the network drops frames"
+                )
             lines.append(line)
         return lines

@@ -73,7 +73,7 @@ class Urgency:
 
 
 class MarkerIds:
-    """A small integer per key, for as long as the key is live; freed ids are reused smallest first."""
+    """A small integer per key while the key is live; freed ids are reused smallest first."""
 
     def __init__(self) -> None:
         self._ids: dict[Hashable, int] = {}
@@ -111,15 +111,15 @@ class MarkerIds:
 
 
 class MarkerSegment(NamedTuple):
-    """Markers of one namespace and action; arrays of length N (pose/scale/colour unused for DELETE)."""
+    """Markers of one namespace and action; length-N arrays (pose/scale/colour unused by DELETE)."""
 
     ns: str
     type: int
     action: int
-    ids: np.ndarray        # (N,) int32
+    ids: np.ndarray  # (N,) int32
     positions: np.ndarray  # (N, 3) float64
-    scales: np.ndarray     # (N, 3) float64
-    colours: np.ndarray    # (N, 4) float32
+    scales: np.ndarray  # (N, 3) float64
+    colours: np.ndarray  # (N, 4) float32
 
 
 class _Layout(NamedTuple):
@@ -168,7 +168,7 @@ class MarkerArrayEncoder:
                 every = np.flatnonzero(starts % 8 == residue)
                 for first in range(0, len(every), self.CHUNK):
                     pause()
-                    rows = every[first:first + self.CHUNK]
+                    rows = every[first : first + self.CHUNK]
                     self._write(out, starts[rows], rows, layout, segment, stamp)
         return out[:size].tobytes()
 
@@ -176,7 +176,7 @@ class MarkerArrayEncoder:
                segment: MarkerSegment, stamp: tuple[int, int]) -> None:
         """Markers `rows` of `segment`, starting at origin-relative offsets `at`, into `out`."""
         i32, u32, f32 = out.view("<i4"), out.view("<u4"), out.view("<f4")
-        f64 = out[self.ORIGIN:self.ORIGIN + (len(out) - 8)].view("<f8")
+        f64 = out[self.ORIGIN : self.ORIGIN + (len(out) - 8)].view("<f8")
         absolute = at + self.ORIGIN
         out[absolute[:, None] + np.arange(layout.length)] = layout.template
         o = layout.offsets
@@ -197,8 +197,9 @@ class MarkerArrayEncoder:
             for channel in range(4):
                 f32[colour + channel] = segment.colours[rows, channel]
 
-    def _starts(self, frame_id: str, segment: MarkerSegment, pos: int
-                ) -> tuple[np.ndarray, dict[int, _Layout]]:
+    def _starts(
+        self, frame_id: str, segment: MarkerSegment, pos: int
+    ) -> tuple[np.ndarray, dict[int, _Layout]]:
         """Origin-relative start of each marker, and the layout per start residue."""
         layouts = {r: self._layout(frame_id, segment, r) for r in (0, 4)}
         n = len(segment.ids)
@@ -214,7 +215,9 @@ class MarkerArrayEncoder:
         else:  # alternating from the first marker
             sequence = np.array([residue[0], residue[1]] * ((n + 1) // 2), dtype=np.int64)[:n]
         lengths = np.where(sequence == 0, padded[0], padded[4])
-        starts = pos + np.concatenate(([0], np.cumsum(lengths[:-1]))) if n else np.zeros(0, np.int64)
+        starts = (
+            pos + np.concatenate(([0], np.cumsum(lengths[:-1]))) if n else np.zeros(0, np.int64)
+        )
         return starts.astype(np.int64), layouts
 
     def _layout(self, frame_id: str, segment: MarkerSegment, residue: int) -> _Layout:
@@ -223,8 +226,9 @@ class MarkerArrayEncoder:
         if layout is None:
             if len(self._layouts) > 64:  # frames come from parameters/inputs: keep the cache small
                 self._layouts.clear()
-            layout = self._layouts[key] = _marker_layout(frame_id.encode(), segment.ns.encode(),
-                                                         segment.type, segment.action, residue)
+            layout = self._layouts[key] = _marker_layout(
+                frame_id.encode(), segment.ns.encode(), segment.type, segment.action, residue
+            )
         return layout
 
 
@@ -263,7 +267,7 @@ def _marker_layout(frame: bytes, ns: bytes, marker_type: int, action: int, resid
     put(np.array([0, 0, 0, 0, 0, 0, 1.0], "<f8").tobytes(), 8, "pose")  # orientation w = 1
     put(b"\0" * 24, 8, "scale")
     put(b"\0" * 16, 4, "color")
-    put(b"\0" * 8, 4, "lifetime")   # 0: forever; deletions are explicit
+    put(b"\0" * 8, 4, "lifetime")  # 0: forever; deletions are explicit
     put(b"\0", 1, "frame_locked")
     count0()  # points
     count0()  # colors
@@ -282,7 +286,7 @@ def _marker_layout(frame: bytes, ns: bytes, marker_type: int, action: int, resid
 
 
 class MarkerBuilder:
-    """Serialized MarkerArrays: a DELETEALL, then the whole scene, with ids bounded by the live scene."""
+    """Serialized MarkerArrays: a DELETEALL, then the whole scene; ids bounded by the live scene."""
 
     CONTACT_DIAMETER_M = 0.3
     FLAT_HEIGHT_M = 0.05
@@ -296,45 +300,63 @@ class MarkerBuilder:
     CHUNK = 512  # keys handled between two pause points
 
     def build(self, prediction: ScenePrediction, pause: Callable[[], None] = lambda: None) -> bytes:
-        """The MarkerArray bytes for `prediction`; calls `pause` between short steps (see MarkerPublisher)."""
+        """The MarkerArray bytes for `prediction`.
+
+        Calls `pause` between short steps (see MarkerPublisher).
+        """
         snapshot = prediction.snapshot
         ids = list(snapshot.ids)
         n = len(ids)
         rows = list(prediction.rows())
         contacts = [row for row in rows if row.status != CollisionPrediction.NO_CONTACT]
-        # listed pairs: mean contacts and (uncertain states) probable ones; not report_all_pairs' rest
-        listed = [row for row in rows if row.status != CollisionPrediction.NO_CONTACT
-                  or row.collision_probability > 0.0]
+        # listed pairs: mean contacts and (uncertain states) probable ones; not report_all_pairs'
+        # rest
+        listed = [
+            row
+            for row in rows
+            if row.status != CollisionPrediction.NO_CONTACT or row.collision_probability > 0.0
+        ]
         pause()
         index = dict(zip(ids, range(n)))
         body_ttc = np.full(n, np.inf)
         body_probability = np.zeros(n)
         if listed:
             ends = np.array([index[row[k]] for row in listed for k in (0, 1)], dtype=np.int64)
-            np.minimum.at(body_ttc, ends, np.repeat([row.plausible_time_to_collision for row in listed], 2))
-            np.maximum.at(body_probability, ends, np.repeat([row.collision_probability for row in listed], 2))
+            np.minimum.at(
+                body_ttc, ends, np.repeat([row.plausible_time_to_collision for row in listed], 2)
+            )
+            np.maximum.at(
+                body_probability, ends, np.repeat([row.collision_probability for row in listed], 2)
+            )
         positions = np.zeros((n, 3))
         if n:
             d = min(snapshot.positions.shape[1], 3)
             positions[:, :d] = snapshot.positions[:, :d]
-        diameters = np.maximum(2.0 * np.asarray(snapshot.radii, dtype=np.float64), 1e-3)  # a point still shows
-        scales = np.stack([diameters, diameters,
-                           diameters if self.dimensions == 3 else np.full(n, self.FLAT_HEIGHT_M)], axis=1)
+        # a point still shows
+        diameters = np.maximum(2.0 * np.asarray(snapshot.radii, dtype=np.float64), 1e-3)
+        scales = np.stack(
+            [diameters, diameters,
+             diameters if self.dimensions == 3 else np.full(n, self.FLAT_HEIGHT_M)],
+            axis=1,
+        )
         shape = SPHERE if self.dimensions == 3 else CYLINDER
         pause()
         gone_bodies = self._departed(self.body_ids, ids)
         pause()
-        bodies = MarkerSegment("bodies", shape, ADD, self._assign(self.body_ids, ids, pause), positions,
-                               scales, Urgency.colours(body_ttc, body_probability))
+        bodies = MarkerSegment("bodies", shape, ADD, self._assign(self.body_ids, ids, pause),
+                               positions, scales, Urgency.colours(body_ttc, body_probability))
         pause()
         pairs = [(row[0], row[1]) for row in contacts]
         m = len(pairs)
         gone_pairs = self._departed(self.pair_ids, pairs)
         contact_points = np.array([row[5] for row in contacts], dtype=np.float64).reshape(m, 3)
         contact_ttc = np.array([row[3] for row in contacts], dtype=np.float64)
-        contact_probability = np.array([row.collision_probability for row in contacts], dtype=np.float64)
-        contacts_segment = MarkerSegment("contacts", SPHERE, ADD, self._assign(self.pair_ids, pairs, pause),
-                                         contact_points, np.full((m, 3), self.CONTACT_DIAMETER_M),
+        contact_probability = np.array(
+            [row.collision_probability for row in contacts], dtype=np.float64
+        )
+        contacts_segment = MarkerSegment("contacts", SPHERE, ADD,
+                                         self._assign(self.pair_ids, pairs, pause), contact_points,
+                                         np.full((m, 3), self.CONTACT_DIAMETER_M),
                                          Urgency.colours(contact_ttc, contact_probability))
         pause()
         # Each array starts with a DELETEALL, so it is complete on its own: a display that missed
@@ -361,8 +383,8 @@ class MarkerBuilder:
         for start in range(0, len(keys), cls.CHUNK):
             if start:
                 pause()
-            part = keys[start:start + cls.CHUNK]
-            out[start:start + len(part)] = [table.assign(k) for k in part]
+            part = keys[start : start + cls.CHUNK]
+            out[start : start + len(part)] = [table.assign(k) for k in part]
         return out
 
     @staticmethod
@@ -374,7 +396,7 @@ class MarkerBuilder:
 
 
 class MarkerPublisher:
-    """Draws the newest offered prediction on its own thread, at most `rate` Hz and within a CPU budget.
+    """Draws the newest offered prediction on its own thread at most `rate` Hz, within a CPU budget.
 
     publish : sends serialized MarkerArray bytes (the node's raw publisher).
     offer() is all the prediction path pays: it replaces a reference under a lock.
@@ -405,7 +427,9 @@ class MarkerPublisher:
         self._node_idle.set()
         self.drawn = 0
         self.last_cost_s = 0.0
-        self._thread = threading.Thread(target=self._run, name="collision_node_markers", daemon=True)
+        self._thread = threading.Thread(
+            target=self._run, name="collision_node_markers", daemon=True
+        )
         self._thread.start()
 
     @property
@@ -476,7 +500,8 @@ class MarkerPublisher:
                     clear = True
                 else:
                     clear = False
-                    # Wait for the rate/budget slot; a newer prediction offered meanwhile replaces this one.
+                    # Wait for the rate/budget slot; a newer prediction offered meanwhile replaces
+                    # this one.
                     delay = self._next_time - time.monotonic()
                     if delay > 0:
                         self._cond.wait(timeout=delay)
@@ -492,7 +517,9 @@ class MarkerPublisher:
                     self.drawn += 1
                 self.last_cost_s = time.monotonic() - started
                 if self._rate > 0:
-                    self._next_time = started + max(1.0 / self._rate, self.last_cost_s / self.BUDGET)
+                    self._next_time = started + max(
+                        1.0 / self._rate, self.last_cost_s / self.BUDGET
+                    )
             except Exception as exc:  # markers are for eyes: never let them stop the node
                 self._on_error(f"markers skipped: {exc!r}")
             finally:

@@ -61,36 +61,65 @@ class ParamSpec:
 
 
 PARAMS: tuple[ParamSpec, ...] = (
-    ParamSpec("state_topics", Parameter.Type.STRING_ARRAY, ["circle_states"],
-              "Topics carrying circle_collision_msgs/CircleStateArray; merged into one scene by id.",
-              read_only=True),
+    ParamSpec(
+        "state_topics",
+        Parameter.Type.STRING_ARRAY,
+        ["circle_states"],
+        "Topics carrying circle_collision_msgs/CircleStateArray; merged into one scene by id.",
+        read_only=True,
+    ),
     ParamSpec("single_state_topics", Parameter.Type.STRING_ARRAY, [],
               "Topics carrying one circle_collision_msgs/CircleState each.", read_only=True),
-    ParamSpec("odometry_topics", Parameter.Type.STRING_ARRAY, [],
-              "Topics carrying nav_msgs/Odometry, one robot each; the body id is the topic's namespace.",
-              read_only=True),
+    ParamSpec(
+        "odometry_topics",
+        Parameter.Type.STRING_ARRAY,
+        [],
+        "Topics carrying nav_msgs/Odometry, one robot each; the body id is the topic's namespace.",
+        read_only=True,
+    ),
     ParamSpec("odometry_radius", Parameter.Type.DOUBLE, 0.5,
-              "Radius in m of the bodies of odometry_topics.", read_only=True, float_range=(0.0, 1e6)),
-    ParamSpec("odometry_radii", Parameter.Type.DOUBLE_ARRAY, [],
-              "Per-topic radii in m, one per odometry_topics entry; empty: odometry_radius for all.",
-              read_only=True),
-    ParamSpec("frame_id", Parameter.Type.STRING, "",
-              "Frame every state must be in; empty adopts the first frame seen (no tf: others are rejected).",
-              read_only=True),
+              "Radius in m of the bodies of odometry_topics.", read_only=True,
+              float_range=(0.0, 1e6)),
+    ParamSpec(
+        "odometry_radii",
+        Parameter.Type.DOUBLE_ARRAY,
+        [],
+        "Per-topic radii in m, one per odometry_topics entry; empty: odometry_radius for all.",
+        read_only=True,
+    ),
+    ParamSpec(
+        "frame_id",
+        Parameter.Type.STRING,
+        "",
+        "Frame every state must be in; empty adopts the first frame seen "
+        "(no tf: others are rejected).",
+        read_only=True,
+    ),
     ParamSpec("dimensions", Parameter.Type.INTEGER, 2,
               "2: circles in the plane (z ignored); 3: spheres.", read_only=True, int_range=(2, 3)),
     ParamSpec("horizon", Parameter.Type.DOUBLE, 5.0,
               "Prediction horizon in s: later contacts are not reported.",
               float_range=(HorizonLimits.MIN_S, HorizonLimits.MAX_S)),
-    ParamSpec("probability_threshold", Parameter.Type.DOUBLE, 0.01,
-              "In (0, 1]: an uncertain pair (covariance given) whose mean paths miss is reported when "
-              "its probability of contact within the horizon reaches this; plausible_time_to_collision "
-              "is the first time the overlap probability does.", float_range=(0.0, 1.0)),
-    ParamSpec("uncertain_pair_budget", Parameter.Type.INTEGER, 4,
-              "Uncertain pairs given the full probability evaluation per prediction, longest-waiting "
-              "first, then earliest possible contact (0: all); the others are reported with probability 1.0, bound 1.0 "
-              "(deferred, counted in /diagnostics). A count, so replay is bit-identical.",
-              read_only=True, int_range=(0, 1_000_000)),
+    ParamSpec(
+        "probability_threshold",
+        Parameter.Type.DOUBLE,
+        0.01,
+        "In (0, 1]: an uncertain pair (covariance given) whose mean paths miss is reported when "
+        "its probability of contact within the horizon reaches this; plausible_time_to_collision "
+        "is the first time the overlap probability does.",
+        float_range=(0.0, 1.0),
+    ),
+    ParamSpec(
+        "uncertain_pair_budget",
+        Parameter.Type.INTEGER,
+        4,
+        "Uncertain pairs given the full probability evaluation per prediction, longest-waiting "
+        "first, then earliest possible contact (0: all); the others are reported with "
+        "probability 1.0, bound 1.0 "
+        "(deferred, counted in /diagnostics). A count, so replay is bit-identical.",
+        read_only=True,
+        int_range=(0, 1_000_000),
+    ),
     ParamSpec("report_all_pairs", Parameter.Type.BOOL, False,
               "Also list NO_CONTACT pairs (time +inf); only for scenes of at most 100 bodies."),
     ParamSpec("stale_timeout", Parameter.Type.DOUBLE, 2.0,
@@ -103,13 +132,22 @@ PARAMS: tuple[ParamSpec, ...] = (
     ParamSpec("max_bodies", Parameter.Type.INTEGER, 10_000,
               "New ids beyond this many are rejected (bounds memory and compute).", read_only=True,
               int_range=(1, 1_000_000)),
-    ParamSpec("state_reliability", Parameter.Type.STRING, "best_effort",
-              "QoS of the input subscriptions: best_effort (matches every publisher; frames may be "
-              "lost) or reliable (keep last 1 per array topic: the newest frame, delivered; matches "
-              "reliable publishers only).", read_only=True),
-    ParamSpec("record_path", Parameter.Type.STRING, "",
-              "Bag directory to record inputs and predictions to (MCAP, rosbag2 layout); empty: off.",
-              read_only=True),
+    ParamSpec(
+        "state_reliability",
+        Parameter.Type.STRING,
+        "best_effort",
+        "QoS of the input subscriptions: best_effort (matches every publisher; frames may be "
+        "lost) or reliable (keep last 1 per array topic: the newest frame, delivered; matches "
+        "reliable publishers only).",
+        read_only=True,
+    ),
+    ParamSpec(
+        "record_path",
+        Parameter.Type.STRING,
+        "",
+        "Bag directory to record inputs and predictions to (MCAP, rosbag2 layout); empty: off.",
+        read_only=True,
+    ),
 )
 SPECS = {spec.name: spec for spec in PARAMS}
 STATE_RELIABILITY = ("best_effort", "reliable")
@@ -129,8 +167,12 @@ def declare_all(node: Node) -> None:
         else:
             node.declare_parameter(spec.name, spec.default, spec.descriptor())
         value = node.get_parameter(spec.name).value
-        if spec.type_ == Parameter.Type.DOUBLE and _is_integer(value) and not spec.read_only \
-                and validate(spec.name, value) is None:
+        if (
+            spec.type_ == Parameter.Type.DOUBLE
+            and _is_integer(value)
+            and not spec.read_only
+            and validate(spec.name, value) is None
+        ):
             node.set_parameters([Parameter(spec.name, Parameter.Type.DOUBLE, float(value))])
 
 
@@ -156,15 +198,18 @@ def _is_number(value: Any) -> bool:
 
 
 def value_of(node: Node, name: str) -> Any:
-    """Current value in its declared type (an integer given for a double as float, lists as list)."""
+    """Current value in its declared type (an int given for a double as float, lists as list)."""
     value = node.get_parameter(name).value
     spec = SPECS[name]
     if value is None:
         return spec.default
     if spec.type_ == Parameter.Type.DOUBLE and _is_number(value):
         return float(value)
-    if spec.type_ == Parameter.Type.DOUBLE_ARRAY and isinstance(value, (list, tuple)) \
-            and all(_is_number(v) for v in value):
+    if (
+        spec.type_ == Parameter.Type.DOUBLE_ARRAY
+        and isinstance(value, (list, tuple))
+        and all(_is_number(v) for v in value)
+    ):
         return [float(v) for v in value]
     if spec.type_ in _ELEMENT_TYPES and isinstance(value, (list, tuple)):
         return list(value)
@@ -206,7 +251,8 @@ def validate(name: str, value: Any) -> str | None:
     elements = _ELEMENT_TYPES.get(spec.type_)
     if elements is not None:
         if not isinstance(value, (list, tuple)) or not all(
-                isinstance(v, elements) and not isinstance(v, bool) for v in value):
+            isinstance(v, elements) and not isinstance(v, bool) for v in value
+        ):
             kind = "strings" if spec.type_ == Parameter.Type.STRING_ARRAY else "numbers"
             return f"{name} must be a list of {kind}, got {value!r}"
     if name == "odometry_radii" and any(not math.isfinite(r) or r < 0.0 for r in value):

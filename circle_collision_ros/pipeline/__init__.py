@@ -10,14 +10,19 @@ in). Importing this package loads numba, the message packages and ``core``,
 never rclpy.
 """
 from circle_collision_ros.pipeline.cdr import CdrError, decode_string
-from circle_collision_ros.pipeline.odometry import (ODOMETRY_TYPE, OdometryError, OdometrySource, decode_odometry,
-                                                    odometry_batch, odometry_sources)
-from circle_collision_ros.pipeline.prediction_codec import (PairPrediction, PredictionArray, decode_prediction_array,
-                                                            encode_contact_rows, encode_prediction_array,
+from circle_collision_ros.pipeline.odometry import (ODOMETRY_TYPE, OdometryError, OdometrySource,
+                                                    decode_odometry, odometry_batch,
+                                                    odometry_sources)
+from circle_collision_ros.pipeline.prediction_codec import (PairPrediction, PredictionArray,
+                                                            decode_prediction_array,
+                                                            encode_contact_rows,
+                                                            encode_prediction_array,
                                                             peek_prediction_array)
-from circle_collision_ros.pipeline.prediction_messages import PredictionColumns, PredictionRow, ScenePrediction
-from circle_collision_ros.pipeline.predictor import (RUNTIME_FIELDS, CollisionPredictor, HorizonLimits, IntakeReport,
-                                                     PredictionStats, PredictorConfig, predict_once)
+from circle_collision_ros.pipeline.prediction_messages import (PredictionColumns, PredictionRow,
+                                                               ScenePrediction)
+from circle_collision_ros.pipeline.predictor import (RUNTIME_FIELDS, CollisionPredictor,
+                                                     HorizonLimits, IntakeReport, PredictionStats,
+                                                     PredictorConfig, predict_once)
 from circle_collision_ros.pipeline.state_batch import StateBatch
 from circle_collision_ros.pipeline.state_codec import (COVARIANCE_SIZE, decode_states, encode_state,
                                                        encode_state_array)
@@ -26,15 +31,40 @@ from circle_collision_ros.pipeline.state_validation import BatchCheck, Rejection
 
 __all__ = [
     # the predictor
-    "CollisionPredictor", "PredictorConfig", "IntakeReport", "PredictionStats", "HorizonLimits",
-    "RUNTIME_FIELDS", "predict_once",
+    "CollisionPredictor",
+    "PredictorConfig",
+    "IntakeReport",
+    "PredictionStats",
+    "HorizonLimits",
+    "RUNTIME_FIELDS",
+    "predict_once",
     # its input and output forms
-    "StateBatch", "ScenePrediction", "PredictionColumns", "PredictionRow",
-    "check_batch", "BatchCheck", "Rejection", "ingest_single_states", "GroupOutcome",
+    "StateBatch",
+    "ScenePrediction",
+    "PredictionColumns",
+    "PredictionRow",
+    "check_batch",
+    "BatchCheck",
+    "Rejection",
+    "ingest_single_states",
+    "GroupOutcome",
     # codecs
-    "CdrError", "decode_string",
-    "COVARIANCE_SIZE", "decode_states", "encode_state", "encode_state_array",
-    "PairPrediction", "PredictionArray", "decode_prediction_array", "peek_prediction_array",
-    "encode_prediction_array", "encode_contact_rows",
-    "ODOMETRY_TYPE", "OdometryError", "OdometrySource", "decode_odometry", "odometry_batch", "odometry_sources",
+    "CdrError",
+    "decode_string",
+    "COVARIANCE_SIZE",
+    "decode_states",
+    "encode_state",
+    "encode_state_array",
+    "PairPrediction",
+    "PredictionArray",
+    "decode_prediction_array",
+    "peek_prediction_array",
+    "encode_prediction_array",
+    "encode_contact_rows",
+    "ODOMETRY_TYPE",
+    "OdometryError",
+    "OdometrySource",
+    "decode_odometry",
+    "odometry_batch",
+    "odometry_sources",
 ]

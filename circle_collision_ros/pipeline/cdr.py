@@ -117,7 +117,9 @@ class CdrReader:
 
     def __init__(self, data: bytes) -> None:
         if len(data) < ORIGIN or data[:2] != CDR_LE:
-            raise CdrError(f"not little-endian CDR (encapsulation {bytes(data[:2]).hex() or 'missing'})")
+            raise CdrError(
+                f"not little-endian CDR (encapsulation {bytes(data[:2]).hex() or 'missing'})"
+            )
         self.data, self.pos = data, ORIGIN
 
     def unpack(self, fmt: struct.Struct, align: int) -> tuple:
@@ -133,7 +135,7 @@ class CdrReader:
         if length < 1 or end > len(self.data) or self.data[end - 1] != 0:
             raise CdrError(f"string of {length} bytes at byte {self.pos} is malformed")
         try:
-            text = self.data[self.pos:end - 1].decode()
+            text = self.data[self.pos : end - 1].decode()
         except UnicodeDecodeError as exc:
             raise CdrError(f"string at byte {self.pos} is not UTF-8 ({exc.reason})") from exc
         self.pos = end

@@ -39,7 +39,8 @@ from typing import NamedTuple
 import numpy as np
 
 from circle_collision_ros.core.uncertainty.covariance import covariance_problem
-from circle_collision_ros.pipeline.cdr import CDR_BE, CDR_LE, ORIGIN, CdrError, align, read_string, read_u32
+from circle_collision_ros.pipeline.cdr import (CDR_BE, CDR_LE, ORIGIN, CdrError, align, read_string,
+                                               read_u32)
 from circle_collision_ros.pipeline.state_batch import StateBatch
 
 ODOMETRY_TYPE = "nav_msgs/msg/Odometry"
@@ -68,8 +69,9 @@ class OdometryFields(NamedTuple):
     child_frame_id: str
     position: tuple[float, float, float]
     orientation: tuple[float, float, float, float]  # x, y, z, w as received
-    linear: tuple[float, float, float]              # m/s in child_frame_id
-    pose_covariance: tuple[float, ...] = (0.0,) * 36   # 6x6 row-major (x, y, z, rot x, rot y, rot z)
+    linear: tuple[float, float, float]  # m/s in child_frame_id
+    # 6x6 row-major (x, y, z, rot x, rot y, rot z)
+    pose_covariance: tuple[float, ...] = (0.0,) * 36
     twist_covariance: tuple[float, ...] = (0.0,) * 36  # 6x6 row-major, in child_frame_id
 
 
@@ -90,8 +92,10 @@ def decode_odometry(data: bytes) -> OdometryFields:
         If the bytes are not well-formed Odometry CDR (either byte order).
     """
     if len(data) < ORIGIN + 8 or bytes(data[:2]) not in (CDR_LE, CDR_BE):
-        raise CdrError(f"not plain CDR Odometry (encapsulation {bytes(data[:2]).hex() or 'missing'}, "
-                       f"{len(data)} bytes)")
+        raise CdrError(
+            f"not plain CDR Odometry (encapsulation {bytes(data[:2]).hex() or 'missing'}, "
+            f"{len(data)} bytes)"
+        )
     be = bytes(data[:2]) == CDR_BE
     buf = np.frombuffer(data, dtype=np.uint8)
     sec = int(read_u32(buf, ORIGIN, be))
@@ -105,12 +109,14 @@ def decode_odometry(data: bytes) -> OdometryFields:
         raise CdrError("truncated or malformed Odometry child_frame_id")
     pos = int(align(pos, 8))
     if pos + 8 * _DOUBLES > len(data):
-        raise CdrError(f"truncated Odometry: pose and twist need {8 * _DOUBLES} bytes at {pos}, "
-                       f"{len(data) - pos} remain")
+        raise CdrError(
+            f"truncated Odometry: pose and twist need {8 * _DOUBLES} bytes at {pos}, "
+            f"{len(data) - pos} remain"
+        )
     values = np.frombuffer(data, dtype=">f8" if be else "<f8", count=_DOUBLES, offset=pos).tolist()
     try:
-        frame = bytes(data[frame_off:frame_off + frame_len]).decode()
-        child = bytes(data[child_off:child_off + child_len]).decode()
+        frame = bytes(data[frame_off : frame_off + frame_len]).decode()
+        child = bytes(data[child_off : child_off + child_len]).decode()
     except UnicodeDecodeError as exc:
         raise CdrError(f"an Odometry frame id is not UTF-8 ({exc.reason})") from exc
     return OdometryFields(sec * 1_000_000_000 + nanosec, frame, child, tuple(values[_POSITION]),
@@ -124,29 +130,37 @@ def unit_quaternion(q: tuple[float, float, float, float]) -> tuple[float, float,
     if not math.isfinite(norm) or norm == 0.0:
         raise OdometryError(f"pose.orientation {q} is zero or not finite")
     if abs(norm - 1.0) > QuaternionRule.TOLERANCE:
-        raise OdometryError(f"pose.orientation {q} is not a unit quaternion (norm {norm:.6g}; "
-                            f"accepted within {QuaternionRule.TOLERANCE:g} of 1)")
+        raise OdometryError(
+            f"pose.orientation {q} is not a unit quaternion (norm {norm:.6g}; "
+            f"accepted within {QuaternionRule.TOLERANCE:g} of 1)"
+        )
     return q[0] / norm, q[1] / norm, q[2] / norm, q[3] / norm
 
 
-def rotate(q: tuple[float, float, float, float], v: tuple[float, float, float]) -> tuple[float, float, float]:
+def rotate(
+    q: tuple[float, float, float, float], v: tuple[float, float, float]
+) -> tuple[float, float, float]:
     """v rotated by the unit quaternion q = (x, y, z, w): v + 2w (u x v) + 2 u x (u x v)."""
     x, y, z, w = q
-    tx, ty, tz = 2.0 * (y * v[2] - z * v[1]), 2.0 * (z * v[0] - x * v[2]), 2.0 * (x * v[1] - y * v[0])
-    return (v[0] + w * tx + (y * tz - z * ty),
-            v[1] + w * ty + (z * tx - x * tz),
+    tx, ty, tz = (2.0 * (y * v[2] - z * v[1]), 2.0 * (z * v[0] - x * v[2]),
+                  2.0 * (x * v[1] - y * v[0]))
+    return (v[0] + w * tx + (y * tz - z * ty), v[1] + w * ty + (z * tx - x * tz),
             v[2] + w * tz + (x * ty - y * tx))
 
 
 def rotation_matrix(q: tuple[float, float, float, float]) -> np.ndarray:
     """3x3 matrix of the unit quaternion q = (x, y, z, w): R v = rotate(q, v)."""
     x, y, z, w = q
-    return np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
-                     [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
-                     [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)]])
+    return np.array(
+        [[1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+         [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+         [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)]]
+    )
 
 
-def odometry_covariance(odom: OdometryFields, q: tuple[float, float, float, float]) -> np.ndarray | None:
+def odometry_covariance(
+    odom: OdometryFields, q: tuple[float, float, float, float]
+) -> np.ndarray | None:
     """(36,) row-major 6x6 covariance of (position, velocity) in header.frame_id, or None if exact.
 
     Raises OdometryError naming the field whose block is not finite/symmetric/PSD.
@@ -179,15 +193,18 @@ def odometry_batch(data: bytes, source: OdometrySource) -> StateBatch:
     q = unit_quaternion(odom.orientation)
     velocity = rotate(q, odom.linear)
     covariance = odometry_covariance(odom, q)
-    return StateBatch(ids=[source.body_id], frames=[odom.frame_id],
-                      stamp_ns=np.array([odom.stamp_ns], dtype=np.int64),
-                      radius=np.array([source.radius], dtype=np.float64),
-                      position=np.array([odom.position], dtype=np.float64),
-                      velocity=np.array([velocity], dtype=np.float64),
-                      acceleration=np.zeros((1, 3), dtype=np.float64),
-                      remove=np.zeros(1, dtype=bool),
-                      covariance=None if covariance is None else covariance[None, :],
-                      covariance_size=None if covariance is None else np.array([36], dtype=np.int64))
+    return StateBatch(
+        ids=[source.body_id],
+        frames=[odom.frame_id],
+        stamp_ns=np.array([odom.stamp_ns], dtype=np.int64),
+        radius=np.array([source.radius], dtype=np.float64),
+        position=np.array([odom.position], dtype=np.float64),
+        velocity=np.array([velocity], dtype=np.float64),
+        acceleration=np.zeros((1, 3), dtype=np.float64),
+        remove=np.zeros(1, dtype=bool),
+        covariance=None if covariance is None else covariance[None, :],
+        covariance_size=None if covariance is None else np.array([36], dtype=np.int64),
+    )
 
 
 def body_id_of_topic(resolved_topic: str) -> str:
@@ -196,8 +213,9 @@ def body_id_of_topic(resolved_topic: str) -> str:
     return namespace or name
 
 
-def odometry_sources(resolved_topics: list[str], radius: float,
-                     radii: list[float]) -> dict[str, OdometrySource]:
+def odometry_sources(
+    resolved_topics: list[str], radius: float, radii: list[float]
+) -> dict[str, OdometrySource]:
     """Topic -> OdometrySource for the node's odometry parameters.
 
     Raises
@@ -206,15 +224,19 @@ def odometry_sources(resolved_topics: list[str], radius: float,
         odometry_radii neither empty nor one per topic, or two topics giving one id.
     """
     if radii and len(radii) != len(resolved_topics):
-        raise ValueError(f"odometry_radii has {len(radii)} entries for {len(resolved_topics)} "
-                         "odometry_topics (give none, or one per topic)")
+        raise ValueError(
+            f"odometry_radii has {len(radii)} entries for {len(resolved_topics)} "
+            "odometry_topics (give none, or one per topic)"
+        )
     sources: dict[str, OdometrySource] = {}
     seen: dict[str, str] = {}
     for k, topic in enumerate(resolved_topics):
         body_id = body_id_of_topic(topic)
         if body_id in seen:
-            raise ValueError(f"odometry_topics {seen[body_id]} and {topic} give the same body id "
-                             f"'{body_id}' (the id is the topic's namespace)")
+            raise ValueError(
+                f"odometry_topics {seen[body_id]} and {topic} give the same body id "
+                f"'{body_id}' (the id is the topic's namespace)"
+            )
         seen[body_id] = topic
         sources[topic] = OdometrySource(body_id, float(radii[k]) if radii else float(radius))
     return sources

@@ -39,7 +39,8 @@ class PairPrediction(NamedTuple):
 
     id_a: str
     id_b: str
-    status: int                               # CollisionPrediction.NO_CONTACT / CONTACT / OVERLAPPING
+    # CollisionPrediction.NO_CONTACT / CONTACT / OVERLAPPING
+    status: int
     time_to_collision: float                  # s after the array's stamp; +inf when no contact
     contact_time: tuple[int, int]             # (sec, nanosec)
     contact_point: tuple[float, float, float]
@@ -76,12 +77,14 @@ def decode_prediction_array(data: bytes, *, uncertainty: bool = True) -> Predict
         contact_time = r.unpack(_TIME, 4)
         v = r.unpack(_VECTORS, 8)
         u = r.unpack(_UNCERTAINTY, 8) if uncertainty else (None, None, None)
-        predictions.append(PairPrediction(id_a, id_b, status, ttc, contact_time, v[0:3], v[3:6], v[6], *u))
+        predictions.append(
+            PairPrediction(id_a, id_b, status, ttc, contact_time, v[0:3], v[3:6], v[6], *u)
+        )
     return PredictionArray(header, horizon, tuple(predictions))
 
 
 def peek_prediction_array(data: bytes) -> tuple[float, int]:
-    """(horizon, number of entries) of CollisionPredictionArray bytes, without decoding the entries."""
+    """(horizon, entry count) of CollisionPredictionArray bytes, without decoding the entries."""
     r = CdrReader(data)
     r.unpack(_TIME, 4)
     r.string()
@@ -94,15 +97,15 @@ def peek_prediction_array(data: bytes) -> tuple[float, int]:
 def _prediction_array_end(frame_len, name_len, count, uncertainty):
     """End position of a CollisionPredictionArray with these string lengths (no NULs)."""
     pos = align(ORIGIN + 8, 4) + 4 + frame_len + 1  # stamp, frame_id
-    pos = align(pos, 8) + 8                         # horizon
-    pos = align(pos, 4) + 4                         # sequence count
+    pos = align(pos, 8) + 8  # horizon
+    pos = align(pos, 4) + 4  # sequence count
     for k in range(count):
         pos = align(pos, 4) + 4 + name_len[2 * k] + 1
         pos = align(pos, 4) + 4 + name_len[2 * k + 1] + 1
-        pos = align(pos + 1, 8) + 8                 # status, time_to_collision
-        pos += 8 + 56                               # contact_time; point, normal, closing
+        pos = align(pos + 1, 8) + 8  # status, time_to_collision
+        pos += 8 + 56  # contact_time; point, normal, closing
         if uncertainty:
-            pos += 24                               # probability, its bound, plausible time
+            pos += 24  # probability, its bound, plausible time
     return pos
 
 
@@ -223,14 +226,27 @@ def encode_prediction_array(stamp: tuple[int, int], frame_id: str, horizon: floa
     buf[:ORIGIN] = np.frombuffer(CDR_LE + b"\x00\x00", dtype=np.uint8)
     body = buf[ORIGIN:]
     contact_sec, contact_nanosec = np.divmod(columns.contact_ns, 1_000_000_000)
-    (frame, blob, starts, lengths, status, ttc, contact_sec, contact_nanosec, point, normal, closing,
-     probability, bound, plausible) = _readonly(
-        frame, blob, starts, lengths, columns.status, columns.ttc, contact_sec, contact_nanosec,
-        np.ascontiguousarray(columns.point), np.ascontiguousarray(columns.normal), columns.closing_speed,
-        columns.probability, columns.probability_bound, columns.plausible_ttc)
-    _encode_predictions(buf, body.view(np.uint32), body.view(np.float64), int(stamp[0]), int(stamp[1]),
-                        frame, float(horizon), blob, starts, lengths, status, ttc, contact_sec,
-                        contact_nanosec, point, normal, closing, uncertainty, probability, bound, plausible)
+    (frame, blob, starts, lengths, status, ttc, contact_sec, contact_nanosec, point, normal,
+     closing, probability, bound, plausible) = _readonly(
+        frame,
+        blob,
+        starts,
+        lengths,
+        columns.status,
+        columns.ttc,
+        contact_sec,
+        contact_nanosec,
+        np.ascontiguousarray(columns.point),
+        np.ascontiguousarray(columns.normal),
+        columns.closing_speed,
+        columns.probability,
+        columns.probability_bound,
+        columns.plausible_ttc,
+    )
+    _encode_predictions(buf, body.view(np.uint32), body.view(np.float64), int(stamp[0]),
+                        int(stamp[1]), frame, float(horizon), blob, starts, lengths, status, ttc,
+                        contact_sec, contact_nanosec, point, normal, closing, uncertainty,
+                        probability, bound, plausible)
     return buf[:end].tobytes()
 
 
@@ -250,10 +266,10 @@ def _put_two_names(u32, body, names, p, start_a, len_a, start_b, len_b):
 
 
 @njit(cache=True)
-def _encode_contacts(buf, u32, f64, sec, nanosec, frame, horizon, names, start_a, len_a, start_b, len_b,
-                     ttc, contact_ns, overlapping, point, normal, closing, contact, overlap_status,
-                     found, probability, bound, plausible, extra, x_start_a, x_len_a, x_start_b, x_len_b,
-                     no_contact):
+def _encode_contacts(buf, u32, f64, sec, nanosec, frame, horizon, names, start_a, len_a, start_b,
+                     len_b, ttc, contact_ns, overlapping, point, normal, closing, contact,
+                     overlap_status, found, probability, bound, plausible, extra, x_start_a,
+                     x_len_a, x_start_b, x_len_b, no_contact):
     """_encode_predictions of contact rows then uncertain NO_CONTACT rows, with the columns
     derived row by row as prediction_messages.ScenePrediction.columns derives them: a contact
     row's status from `overlapping`, point/normal padded with +0.0 to 3-D, probability,
@@ -269,7 +285,10 @@ def _encode_contacts(buf, u32, f64, sec, nanosec, frame, horizon, names, start_a
     (tests/pipeline/test_prediction_codec.py)."""
     count = ttc.shape[0]
     D = point.shape[1]
-    p = _put_array_header(buf, u32, f64, sec, nanosec, frame, horizon, count + extra.shape[0]) - ORIGIN
+    p = (
+        _put_array_header(buf, u32, f64, sec, nanosec, frame, horizon, count + extra.shape[0])
+        - ORIGIN
+    )
     body = buf[ORIGIN:]
     for k in range(count):
         t = ttc[k]
@@ -336,7 +355,8 @@ _NONE_F.flags.writeable = False
 
 
 def encode_contact_rows(stamp: tuple[int, int], frame_id: str, horizon: float, contacts,
-                        contact: int, overlapping: int, uncertain=None, no_contact: int = 0) -> bytes | None:
+                        contact: int, overlapping: int, uncertain=None,
+                        no_contact: int = 0) -> bytes | None:
     """The CollisionPredictionArray of the contacts, then (given `uncertain`) uncertain
     NO_CONTACT rows, straight from a core.scene.SceneContacts with UTF-8 ids: the bytes
     encode_prediction_array writes for ScenePrediction.columns of it, without building the
@@ -357,21 +377,41 @@ def encode_contact_rows(stamp: tuple[int, int], frame_id: str, horizon: float, c
     else:
         found, probability, bound, plausible, extra, u_utf8 = uncertain
         x_ids = tuple(x[extra] for x in u_utf8[1:])
-    (frame, blob, start_a, len_a, start_b, len_b, ttc, contact_ns, over, point, normal, closing, found,
-     probability, bound, plausible, extra, x_start_a, x_len_a, x_start_b, x_len_b) = _readonly(
-        np.frombuffer(frame_id.encode(), dtype=np.uint8), *contacts.id_utf8, contacts.ttc,
-        contacts.contact_ns, contacts.overlapping, contacts.point, contacts.normal, contacts.closing_speed,
-        found, probability, bound, plausible, extra, *x_ids)
+    (frame, blob, start_a, len_a, start_b, len_b, ttc, contact_ns, over, point, normal, closing,
+     found, probability, bound, plausible, extra, x_start_a, x_len_a, x_start_b,
+     x_len_b) = _readonly(
+        np.frombuffer(frame_id.encode(), dtype=np.uint8),
+        *contacts.id_utf8,
+        contacts.ttc,
+        contacts.contact_ns,
+        contacts.overlapping,
+        contacts.point,
+        contacts.normal,
+        contacts.closing_speed,
+        found,
+        probability,
+        bound,
+        plausible,
+        extra,
+        *x_ids,
+    )
     # a NO_CONTACT row has a contact row's layout: the end from all rows' id lengths
-    lens_a, lens_b = _readonly(np.concatenate((len_a, x_len_a)), np.concatenate((len_b, x_len_b))) \
-        if extra.shape[0] else (len_a, len_b)
+    lens_a, lens_b = (
+        _readonly(np.concatenate((len_a, x_len_a)), np.concatenate((len_b, x_len_b)))
+        if extra.shape[0]
+        else (len_a, len_b)
+    )
     end = int(_contacts_end(frame.shape[0], lens_a, lens_b))
     buf = np.zeros(ORIGIN + 8 * -(-(end - ORIGIN) // 8), dtype=np.uint8)
     buf[:ORIGIN] = np.frombuffer(CDR_LE + b"\x00\x00", dtype=np.uint8)
     body = buf[ORIGIN:]
-    if _encode_contacts(buf, body.view(np.uint32), body.view(np.float64), int(stamp[0]), int(stamp[1]),
-                        frame, float(horizon), blob, start_a, len_a, start_b, len_b, ttc, contact_ns, over,
-                        point, normal, closing, contact, overlapping, found, probability, bound, plausible,
-                        extra, x_start_a, x_len_a, x_start_b, x_len_b, no_contact) < 0:
+    if (
+        _encode_contacts(buf, body.view(np.uint32), body.view(np.float64), int(stamp[0]),
+                         int(stamp[1]), frame, float(horizon), blob, start_a, len_a, start_b, len_b,
+                         ttc, contact_ns, over, point, normal, closing, contact, overlapping, found,
+                         probability, bound, plausible, extra, x_start_a, x_len_a, x_start_b,
+                         x_len_b, no_contact)
+        < 0
+    ):
         return None
     return buf[:end].tobytes()

@@ -35,7 +35,10 @@ from std_msgs.msg import Header
 
 from circle_collision_msgs.msg import CollisionPrediction, CollisionPredictionArray
 from circle_collision_ros.core.scene import SceneContacts, SceneSnapshot, SceneUncertainty
-from circle_collision_ros.pipeline.prediction_codec import encode_contact_rows, encode_prediction_array
+from circle_collision_ros.pipeline.prediction_codec import (
+    encode_contact_rows,
+    encode_prediction_array,
+)
 
 _NS_PER_S = 1_000_000_000
 
@@ -73,13 +76,13 @@ class PredictionColumns:
 
     id_a: list[str]
     id_b: list[str]
-    status: np.ndarray         # (K,) uint8
-    ttc: np.ndarray            # (K,) float64
-    contact_ns: np.ndarray     # (K,) int64 (0 for NO_CONTACT)
-    point: np.ndarray          # (K, 3)
-    normal: np.ndarray         # (K, 3)
+    status: np.ndarray  # (K,) uint8
+    ttc: np.ndarray  # (K,) float64
+    contact_ns: np.ndarray  # (K,) int64 (0 for NO_CONTACT)
+    point: np.ndarray  # (K, 3)
+    normal: np.ndarray  # (K, 3)
     closing_speed: np.ndarray  # (K,)
-    probability: np.ndarray    # (K,) float64
+    probability: np.ndarray  # (K,) float64
     probability_bound: np.ndarray  # (K,) float64
     plausible_ttc: np.ndarray  # (K,) float64, s
 
@@ -123,13 +126,14 @@ class ScenePrediction:
         d = c.point.shape[1]
         point, normal = np.zeros((n, 3)), np.zeros((n, 3))
         point[:, :d], normal[:, :d] = c.point[k], c.normal[k]
-        status = np.where(c.overlapping[k], CollisionPrediction.OVERLAPPING,
-                          CollisionPrediction.CONTACT).astype(np.uint8)
+        status = np.where(
+            c.overlapping[k], CollisionPrediction.OVERLAPPING, CollisionPrediction.CONTACT
+        ).astype(np.uint8)
         id_a, id_b = c.id_a[k].tolist(), c.id_b[k].tolist()
         ttc = c.ttc[k]
-        parts = {"status": [status], "ttc": [ttc], "contact_ns": [c.contact_ns[k]], "point": [point],
-                 "normal": [normal], "closing": [c.closing_speed[k]], "probability": [np.ones(n)],
-                 "bound": [np.zeros(n)], "plausible": [ttc]}
+        parts = {"status": [status], "ttc": [ttc], "contact_ns": [c.contact_ns[k]],
+                 "point": [point], "normal": [normal], "closing": [c.closing_speed[k]],
+                 "probability": [np.ones(n)], "bound": [np.zeros(n)], "plausible": [ttc]}
 
         def no_contact_rows(a: list, b: list, probability, bound, plausible) -> None:
             """Append NO_CONTACT rows (time +inf, zero details) with these probability fields."""
@@ -139,8 +143,8 @@ class ScenePrediction:
             for name, value in (("status", np.full(m, CollisionPrediction.NO_CONTACT, np.uint8)),
                                 ("ttc", np.full(m, np.inf)), ("contact_ns", np.zeros(m, np.int64)),
                                 ("point", np.zeros((m, 3))), ("normal", np.zeros((m, 3))),
-                                ("closing", np.zeros(m)), ("probability", probability), ("bound", bound),
-                                ("plausible", plausible)):
+                                ("closing", np.zeros(m)), ("probability", probability),
+                                ("bound", bound), ("plausible", plausible)):
                 parts[name].append(value)
 
         u = self.uncertainty
@@ -151,22 +155,30 @@ class ScenePrediction:
             parts["bound"][0][has] = u.probability_bound[found[has]]
             parts["plausible"][0] = plausible = ttc.copy()
             plausible[has] = u.plausible_ttc[found[has]]
-            no_contact_rows(u.id_a[e].tolist(), u.id_b[e].tolist(), u.probability[e], u.probability_bound[e],
-                            u.plausible_ttc[e])
+            no_contact_rows(u.id_a[e].tolist(), u.id_b[e].tolist(), u.probability[e],
+                            u.probability_bound[e], u.plausible_ttc[e])
         if self._report_all_rows:
             ids = self.capture.ids()
             rank = {b: r for r, b in enumerate(ids)}
             pairs = set(zip(map(rank.__getitem__, id_a), map(rank.__getitem__, id_b)))
-            rest = [(a, b) for a in range(len(ids)) for b in range(a + 1, len(ids)) if (a, b) not in pairs]
+            rest = [
+                (a, b)
+                for a in range(len(ids))
+                for b in range(a + 1, len(ids))
+                if (a, b) not in pairs
+            ]
             m = len(rest)
-            no_contact_rows([ids[a] for a, _ in rest], [ids[b] for _, b in rest], np.zeros(m), np.zeros(m),
-                            np.full(m, np.inf))
-        col = {name: np.concatenate(values) if len(values) > 1 else values[0] for name, values in parts.items()}
+            no_contact_rows([ids[a] for a, _ in rest], [ids[b] for _, b in rest], np.zeros(m),
+                            np.zeros(m), np.full(m, np.inf))
+        col = {
+            name: np.concatenate(values) if len(values) > 1 else values[0]
+            for name, values in parts.items()
+        }
         f64 = lambda x: np.ascontiguousarray(x, dtype=np.float64)  # noqa: E731
         return PredictionColumns(id_a, id_b, col["status"], f64(col["ttc"]),
-                                 np.ascontiguousarray(col["contact_ns"], dtype=np.int64), col["point"],
-                                 col["normal"], f64(col["closing"]), f64(col["probability"]), f64(col["bound"]),
-                                 f64(col["plausible"]))
+                                 np.ascontiguousarray(col["contact_ns"], dtype=np.int64),
+                                 col["point"], col["normal"], f64(col["closing"]),
+                                 f64(col["probability"]), f64(col["bound"]), f64(col["plausible"]))
 
     @cached_property
     def _uncertain_join(self) -> tuple[np.ndarray, np.ndarray]:
@@ -182,12 +194,17 @@ class ScenePrediction:
             found = found[k]
         else:
             row = {pair: j for j, pair in enumerate(zip(u.id_a.tolist(), u.id_b.tolist()))}
-            found = np.array([row.get(pair, -1) for pair in zip(c.id_a[k].tolist(), c.id_b[k].tolist())],
-                             dtype=np.int64)
+            found = np.array(
+                [row.get(pair, -1) for pair in zip(c.id_a[k].tolist(), c.id_b[k].tolist())],
+                dtype=np.int64,
+            )
         extra = np.ones(len(u), dtype=bool)
         extra[found[found >= 0]] = False
-        extra &= (u.probability >= self.probability_threshold) & np.isfinite(u.probability) \
+        extra &= (
+            (u.probability >= self.probability_threshold)
+            & np.isfinite(u.probability)
             & np.isfinite(u.probability_bound)
+        )
         e = np.flatnonzero(extra)
         # by (plausible time, id_a, id_b): the rows are in (id_a, id_b) order (SceneUncertainty),
         # so a stable sort on the time alone (no NaN here: a row with a finite probability has
@@ -207,38 +224,55 @@ class ScenePrediction:
         # last line of defence behind the "never publishes NaN" guarantee.
         if all(np.isfinite(x).all() for x in (c.ttc, c.closing_speed, c.point, c.normal)):
             return slice(None)  # the common case, without per-row reductions
-        finite = np.isfinite(c.ttc) & np.isfinite(c.closing_speed) \
-            & np.isfinite(c.point).all(axis=1) & np.isfinite(c.normal).all(axis=1)
+        finite = (
+            np.isfinite(c.ttc)
+            & np.isfinite(c.closing_speed)
+            & np.isfinite(c.point).all(axis=1)
+            & np.isfinite(c.normal).all(axis=1)
+        )
         return np.flatnonzero(finite)
 
     def rows(self) -> Iterator[PredictionRow]:
         """The entries one by one, in publication order (see `columns`)."""
         c = self.columns
         sec, nanosec = np.divmod(c.contact_ns, _NS_PER_S)
-        for a, b, status, ttc, s, ns, p, n, cs, pr, pb, pt in zip(
-                c.id_a, c.id_b, c.status.tolist(), c.ttc.tolist(), sec.tolist(), nanosec.tolist(),
-                c.point.tolist(), c.normal.tolist(), c.closing_speed.tolist(), c.probability.tolist(),
-                c.probability_bound.tolist(), c.plausible_ttc.tolist()):
+        for a, b, status, ttc, s, ns, p, n, cs, pr, pb, pt in zip(c.id_a, c.id_b, c.status.tolist(),
+                                                                  c.ttc.tolist(), sec.tolist(),
+                                                                  nanosec.tolist(),
+                                                                  c.point.tolist(),
+                                                                  c.normal.tolist(),
+                                                                  c.closing_speed.tolist(),
+                                                                  c.probability.tolist(),
+                                                                  c.probability_bound.tolist(),
+                                                                  c.plausible_ttc.tolist()):
             yield PredictionRow(a, b, status, ttc, (s, ns), tuple(p), tuple(n), cs, pr, pb, pt)
 
     def to_message(self) -> CollisionPredictionArray:
         """As a message object (service responses, tests)."""
         predictions = [
-            CollisionPrediction(id_a=r.id_a, id_b=r.id_b, status=r.status,
-                                time_to_collision=r.time_to_collision,
-                                contact_time=Time(sec=r.contact_time[0], nanosec=r.contact_time[1]),
-                                contact_point=Point(x=r.contact_point[0], y=r.contact_point[1],
-                                                    z=r.contact_point[2]),
-                                normal=Vector3(x=r.normal[0], y=r.normal[1], z=r.normal[2]),
-                                closing_speed=r.closing_speed,
-                                collision_probability=r.collision_probability,
-                                collision_probability_bound=r.collision_probability_bound,
-                                plausible_time_to_collision=r.plausible_time_to_collision)
-            for r in self.rows()]
+            CollisionPrediction(
+                id_a=r.id_a,
+                id_b=r.id_b,
+                status=r.status,
+                time_to_collision=r.time_to_collision,
+                contact_time=Time(sec=r.contact_time[0], nanosec=r.contact_time[1]),
+                contact_point=Point(
+                    x=r.contact_point[0], y=r.contact_point[1], z=r.contact_point[2]
+                ),
+                normal=Vector3(x=r.normal[0], y=r.normal[1], z=r.normal[2]),
+                closing_speed=r.closing_speed,
+                collision_probability=r.collision_probability,
+                collision_probability_bound=r.collision_probability_bound,
+                plausible_time_to_collision=r.plausible_time_to_collision,
+            )
+            for r in self.rows()
+        ]
         sec, nanosec = self.stamp
-        return CollisionPredictionArray(header=Header(stamp=Time(sec=sec, nanosec=nanosec),
-                                                      frame_id=self.frame_id),
-                                        horizon=float(self.horizon), predictions=predictions)
+        return CollisionPredictionArray(
+            header=Header(stamp=Time(sec=sec, nanosec=nanosec), frame_id=self.frame_id),
+            horizon=float(self.horizon),
+            predictions=predictions,
+        )
 
     def to_cdr(self, *, uncertainty: bool = True) -> bytes:
         """As serialized bytes, without building message objects (the node's path).
@@ -252,15 +286,20 @@ class ScenePrediction:
             uncertain = u is not None and len(u) > 0
             # uncertain rows join only when their ids lie in the contacts' blob and no contact
             # row was dropped (then the columns path below)
-            if not uncertain or (u.id_utf8 is not None and u.id_utf8[0].base is c.id_utf8[0].base
-                                 and isinstance(self._finite_rows, slice)):
+            if not uncertain or (
+                u.id_utf8 is not None
+                and u.id_utf8[0].base is c.id_utf8[0].base
+                and isinstance(self._finite_rows, slice)
+            ):
                 joined = None
                 if uncertain:
                     found, extra = self._uncertain_join
-                    joined = (found, u.probability, u.probability_bound, u.plausible_ttc, extra, u.id_utf8)
+                    joined = (found, u.probability, u.probability_bound, u.plausible_ttc, extra,
+                              u.id_utf8)
                 data = encode_contact_rows(self.stamp, self.frame_id, float(self.horizon), c,
-                                           CollisionPrediction.CONTACT, CollisionPrediction.OVERLAPPING,
-                                           joined, CollisionPrediction.NO_CONTACT)
+                                           CollisionPrediction.CONTACT,
+                                           CollisionPrediction.OVERLAPPING, joined,
+                                           CollisionPrediction.NO_CONTACT)
                 if data is not None:
                     return data
         columns = self.columns

@@ -16,7 +16,7 @@ circle_collision_ros/core/scene.py.
 from __future__ import annotations
 
 import time
-from collections.abc import Sequence
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field, replace
 
 import numpy as np
@@ -25,7 +25,8 @@ from circle_collision_msgs.msg import CircleState, CircleStateArray
 from circle_collision_ros.core.parallel_policy import threads_forced
 from circle_collision_ros.core.scene import Scene, SceneSnapshot
 from circle_collision_ros.core.uncertainty import load_fallback_kernels
-from circle_collision_ros.pipeline.state_codec import decode_states, encode_state, encode_state_array
+from circle_collision_ros.pipeline.state_codec import (decode_states, encode_state,
+                                                       encode_state_array)
 from circle_collision_ros.pipeline.prediction_messages import ScenePrediction
 from circle_collision_ros.pipeline.state_batch import StateBatch
 from circle_collision_ros.pipeline.state_validation import Rejection, check_batch
@@ -59,6 +60,8 @@ class PredictorConfig:
 #: The PredictorConfig fields that may change while running (node parameters
 #: applied at run time, and replayed from a recording's config records).
 RUNTIME_FIELDS = ("horizon", "stale_timeout", "report_all_pairs", "probability_threshold")
+#: What CollisionPredictor.warm_up can prepare (pipeline.kernels compiles each in a process).
+WARM_UP_PATHS = ("exact", "threads", "uncertain", "messages")
 
 
 @dataclass
@@ -83,7 +86,8 @@ class PredictionStats:
 
     bodies: int = 0
     contacts: int = 0
-    candidate_pairs: int = 0  # pairs the narrow phase evaluated (only changed bodies' pairs when incremental)
+    # pairs the narrow phase evaluated (only changed bodies' pairs when incremental)
+    candidate_pairs: int = 0
     uncertain_deferred: int = 0  # uncertain pairs not evaluated for lack of uncertain_pair_budget
     compute_s: float = 0.0
 
@@ -126,48 +130,69 @@ class CollisionPredictor:
         """Forget every body and remembered removal (e.g. after the clock jumped back)."""
         self._scene.clear()
 
-    def warm_up(self) -> None:
+    def warm_up(self, paths: Iterable[str] = WARM_UP_PATHS) -> None:
         """Run every compiled kernel a message can reach once, on tiny scenes, so the first real
-        message pays no numba compile or cache load (the node calls it before it subscribes).
+        message pays no numba compile or cache load (the node prepares them before it subscribes,
+        through ``pipeline.kernels.prepare``, which compiles cold paths in parallel processes).
 
-        Twice: serial, then with threads forced, so the threaded twins are loaded too -- the
-        policy picks them for large frames only (in a fresh install's node the first covariance
-        frame of 5,000 bodies compiled the threaded sweep: p99 3 s, bench_node --targets
-        --covariance)."""
-        for threaded in (False, True):
-            with threads_forced(threaded):
-                self._warm_up_paths()
+        ``paths`` (any of WARM_UP_PATHS): ``exact`` the scene's serial kernels; ``threads`` the
+        same and the uncertain and message paths with threads forced, so the threaded twins the
+        policy picks for large frames are loaded too; ``uncertain`` the probability of contact;
+        ``messages`` decoding and encoding."""
+        unknown = set(paths) - set(WARM_UP_PATHS)
+        if unknown:
+            raise ValueError(
+                f"warm_up: unknown paths {sorted(unknown)}; expected some of {WARM_UP_PATHS}"
+            )
+        for path in paths:
+            with threads_forced(path == "threads"):
+                if path in ("exact", "threads"):
+                    self._warm_up_scenes()
+                if path in ("uncertain", "threads"):
+                    self._warm_up_uncertain()
+                if path in ("messages", "threads"):
+                    self._warm_up_messages()
 
-    def _warm_up_paths(self) -> None:
+    def _warm_up_scenes(self) -> None:
         scene = Scene(self.config.horizon, self.config.dimensions)
         d = self.config.dimensions
-        scene.upsert_many(["a", "b"], np.eye(2, d), np.zeros((2, d)), np.zeros((2, d)), np.ones(2), 1)
+        scene.upsert_many(
+            ["a", "b"], np.eye(2, d), np.zeros((2, d)), np.zeros((2, d)), np.ones(2), 1
+        )
         scene.predictions()
         # ... and the large-scene path: a rebuild (a tracker array, an epoch crossing) of more than
-        # Scene._COMPILED_ROWS pairs runs the vectorised, threaded kernels, whose cache load cost
-        # ~0.15 s in the first such cycle (3 s where the cache was stale): 100 overlapping bodies.
+        # Scene._COMPILED_ROWS pairs runs the vectorised, threaded kernels: 100 overlapping bodies.
         k = 100
         rows = np.random.default_rng(0).uniform(0.0, 1.0, (k, d))
         crowd = Scene(self.config.horizon, d)
-        crowd.upsert_many([f"w{i:03d}" for i in range(k)], rows, np.zeros((k, d)), np.zeros((k, d)),
-                          np.ones(k), 1)
+        crowd.upsert_many(
+            [f"w{i:03d}" for i in range(k)], rows, np.zeros((k, d)), np.zeros((k, d)), np.ones(k), 1
+        )
         crowd.predictions()
         # ... and the one-body path (a stream of single states, bodies arriving one by one): its
         # compiled query passes, including the specialisations for the read-only arrays a
-        # published prediction leaves behind -- compiled on a first stream they stalled a node
-        # for ~15 s on a fresh install (bench/bench_node.py --targets, 300 streams)
+        # published prediction leaves behind (bench/bench_node.py --targets, 300 streams)
         stream = Scene(self.config.horizon, d)
         for k in range(12):
             p = np.zeros((1, d))
             p[0, 0] = 0.5 * (k % 6)
-            stream.merge([f"s{k % 6}"], [10 + k], p, np.eye(1, d), np.zeros((1, d)), [1.0], [False], 0)
+            stream.merge(
+                [f"s{k % 6}"], [10 + k], p, np.eye(1, d), np.zeros((1, d)), [1.0], [False], 0
+            )
             stream.predictions()
-        # and the uncertain path's kernels (a first uncertain state would otherwise wait for them)
+
+    def _warm_up_uncertain(self) -> None:
+        """The uncertain path's kernels (a first uncertain state would otherwise wait for them)."""
+        d = self.config.dimensions
+        scene = Scene(self.config.horizon, d)
+        scene.upsert_many(
+            ["a", "b"], np.eye(2, d), np.zeros((2, d)), np.zeros((2, d)), np.ones(2), 1
+        )
+        scene.predictions()
         scene.merge(["a"], [2], np.eye(1, d), np.zeros((1, d)), np.zeros((1, d)), [1.0], [False], 0,
                     covariances=np.eye(2 * d)[None] * 0.01)
         scene.uncertain_pairs(self.config.probability_threshold, scene.predictions())
         load_fallback_kernels(d)
-        self._warm_up_messages()
 
     def _warm_up_messages(self) -> None:
         """The message path on throwaway predictors: decoding both input types, exact and with
@@ -186,18 +211,23 @@ class CollisionPredictor:
         covariance = np.zeros((n, 36))
         covariance[:, ::7] = 0.01  # the 6x6 diagonal
         for uncertain in (False, True):
-            batch = StateBatch(ids=["a", "b", "c"], frames=["map"] * n, stamp_ns=np.full(n, t, np.int64),
-                               radius=np.ones(n), position=position, velocity=velocity,
-                               acceleration=acceleration, remove=np.zeros(n, dtype=bool),
+            batch = StateBatch(ids=["a", "b", "c"], frames=["map"] * n,
+                               stamp_ns=np.full(n, t, np.int64), radius=np.ones(n),
+                               position=position, velocity=velocity, acceleration=acceleration,
+                               remove=np.zeros(n, dtype=bool),
                                covariance=covariance if uncertain else None,
                                covariance_size=np.full(n, 36, np.int64) if uncertain else None)
             for report_all in (False, True):
-                predictor = CollisionPredictor(replace(self.config, frame_id="map", report_all_pairs=report_all,
-                                                       max_bodies=n))
-                predictor.receive_batch(decode_states(encode_state_array(batch, t, "map"), CircleStateArray), t)
+                predictor = CollisionPredictor(
+                    replace(self.config, frame_id="map", report_all_pairs=report_all, max_bodies=n)
+                )
+                predictor.receive_batch(
+                    decode_states(encode_state_array(batch, t, "map"), CircleStateArray), t
+                )
                 prediction = predictor.predict()
                 prediction.to_cdr()
-                prediction.to_cdr(uncertainty=False)  # replay of recordings made before the probability fields
+                # replay of recordings made before the probability fields
+                prediction.to_cdr(uncertainty=False)
                 one = replace(batch.select(np.array([1])), stamp_ns=np.array([t + 1], np.int64))
                 predictor.receive_batch(decode_states(encode_state(one), CircleState), t + 1)
                 predictor.predict().to_cdr()
@@ -216,7 +246,9 @@ class CollisionPredictor:
         now_ns : receiving clock (ns) used for the future-stamp check and as the
             bodies' receive time for expiry; None skips the future check (service).
         """
-        check = check_batch(batch, frame_id=self.frame_id, now_ns=now_ns, dimensions=self.config.dimensions)
+        check = check_batch(
+            batch, frame_id=self.frame_id, now_ns=now_ns, dimensions=self.config.dimensions
+        )
         report = IntakeReport(rejected=check.rejections)
         if len(batch) == 0:
             return report
@@ -242,9 +274,11 @@ class CollisionPredictor:
         report.accepted = int(merged.accepted.size)
         report.removed = int(merged.removed.size)
         report.ignored = int(merged.not_newer.size + merged.removal_ignored.size)
-        report.rejected += [Rejection(int(good[k]) if good is not None else k, batch.ids[k],
-                                      f"scene is full (max_bodies={self.config.max_bodies})")
-                            for k in merged.full.tolist()]
+        report.rejected += [
+            Rejection(int(good[k]) if good is not None else k, batch.ids[k],
+                      f"scene is full (max_bodies={self.config.max_bodies})")
+            for k in merged.full.tolist()
+        ]
         return report
 
     def receive_batch(self, batch: StateBatch, now_ns: int) -> IntakeReport:
@@ -267,8 +301,9 @@ class CollisionPredictor:
         horizon = self.config.horizon if horizon is None else float(horizon)
         self._scene.set_horizon(horizon)
         contacts = self._scene.predictions()
-        uncertainty = self._scene.uncertain_pairs(self.config.probability_threshold, contacts,
-                                                  self.config.uncertain_pair_budget or None)
+        uncertainty = self._scene.uncertain_pairs(
+            self.config.probability_threshold, contacts, self.config.uncertain_pair_budget or None
+        )
         prediction = ScenePrediction(contacts, self._scene.capture(), horizon, self.frame_id,
                                      self.config.report_all_pairs, uncertainty,
                                      self.config.probability_threshold)
@@ -291,8 +326,8 @@ class HorizonLimits:
 
 
 def predict_once(states: Sequence[CircleState], config: PredictorConfig,
-                 horizon: float | None = None, request_time_ns: int = 0
-                 ) -> tuple[bool, str, ScenePrediction | None]:
+                 horizon: float | None = None,
+                 request_time_ns: int = 0) -> tuple[bool, str, ScenePrediction | None]:
     """Stateless prediction for one set of states (the service).
 
     Rules (README, "Service"):
@@ -309,14 +344,20 @@ def predict_once(states: Sequence[CircleState], config: PredictorConfig,
     if horizon is None or horizon == 0.0:
         horizon = config.horizon
     if not (HorizonLimits.MIN_S <= horizon <= HorizonLimits.MAX_S):  # also false for NaN
-        return (False, f"horizon must be 0 (the node's horizon, {config.horizon} s) or in "
-                f"[{HorizonLimits.MIN_S}, {HorizonLimits.MAX_S}] s, got {horizon}", None)
+        return (
+            False,
+            f"horizon must be 0 (the node's horizon, {config.horizon} s) or in "
+            f"[{HorizonLimits.MIN_S}, {HorizonLimits.MAX_S}] s, got {horizon}",
+            None,
+        )
     if not states:
         return False, "the request has no circles", None
     batch = StateBatch.from_messages(states)
     unstamped = batch.stamp_ns == 0
     if unstamped.any() and request_time_ns > 0:
-        batch = replace(batch, stamp_ns=np.where(unstamped, np.int64(request_time_ns), batch.stamp_ns))
+        batch = replace(
+            batch, stamp_ns=np.where(unstamped, np.int64(request_time_ns), batch.stamp_ns)
+        )
     predictor = CollisionPredictor(replace(config, max_bodies=len(states), horizon=horizon))
     report = predictor.ingest(batch, now_ns=None)
     reasons: dict[int, list[str]] = {r.index: [r.reason] for r in report.rejected}
@@ -324,6 +365,12 @@ def predict_once(states: Sequence[CircleState], config: PredictorConfig,
         if s.remove:
             reasons.setdefault(k, []).append("remove=true cannot be used in a stateless request")
     if reasons:
-        return False, " | ".join(f"circles[{k}] (id '{states[k].id}'): {'; '.join(reasons[k])}"
-                                 for k in sorted(reasons)), None
+        return (
+            False,
+            " | ".join(
+                f"circles[{k}] (id '{states[k].id}'): {'; '.join(reasons[k])}"
+                for k in sorted(reasons)
+            ),
+            None,
+        )
     return True, "", predictor.predict(horizon)

@@ -73,7 +73,7 @@ USED_COVARIANCE_AXES = {2: (0, 1, 3, 4), 3: (0, 1, 2, 3, 4, 5)}
 
 
 def covariance_block(covariance: np.ndarray, dimensions: int) -> np.ndarray:
-    """(N, 36) row-major 6x6 covariances -> (N, 2D, 2D) over (position, velocity) of the used axes."""
+    """(N, 36) row-major 6x6 covariances -> (N, 2D, 2D) over (position, velocity) of used axes."""
     axes = np.array(USED_COVARIANCE_AXES[dimensions])
     return covariance.reshape(-1, 6, 6)[:, axes[:, None], axes[None, :]]
 

@@ -17,15 +17,17 @@ import numpy as np
 from numba import njit
 
 from circle_collision_msgs.msg import CircleState, CircleStateArray
-from circle_collision_ros.pipeline.cdr import (CDR_BE, CDR_LE, ORIGIN, CdrError, CdrWriter, align, read_string,
-                                               read_u32)
+from circle_collision_ros.pipeline.cdr import (CDR_BE, CDR_LE, ORIGIN, CdrError, CdrWriter, align,
+                                               read_string, read_u32)
 from circle_collision_ros.pipeline.state_batch import StateBatch
 
 COVARIANCE_SIZE = 36  # values of a CircleState covariance (6x6 row-major); 0 = none given
 
 
 @njit(cache=True)
-def _decode_states(buf, f64, pos, count, stamps, strings, numbers, remove, be, with_cov, cov_size, cov):
+def _decode_states(
+    buf, f64, pos, count, stamps, strings, numbers, remove, be, with_cov, cov_size, cov
+):
     """Decode `count` CircleStates starting at `pos`; returns the end position or -1.
 
     stamps[k]: the header stamp in ns (int32 seconds: no int64 overflow).
@@ -122,27 +124,36 @@ def _decoded(data: bytes, buf: np.ndarray, strings: np.ndarray, col: int) -> lis
     # one string (a per-body stream's message) needs no compiled pass to be "all the same"
     joined, same = (None, True) if count == 1 else _joined(buf, strings, col)
     if same:
-        return [data[strings[0, col]:strings[0, col] + strings[0, col + 1]].decode()] * count
+        return [data[strings[0, col] : strings[0, col] + strings[0, col + 1]].decode()] * count
     parts = joined.tobytes().decode().split("\0")
     if len(parts) == count + 1:
         del parts[-1]
         return parts
-    return [data[o:o + n].decode() for o, n in zip(strings[:, col].tolist(), strings[:, col + 1].tolist())]
+    return [
+        data[o : o + n].decode()
+        for o, n in zip(strings[:, col].tolist(), strings[:, col + 1].tolist())
+    ]
 
 
-def _batch(data: bytes, buf: np.ndarray, count: int, start: int, array_frame: str,
-           be: bool, uncertainty: bool) -> StateBatch:
+def _batch(data: bytes, buf: np.ndarray, count: int, start: int, array_frame: str, be: bool,
+           uncertainty: bool) -> StateBatch:
     stamps = np.empty(count, dtype=np.int64)
     strings = np.empty((count, 4), dtype=np.int64)
     numbers = np.empty((count, 10), dtype=np.float64)
     remove = np.empty(count, dtype=np.bool_)
     cov_size = np.zeros(count if uncertainty else 0, dtype=np.int64)
     cov = np.empty((count if uncertainty else 0, COVARIANCE_SIZE), dtype=np.float64)
-    f64 = np.frombuffer(data, dtype=">f8" if be else "<f8", offset=ORIGIN, count=(len(data) - ORIGIN) // 8)
+    f64 = np.frombuffer(
+        data, dtype=">f8" if be else "<f8", offset=ORIGIN, count=(len(data) - ORIGIN) // 8
+    )
     if not f64.dtype.isnative:
         f64 = f64.astype(np.float64)
-    if _decode_states(buf, f64, start, count, stamps, strings, numbers, remove, be, uncertainty,
-                      cov_size, cov) < 0:
+    if (
+        _decode_states(
+            buf, f64, start, count, stamps, strings, numbers, remove, be, uncertainty, cov_size, cov
+        )
+        < 0
+    ):
         raise CdrError("truncated or malformed CircleState data")
     given = uncertainty and (bool(cov_size[0]) if count == 1 else bool(cov_size.any()))
     try:
@@ -153,8 +164,8 @@ def _batch(data: bytes, buf: np.ndarray, count: int, start: int, array_frame: st
     if "" in frames:  # a state without a frame has the array's
         frames = [f or array_frame for f in frames]
     # positional: a frozen dataclass takes keywords at twice the cost (~2 us of a one-state message)
-    return StateBatch(ids, frames, stamps, numbers[:, 0], numbers[:, 1:4], numbers[:, 4:7], numbers[:, 7:10],
-                      remove, cov if given else None, cov_size if given else None)
+    return StateBatch(ids, frames, stamps, numbers[:, 0], numbers[:, 1:4], numbers[:, 4:7],
+                      numbers[:, 7:10], remove, cov if given else None, cov_size if given else None)
 
 
 def decode_states(data: bytes, msg_type: type, *, uncertainty: bool = True) -> StateBatch:
@@ -189,7 +200,7 @@ def decode_states(data: bytes, msg_type: type, *, uncertainty: bool = True) -> S
     if count * (101 if uncertainty else 97) > len(buf) - pos:
         raise CdrError(f"sequence length {count} does not fit in {len(buf)} bytes")
     try:
-        array_frame = data[off:off + ln].decode()
+        array_frame = data[off : off + ln].decode()
     except UnicodeDecodeError as exc:
         raise CdrError(f"frame_id is not UTF-8 ({exc.reason})") from exc
     return _batch(data, buf, count, pos + 4, array_frame, be, uncertainty)
@@ -221,14 +232,19 @@ def encode_state(batch: StateBatch) -> bytes:
 
 
 def _write_states(w: CdrWriter, batch: StateBatch) -> None:
-    numbers = np.column_stack([batch.radius, batch.position, batch.velocity, batch.acceleration]).tolist()
+    numbers = np.column_stack(
+        [batch.radius, batch.position, batch.velocity, batch.acceleration]
+    ).tolist()
     if batch.covariance is None:
         covariances = [()] * len(batch)
     else:
-        covariances = [row if size == COVARIANCE_SIZE else ()
-                       for row, size in zip(batch.covariance.tolist(), batch.covariance_size.tolist())]
-    for body_id, frame, stamp, values, remove, cov in zip(batch.ids, batch.frames, batch.stamp_ns.tolist(),
-                                                          numbers, batch.remove.tolist(), covariances):
+        covariances = [
+            row if size == COVARIANCE_SIZE else ()
+            for row, size in zip(batch.covariance.tolist(), batch.covariance_size.tolist())
+        ]
+    for body_id, frame, stamp, values, remove, cov in zip(batch.ids, batch.frames,
+                                                          batch.stamp_ns.tolist(), numbers,
+                                                          batch.remove.tolist(), covariances):
         w.time(*divmod(stamp, 1_000_000_000))
         w.string(frame.encode())
         w.string(body_id.encode())
@@ -255,7 +271,7 @@ def _text(data: bytes, pos: int) -> tuple[str, int] | None:
         return "", start
     if start + size > len(data) or data[start + size - 1] != 0:
         return None
-    return data[start:start + size - 1].decode(), start + size
+    return data[start : start + size - 1].decode(), start + size
 
 
 def decode_state_row(data: bytes, uncertainty: bool) -> tuple | None:
@@ -290,8 +306,12 @@ def decode_state_row(data: bytes, uncertainty: bool) -> tuple | None:
                 end += (-(end - 4)) % 8
                 if end + 8 * size > len(data):
                     return None
-                cov = struct.unpack_from(f"<{size}d", data, end) if size <= COVARIANCE_SIZE \
-                    else (0.0,) * size  # any wrong length is rejected by validation, values unused
-        return stamp_ns, frame[0], body[0], _NUMBERS.unpack_from(data, pos), data[pos + 80] != 0, cov
+                cov = (
+                    struct.unpack_from(f"<{size}d", data, end)
+                    if size <= COVARIANCE_SIZE
+                    else (0.0,) * size
+                )  # any wrong length is rejected by validation, values unused
+        return (stamp_ns, frame[0], body[0], _NUMBERS.unpack_from(data, pos), data[pos + 80] != 0,
+                cov)
     except UnicodeDecodeError:
         return None  # decode_states names the error

@@ -12,7 +12,8 @@ the run, in arrival order; waves are merged in order, then bodies are expired
 once at the run's receive time. So every body's states are merged in the order
 they arrived, and no batch holds an id twice (which check_batch would reject
 as a duplicate). Effects across bodies within one run (which of two new ids
-fills the last max_bodies place) follow wave order, identically live and in replay. A message that is not plain little-endian CDR,
+fills the last max_bodies place) follow wave order, identically live and in replay. A message that
+is not plain little-endian CDR,
 or is malformed, goes through state_codec.decode_states alone (same acceptance,
 same error).
 """
@@ -26,7 +27,8 @@ from circle_collision_msgs.msg import CircleState
 from circle_collision_ros.pipeline.cdr import CdrError
 from circle_collision_ros.pipeline.predictor import CollisionPredictor, IntakeReport
 from circle_collision_ros.pipeline.state_batch import StateBatch, covariance_columns
-from circle_collision_ros.pipeline.state_codec import COVARIANCE_SIZE, decode_state_row, decode_states
+from circle_collision_ros.pipeline.state_codec import (COVARIANCE_SIZE, decode_state_row,
+                                                       decode_states)
 
 
 class GroupOutcome(NamedTuple):
@@ -60,14 +62,20 @@ def ingest_single_states(predictor: CollisionPredictor, messages: list[bytes], n
             if len(batch) != 1:  # cannot happen for CircleState; keep the rule explicit
                 errors[k] = CdrError(f"expected one CircleState, decoded {len(batch)}")
                 continue
-            row = (int(batch.stamp_ns[0]), batch.frames[0], batch.ids[0],
-                   (float(batch.radius[0]), *batch.position[0].tolist(), *batch.velocity[0].tolist(),
-                    *batch.acceleration[0].tolist()), bool(batch.remove[0]),
-                   _covariance_values(batch))
+            row = (
+                int(batch.stamp_ns[0]),
+                batch.frames[0],
+                batch.ids[0],
+                (float(batch.radius[0]), *batch.position[0].tolist(), *batch.velocity[0].tolist(),
+                 *batch.acceleration[0].tolist()),
+                bool(batch.remove[0]),
+                _covariance_values(batch),
+            )
         rows.append(row)
         owner.append(k)
-    reports: list[IntakeReport | None] = [None if errors[k] else IntakeReport()
-                                          for k in range(len(messages))]
+    reports: list[IntakeReport | None] = [
+        None if errors[k] else IntakeReport() for k in range(len(messages))
+    ]
     if not rows:
         return GroupOutcome(reports, errors)
     stamps = np.array([r[0] for r in rows], dtype=np.int64)
@@ -75,10 +83,13 @@ def ingest_single_states(predictor: CollisionPredictor, messages: list[bytes], n
     ids = [r[2] for r in rows]
     batch = StateBatch(ids=ids, frames=[r[1] or array_frame for r in rows], stamp_ns=stamps,
                        radius=numbers[:, 0], position=numbers[:, 1:4], velocity=numbers[:, 4:7],
-                       acceleration=numbers[:, 7:10], remove=np.array([r[4] for r in rows], dtype=bool),
+                       acceleration=numbers[:, 7:10],
+                       remove=np.array([r[4] for r in rows], dtype=bool),
                        **covariance_columns([r[5] for r in rows]))
     seen: dict[str, int] = {}
-    wave = np.array([seen.__setitem__(i, seen.get(i, -1) + 1) or seen[i] for i in ids], dtype=np.int64)
+    wave = np.array(
+        [seen.__setitem__(i, seen.get(i, -1) + 1) or seen[i] for i in ids], dtype=np.int64
+    )
     for w in range(int(wave.max()) + 1):
         take = np.flatnonzero(wave == w)
         report = predictor.ingest(batch if take.size == len(batch) else batch.select(take), now_ns)
@@ -89,7 +100,7 @@ def ingest_single_states(predictor: CollisionPredictor, messages: list[bytes], n
 
 
 def _covariance_values(batch: StateBatch) -> tuple:
-    """The one state's covariance as received: () if none, its 36 values, or a wrong-length stand-in."""
+    """The state's covariance as received: () if none, its 36 values, or a wrong-length stand-in."""
     if batch.covariance is None:
         return ()
     size = int(batch.covariance_size[0])

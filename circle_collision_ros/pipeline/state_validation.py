@@ -15,9 +15,11 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
-from circle_collision_ros.core.uncertainty.covariance import COV_PSD_RTOL, COV_SYMMETRY_RTOL, covariance_problem
+from circle_collision_ros.core.uncertainty.covariance import (COV_PSD_RTOL, COV_SYMMETRY_RTOL,
+                                                              covariance_problem)
 from circle_collision_ros.pipeline.state_codec import COVARIANCE_SIZE
-from circle_collision_ros.pipeline.state_batch import USED_COVARIANCE_AXES, StateBatch, covariance_block
+from circle_collision_ros.pipeline.state_batch import (USED_COVARIANCE_AXES, StateBatch,
+                                                       covariance_block)
 
 
 class StampLimits:
@@ -45,7 +47,7 @@ class ValueLimits:
     MAX_MAGNITUDE = 1e12
     # Covariance entries (m^2, m^2/s, m^2/s^2): the square of the above. Propagated over the
     # largest stamp difference (dt^2 ~ 5e18) they stay finite (~1e43).
-    MAX_COVARIANCE = MAX_MAGNITUDE ** 2
+    MAX_COVARIANCE = MAX_MAGNITUDE**2
 
 
 def covariance_rejected(blocks: np.ndarray) -> np.ndarray:
@@ -115,7 +117,9 @@ def _covariance_screen(blocks, sym_rtol, rejected, decompose):
 
 
 @njit(cache=True)
-def _covariance_rows(cov, size, remove, axes, max_abs, sym_rtol, block, given, bad, flagged, decompose):
+def _covariance_rows(
+    cov, size, remove, axes, max_abs, sym_rtol, block, given, bad, flagged, decompose
+):
     """covariance_checks' pass over the (n, 36) row-major 6x6 covariances, one row at a time:
     block[i] = the rows/columns `axes` of row i; given[i] = 36 values and the block not all
     zero (a NaN is not zero); bad[i] = a count other than 0 or 36, or (given, not a removal)
@@ -175,12 +179,15 @@ _VECTORS = ("position", "velocity", "acceleration")
 class StampHint:
     """How to stamp a state, for the warning on a zero stamp (the `ros2 topic pub` way)."""
 
-    ZERO = ("header.stamp is zero (unset): stamp each state with the time it is valid at"
-            " (ros2 topic pub: header: {stamp: now})")
+    ZERO = (
+        "header.stamp is zero (unset): stamp each state with the time it is valid at"
+        " (ros2 topic pub: header: {stamp: now})"
+    )
 
 
-def covariance_checks(batch: StateBatch, dimensions: int
-                      ) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+def covariance_checks(
+    batch: StateBatch, dimensions: int
+) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
     """(bad, uncertain, block): per state, whether its covariance is unusable, whether it is
     usable and not all zero on the used axes (a zero or absent covariance is an exact state),
     and the (n, 2D, 2D) block of the used axes (state_batch.covariance_block; None without
@@ -200,7 +207,8 @@ def covariance_checks(batch: StateBatch, dimensions: int
     _covariance_rows(np.ascontiguousarray(batch.covariance, dtype=np.float64),
                      np.ascontiguousarray(batch.covariance_size, dtype=np.int64),
                      np.ascontiguousarray(batch.remove, dtype=np.bool_), axes,
-                     ValueLimits.MAX_COVARIANCE, COV_SYMMETRY_RTOL, block, given, bad, flagged, decompose)
+                     ValueLimits.MAX_COVARIANCE, COV_SYMMETRY_RTOL, block, given, bad, flagged,
+                     decompose)
     _psd_rejected(block, decompose, flagged)
     # the core's own check decides (and words) each refusal: no row refused without its reason
     rows = np.flatnonzero(flagged)
@@ -212,18 +220,22 @@ def _covariance_reason(batch: StateBatch, k: int, dimensions: int) -> str | None
     size = int(batch.covariance_size[k])
     if size not in (0, COVARIANCE_SIZE):
         return f"covariance has {size} values (expected 0 or {COVARIANCE_SIZE}: 6x6 row-major)"
-    block = covariance_block(batch.covariance[k:k + 1], dimensions)[0]
+    block = covariance_block(batch.covariance[k : k + 1], dimensions)[0]
     axes = "x, y, vx, vy" if dimensions == 2 else "x, y, z, vx, vy, vz"
     largest = float(np.abs(block).max())
     if largest > ValueLimits.MAX_COVARIANCE:
-        return f"covariance has a value of magnitude {largest:g}, beyond {ValueLimits.MAX_COVARIANCE:g}" \
-               f" (rows/columns {axes})"
+        return (
+            f"covariance has a value of magnitude {largest:g}, "
+            f"beyond {ValueLimits.MAX_COVARIANCE:g}"
+            f" (rows/columns {axes})"
+        )
     problem = covariance_problem(block)
     return None if problem is None else f"{problem} (rows/columns {axes})"
 
 
-def _reasons(batch: StateBatch, k: int, frame_id: str, now_ns: int | None, dup: bool,
-             dimensions: int = 3) -> str:
+def _reasons(
+    batch: StateBatch, k: int, frame_id: str, now_ns: int | None, dup: bool, dimensions: int = 3
+) -> str:
     """Every problem of row k, in a fixed order (so the message is deterministic), "; "-joined."""
     found: list[str] = []
     if not batch.ids[k]:
@@ -243,14 +255,18 @@ def _reasons(batch: StateBatch, k: int, frame_id: str, now_ns: int | None, dup: 
                 if not np.isfinite(value):
                     found.append(f"{name}.{axis} is {value}")
                 elif abs(value) > ValueLimits.MAX_MAGNITUDE:
-                    found.append(f"{name}.{axis} is {value}, beyond +-{ValueLimits.MAX_MAGNITUDE:g}")
+                    found.append(
+                        f"{name}.{axis} is {value}, beyond +-{ValueLimits.MAX_MAGNITUDE:g}"
+                    )
         if batch.covariance is not None:
             problem = _covariance_reason(batch, k, dimensions)
             if problem:
                 found.append(problem)
         if frame_id and batch.frames[k] != frame_id:
-            found.append(f"frame '{batch.frames[k]}' is not the scene frame '{frame_id}'"
-                         f" (no tf here: publish in '{frame_id}')")
+            found.append(
+                f"frame '{batch.frames[k]}' is not the scene frame '{frame_id}'"
+                f" (no tf here: publish in '{frame_id}')"
+            )
     stamp = int(batch.stamp_ns[k])
     if stamp == 0:
         found.append(StampHint.ZERO)
@@ -274,7 +290,11 @@ def clean_single_state(batch: StateBatch, frame_id: str, now_ns: int | None) -> 
     scalars (a per-body stream's message: the vectorised checks cost ~0.1 ms of numpy set-up);
     None when any check might fail (the general path then words the reasons)."""
     body_id, frame, stamp = batch.ids[0], batch.frames[0], int(batch.stamp_ns[0])
-    if not body_id or stamp <= 0 or (now_ns is not None and stamp - now_ns > StampLimits.MAX_FUTURE_NS):
+    if (
+        not body_id
+        or stamp <= 0
+        or (now_ns is not None and stamp - now_ns > StampLimits.MAX_FUTURE_NS)
+    ):
         return None
     if not bool(batch.remove[0]):
         limit = ValueLimits.MAX_MAGNITUDE
@@ -291,8 +311,9 @@ def clean_single_state(batch: StateBatch, frame_id: str, now_ns: int | None) -> 
     return BatchCheck(_GOOD, [], frame_id, _EXACT)
 
 
-def check_batch(batch: StateBatch, *, frame_id: str, now_ns: int | None,
-                dimensions: int = 3) -> BatchCheck:
+def check_batch(
+    batch: StateBatch, *, frame_id: str, now_ns: int | None, dimensions: int = 3
+) -> BatchCheck:
     """Which states are usable.
 
     Parameters
@@ -322,9 +343,12 @@ def check_batch(batch: StateBatch, *, frame_id: str, now_ns: int | None,
     else:
         empty = np.zeros(n, dtype=bool)
     limit = ValueLimits.MAX_MAGNITUDE  # also false for NaN and +-inf
-    finite = (np.abs(batch.radius) <= limit) & (np.abs(batch.position) <= limit).all(axis=1) \
-        & (np.abs(batch.velocity) <= limit).all(axis=1) \
+    finite = (
+        (np.abs(batch.radius) <= limit)
+        & (np.abs(batch.position) <= limit).all(axis=1)
+        & (np.abs(batch.velocity) <= limit).all(axis=1)
         & (np.abs(batch.acceleration) <= limit).all(axis=1)
+    )
     covariance_bad, uncertain, block = covariance_checks(batch, dimensions)
     geometry_bad = ~batch.remove & (~finite | (batch.radius < 0.0)) | covariance_bad
     stamp_bad = batch.stamp_ns <= 0
@@ -336,8 +360,12 @@ def check_batch(batch: StateBatch, *, frame_id: str, now_ns: int | None,
         if candidates.size:
             frame_id = batch.frames[int(candidates[0])]
     if frame_id and batch.frames.count(frame_id) != n:  # some state in another frame
-        bad |= ~batch.remove & np.fromiter((f != frame_id for f in batch.frames), dtype=bool, count=n)
-    rejections = [Rejection(int(k), batch.ids[k], _reasons(batch, int(k), frame_id, now_ns, bool(dup[k]),
-                                                           dimensions))
-                  for k in np.flatnonzero(bad)]
+        bad |= ~batch.remove & np.fromiter(
+            (f != frame_id for f in batch.frames), dtype=bool, count=n
+        )
+    rejections = [
+        Rejection(int(k), batch.ids[k],
+                  _reasons(batch, int(k), frame_id, now_ns, bool(dup[k]), dimensions))
+        for k in np.flatnonzero(bad)
+    ]
     return BatchCheck(~bad, rejections, frame_id, uncertain & ~bad, block)

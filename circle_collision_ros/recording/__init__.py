@@ -5,7 +5,8 @@ it in every pytest run, which must not pull in rclpy, numba or the pipeline):
 
 - ``bag_recorder``: the node's MCAP recorder (rosbag2 layout, metadata.yaml);
 - ``bag_reader``: reads such a bag back (``tolerant``: a truncated one up to its last chunk);
-- ``ros_type_definitions``: the full ``ros2msg`` definition texts (and type hashes) recorded as schemas;
+- ``ros_type_definitions``: the full ``ros2msg`` definition texts (and type hashes) recorded as
+  schemas;
 - ``replay_engine``: replays one bag through CollisionPredictor and compares (replay_bag);
 - ``corpus``: replays many bags in parallel (local workers or Dask) and summarises;
 - ``replay``: the ``replay`` command (one bag, a corpus, or ``--publish``);

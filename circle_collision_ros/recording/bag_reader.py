@@ -54,12 +54,15 @@ class BagRecord(NamedTuple):
 
 
 
-TopicInfo = NamedTuple("TopicInfo", [("topic", str), ("type_name", str), ("definition", str),
-                                     ("offered_qos", str), ("type_hash", str), ("message_count", int)])
+TopicInfo = NamedTuple(
+    "TopicInfo",
+    [("topic", str), ("type_name", str), ("definition", str), ("offered_qos", str),
+     ("type_hash", str), ("message_count", int)],
+)
 
 
 class _ExactReader:
-    """A file whose reads return exactly the bytes asked for, else raise ValueError('truncated: ...').
+    """A file whose reads return exactly the bytes asked, else raise ValueError('truncated: ...').
 
     A size beyond the end fails before reading: nothing is allocated for lengths read from garbage.
     """
@@ -70,8 +73,10 @@ class _ExactReader:
     def read(self, size: int = -1) -> bytes:
         position = self.stream.tell()
         if size > self.size - position:
-            raise ValueError(f"truncated: a record at byte {position} needs {size} bytes, "
-                             f"{self.size - position} remain")
+            raise ValueError(
+                f"truncated: a record at byte {position} needs {size} bytes, "
+                f"{self.size - position} remain"
+            )
         return self.stream.read(size)
 
 
@@ -105,7 +110,9 @@ class BagContents:
 
 def _read(stream: BinaryIO, size: int, bag: dict) -> None:
     """One validating pass: fills bag's schemas, channels, messages and config."""
-    reader = StreamReader(_ExactReader(stream, size), emit_chunks=True, validate_crcs=True, record_size_limit=size)
+    reader = StreamReader(
+        _ExactReader(stream, size), emit_chunks=True, validate_crcs=True, record_size_limit=size
+    )
     for record in reader.records:
         if not bag["header_seen"] and not isinstance(record, Header):
             raise ValueError("first record is not an MCAP header")
@@ -123,7 +130,8 @@ def _read(stream: BinaryIO, size: int, bag: dict) -> None:
                 messages.append(item)
             elif isinstance(item, Metadata) and item.name == BagFormat.CONFIG_METADATA_NAME:
                 bag["config"] = {k: _json_or_text(v) for k, v in item.metadata.items()}
-        bag["messages"] += messages  # only once the whole chunk parsed: a chunk is kept whole or not
+        # only once the whole chunk parsed: a chunk is kept whole or not
+        bag["messages"] += messages
         if isinstance(record, Footer):
             footer, resume = size - len(Limits.MAGIC) - Limits.FOOTER_RECORD, stream.tell()
             stream.seek(footer + Limits.FOOTER_RECORD)
@@ -133,7 +141,10 @@ def _read(stream: BinaryIO, size: int, bag: dict) -> None:
             if record.summary_crc and not 0 < start <= footer:
                 raise ValueError("footer points outside the file")
             stream.seek(start)  # the summary CRC covers the summary and the footer up to the CRC
-            if record.summary_crc and zlib.crc32(stream.read(footer + 25 - start)) != record.summary_crc:
+            if (
+                record.summary_crc
+                and zlib.crc32(stream.read(footer + 25 - start)) != record.summary_crc
+            ):
                 raise ValueError("summary CRC mismatch")
             stream.seek(resume)  # the library reads the end magic next
 
@@ -153,7 +164,8 @@ def _resolve_mcap(path: Path) -> Path:
         return path
     try:
         info = yaml.safe_load((path / BagFormat.METADATA_FILE).read_text(encoding="utf-8"))[
-            "rosbag2_bagfile_information"]
+            "rosbag2_bagfile_information"
+        ]
         candidates = [path / Path(str(name)).name for name in info["relative_file_paths"]]
         storage = info.get("storage_identifier")
     except Exception:  # noqa: BLE001 -- a missing/damaged metadata.yaml must not hide the data
@@ -162,7 +174,11 @@ def _resolve_mcap(path: Path) -> Path:
         raise BagError(f"{path}: storage {storage!r} is not supported (only mcap)")
     existing = [c for c in candidates if c.is_file()]
     if len(existing) != 1:
-        what = "no .mcap file" if not existing else f"{len(existing)} .mcap files (split bags unsupported)"
+        what = (
+            "no .mcap file"
+            if not existing
+            else f"{len(existing)} .mcap files (split bags unsupported)"
+        )
         raise BagError(f"{path}: bag directory has {what}")
     return existing[0]
 
@@ -186,7 +202,8 @@ def open_bag(path: str | os.PathLike[str], *, tolerant: bool = False,
     `message_types`, or such a channel not in ros2msg/cdr.
     """
     mcap_path = _resolve_mcap(Path(path))
-    bag: dict[str, Any] = {"schemas": {}, "channels": {}, "messages": [], "config": None, "header_seen": False}
+    bag: dict[str, Any] = {"schemas": {}, "channels": {}, "messages": [], "config": None,
+                           "header_seen": False}
     problem = None
     try:
         with open(mcap_path, "rb") as stream:
@@ -199,8 +216,11 @@ def open_bag(path: str | os.PathLike[str], *, tolerant: bool = False,
             except Exception as exc:  # noqa: BLE001 -- any parse failure means a bad file
                 problem = _describe(exc)
                 if not tolerant or not bag["header_seen"]:
-                    hint = "; open_bag(..., tolerant=True) reads up to the last complete chunk" \
-                        if problem.startswith("truncated") and not tolerant else ""
+                    hint = (
+                        "; open_bag(..., tolerant=True) reads up to the last complete chunk"
+                        if problem.startswith("truncated") and not tolerant
+                        else ""
+                    )
                     raise ValueError(problem + hint) from exc
     except ValueError as exc:
         raise BagError(f"{mcap_path}: {exc}") from exc
@@ -222,23 +242,41 @@ def _contents(path: Path, bag: dict, types: set[str], problem: str | None) -> Ba
         if name not in types:
             ignored[channel.topic] = name
             continue
-        if (schema.encoding, channel.message_encoding) != (BagFormat.SCHEMA_ENCODING, BagFormat.MESSAGE_ENCODING):
-            raise BagError(f"{path}: topic {channel.topic} ({name}) uses schema encoding {schema.encoding!r} / "
-                           f"message encoding {channel.message_encoding!r}; expected "
-                           f"{BagFormat.SCHEMA_ENCODING!r} / {BagFormat.MESSAGE_ENCODING!r}")
+        if (schema.encoding, channel.message_encoding) != (
+            BagFormat.SCHEMA_ENCODING,
+            BagFormat.MESSAGE_ENCODING,
+        ):
+            raise BagError(
+                f"{path}: topic {channel.topic} ({name}) uses "
+                f"schema encoding {schema.encoding!r} / "
+                f"message encoding {channel.message_encoding!r}; expected "
+                f"{BagFormat.SCHEMA_ENCODING!r} / {BagFormat.MESSAGE_ENCODING!r}"
+            )
         previous = topics.get(channel.topic)
         if previous is not None and previous.type_name != name:
             raise BagError(f"{path}: topic {channel.topic} recorded with two types")
         topics[channel.topic] = TopicInfo(
-            channel.topic, name, schema.data.decode("utf-8", errors="replace"),
-            channel.metadata.get(BagFormat.CHANNEL_QOS_KEY, ""), channel.metadata.get(BagFormat.CHANNEL_TYPE_HASH_KEY, ""),
-            counts.get(channel.id, 0) + (previous.message_count if previous else 0))
+            channel.topic,
+            name,
+            schema.data.decode("utf-8", errors="replace"),
+            channel.metadata.get(BagFormat.CHANNEL_QOS_KEY, ""),
+            channel.metadata.get(BagFormat.CHANNEL_TYPE_HASH_KEY, ""),
+            counts.get(channel.id, 0) + (previous.message_count if previous else 0),
+        )
         selected[channel.id] = (channel.topic, name, schema.data.decode("utf-8", errors="replace"))
     if not topics:
         found = ", ".join(f"{t} ({n or 'no schema'})" for t, n in sorted(ignored.items())) or "none"
         note = f"; reading stopped early: {problem}" if problem else ""
-        raise BagError(f"{path}: no channels of types {', '.join(sorted(types))} (found: {found}){note}")
-    records = sorted((BagRecord(*selected[m.channel_id][:2], m.data, m.log_time, m.publish_time,
-                                selected[m.channel_id][2])
-                      for m in bag["messages"] if m.channel_id in selected), key=lambda r: r.log_time_ns)
+        raise BagError(
+            f"{path}: no channels of types {', '.join(sorted(types))} (found: {found}){note}"
+        )
+    records = sorted(
+        (
+            BagRecord(*selected[m.channel_id][:2], m.data, m.log_time, m.publish_time,
+                      selected[m.channel_id][2])
+            for m in bag["messages"]
+            if m.channel_id in selected
+        ),
+        key=lambda r: r.log_time_ns,
+    )
     return BagContents(path, topics, ignored, bag["config"], problem is not None, problem, records)

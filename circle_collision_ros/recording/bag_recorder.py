@@ -39,13 +39,7 @@ from mcap.writer import LIBRARY_IDENTIFIER, CompressionType, Writer
 
 from .ros_type_definitions import TypeDefinitionError, full_msg_definition, type_description_hash
 
-__all__ = [
-    "BagFormat",
-    "BagRecorder",
-    "ChunkLimits",
-    "RecordingError",
-    "qos_profiles_yaml",
-]
+__all__ = ["BagFormat", "BagRecorder", "ChunkLimits", "RecordingError", "qos_profiles_yaml"]
 
 
 class BagFormat:
@@ -508,13 +502,10 @@ class BagRecorder:
             except yaml.YAMLError:
                 qos = []
             topics.append({
-                "topic_metadata": {
-                    "name": topic,
-                    "type": stats.type_name,
-                    "serialization_format": BagFormat.MESSAGE_ENCODING,
-                    "offered_qos_profiles": qos if isinstance(qos, list) else [],
-                    "type_description_hash": stats.type_hash,
-                },
+                "topic_metadata": {"name": topic, "type": stats.type_name,
+                                   "serialization_format": BagFormat.MESSAGE_ENCODING,
+                                   "offered_qos_profiles": qos if isinstance(qos, list) else [],
+                                   "type_description_hash": stats.type_hash},
                 "message_count": counts[topic],
             })
         info = {
@@ -527,12 +518,9 @@ class BagRecorder:
             "compression_format": "",
             "compression_mode": "",
             "relative_file_paths": [self._file_name],
-            "files": [{
-                "path": self._file_name,
-                "starting_time": {"nanoseconds_since_epoch": start_ns},
-                "duration": {"nanoseconds": duration},
-                "message_count": total,
-            }],
+            "files": [{"path": self._file_name,
+                       "starting_time": {"nanoseconds_since_epoch": start_ns},
+                       "duration": {"nanoseconds": duration}, "message_count": total}],
             "custom_data": {
                 BagFormat.STATE_KEY: (BagFormat.STATE_CLOSED if final
                                       else BagFormat.STATE_RECORDING),

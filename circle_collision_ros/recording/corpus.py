@@ -77,7 +77,8 @@ def replay_outcome(path: str, tolerant: bool = False) -> BagOutcome:
     from circle_collision_ros.recording.bag_reader import BagError
     from circle_collision_ros.recording.replay_engine import replay_bag
 
-    numba.set_num_threads(1)  # one process per core: the solver's threaded kernels would oversubscribe
+    # one process per core: the solver's threaded kernels would oversubscribe
+    numba.set_num_threads(1)
     started = time.perf_counter()
     try:
         report = replay_bag(path, tolerant=tolerant)
@@ -106,12 +107,13 @@ def replay_outcome(path: str, tolerant: bool = False) -> BagOutcome:
 # ---------------------------------------------------------------- finding the bags
 
 def is_bag_dir(path: Path) -> bool:
-    """A rosbag2 directory: metadata.yaml, or (after a crash lost it) a single .mcap and no folders."""
+    """A rosbag2 directory: metadata.yaml, or (a crash lost it) a single .mcap and no folders."""
     if (path / BAG_METADATA).is_file():
         return True
     entries = list(path.iterdir())
-    return (sum(e.suffix == ".mcap" and e.is_file() for e in entries) == 1
-            and not any(e.is_dir() for e in entries))
+    return sum(e.suffix == ".mcap" and e.is_file() for e in entries) == 1 and not any(
+        e.is_dir() for e in entries
+    )
 
 
 def _has_glob(spec: str) -> bool:
@@ -137,20 +139,29 @@ def find_bags(specs: Iterable[str]) -> tuple[list[str], list[BagOutcome]]:
             bags.append(str(path))
 
     for spec in specs:
-        paths = [Path(p) for p in sorted(glob.glob(spec, recursive=True))] if _has_glob(spec) else [Path(spec)]
+        paths = (
+            [Path(p) for p in sorted(glob.glob(spec, recursive=True))]
+            if _has_glob(spec)
+            else [Path(spec)]
+        )
         if not paths:
             problems.append(BagOutcome(spec, Verdict.UNREADABLE, detail=f"{spec}: no path matches"))
         for path in paths:
             if not path.exists():
-                problems.append(BagOutcome(str(path), Verdict.UNREADABLE,
-                                           detail=f"{path}: no such file or directory"))
+                problems.append(
+                    BagOutcome(
+                        str(path), Verdict.UNREADABLE, detail=f"{path}: no such file or directory"
+                    )
+                )
             elif not path.is_dir() or is_bag_dir(path):
                 add(path)
             else:
                 found = _search(path)
                 if not found:
-                    problems.append(BagOutcome(str(path), Verdict.UNREADABLE,
-                                               detail=f"{path}: no bags (metadata.yaml or .mcap) found below"))
+                    problems.append(
+                        BagOutcome(str(path), Verdict.UNREADABLE,
+                                   detail=f"{path}: no bags (metadata.yaml or .mcap) found below")
+                    )
                 for bag in found:
                     add(bag)
     return bags, problems
@@ -159,7 +170,8 @@ def find_bags(specs: Iterable[str]) -> tuple[list[str], list[BagOutcome]]:
 def _search(root: Path) -> list[Path]:
     found: list[Path] = []
     visited: set[str] = set()
-    for directory, subdirs, files in os.walk(root, followlinks=True):  # corpora of symlinks are common
+    # corpora of symlinks are common
+    for directory, subdirs, files in os.walk(root, followlinks=True):
         here = Path(directory)
         if os.path.realpath(here) in visited:  # a link loop or a second link to the same folder
             subdirs.clear()
@@ -176,6 +188,7 @@ def _search(root: Path) -> list[Path]:
 
 # ---------------------------------------------------------------- progress
 
+
 class Progress:
     """A progress bar on a terminal (tqdm, on stderr); plain lines on stdout otherwise."""
 
@@ -185,6 +198,7 @@ class Progress:
         self.bar = None
         if self.tty:
             import tqdm
+
             tqdm.tqdm.monitor_interval = 0  # no monitor thread: workers are forked from us
             self.bar = tqdm.tqdm(total=total, unit="bag", file=sys.stderr, dynamic_ncols=True)
 
@@ -208,9 +222,11 @@ class Progress:
             if outcome.verdict != Verdict.IDENTICAL:
                 self._line(f"{outcome.verdict}: {outcome.detail}")
         else:
-            self._line(f"[{self.done}/{self.total}] {outcome.verdict} {outcome.path}"
-                       f" ({outcome.inputs} inputs, {outcome.predictions} predictions,"
-                       f" {outcome.pairs_compared} pairs, {outcome.seconds:.2f} s)")
+            self._line(
+                f"[{self.done}/{self.total}] {outcome.verdict} {outcome.path}"
+                f" ({outcome.inputs} inputs, {outcome.predictions} predictions,"
+                f" {outcome.pairs_compared} pairs, {outcome.seconds:.2f} s)"
+            )
 
     def close(self) -> None:
         if self.bar is not None:
@@ -267,7 +283,7 @@ class LocalPool:
     """
 
     def __init__(self, jobs: int, tolerant: bool = False) -> None:
-        import circle_collision_ros.recording.replay_engine  # noqa: F401  (imported once, before forking)
+        # noqa: F401  (imported once, before forking)
 
         self.jobs, self.tolerant = jobs, tolerant
         self.ctx = multiprocessing.get_context("fork")
@@ -285,8 +301,11 @@ class LocalPool:
                         w.conn.send(w.bag)
                         progress.started(w.bag, str(w.process.pid))
                 busy = [w for w in workers if w.bag is not None]
-                ready = set(multiprocessing.connection.wait(
-                    [w.conn for w in busy] + [w.process.sentinel for w in busy]))
+                ready = set(
+                    multiprocessing.connection.wait(
+                        [w.conn for w in busy] + [w.process.sentinel for w in busy]
+                    )
+                )
                 for index, w in enumerate(workers):
                     if w.bag is None or not ({w.conn, w.process.sentinel} & ready):
                         continue
@@ -331,8 +350,9 @@ def _exit_reason(code: int | None) -> str:
     return f"exit code {code}"
 
 
-def run_on_dask(bags: list[str], address: str, results: Results, progress: Progress,
-                tolerant: bool = False) -> None:
+def run_on_dask(
+    bags: list[str], address: str, results: Results, progress: Progress, tolerant: bool = False
+) -> None:
     """Replay `bags` as tasks on the Dask scheduler at `address` (tcp://host:port).
 
     The workers need this package installed and the bag paths readable under
@@ -347,8 +367,12 @@ def run_on_dask(bags: list[str], address: str, results: Results, progress: Progr
     attempts = dict.fromkeys(bags, 1)
     with Client(address, timeout="30s") as client:
         # Absolute paths: a worker's working directory is not ours.
-        futures = {client.submit(replay_outcome, os.path.abspath(bag), tolerant, pure=False,
-                                 key=f"replay-{i}-1"): bag for i, bag in enumerate(bags)}
+        futures = {
+            client.submit(
+                replay_outcome, os.path.abspath(bag), tolerant, pure=False, key=f"replay-{i}-1"
+            ): bag
+            for i, bag in enumerate(bags)
+        }
         index = {bag: i for i, bag in enumerate(bags)}
         pending = as_completed(futures)
         try:
@@ -357,11 +381,14 @@ def run_on_dask(bags: list[str], address: str, results: Results, progress: Progr
                 try:
                     outcome = future.result()
                 except KilledWorker as exc:
-                    why = f"worker died ({exc.last_worker.address if exc.last_worker else 'unknown'})"
+                    why = (
+                        f"worker died ({exc.last_worker.address if exc.last_worker else 'unknown'})"
+                    )
                     if attempts[bag] < MAX_ATTEMPTS:
                         attempts[bag] += 1
                         progress.retrying(bag, why)
-                        retry = client.submit(replay_outcome, os.path.abspath(bag), tolerant, pure=False,
+                        retry = client.submit(replay_outcome, os.path.abspath(bag), tolerant,
+                                              pure=False,
                                               key=f"replay-{index[bag]}-{attempts[bag]}")
                         futures[retry] = bag
                         pending.add(retry)
@@ -380,6 +407,7 @@ def run_on_dask(bags: list[str], address: str, results: Results, progress: Progr
 
 # ---------------------------------------------------------------- summary and JUnit
 
+
 def exit_code(outcomes: Iterable[BagOutcome]) -> int:
     verdicts = {o.verdict for o in outcomes}
     if verdicts & {Verdict.UNREADABLE, Verdict.FAILED}:
@@ -392,20 +420,30 @@ def exit_code(outcomes: Iterable[BagOutcome]) -> int:
 def format_summary(outcomes: list[BagOutcome], wall_seconds: float, where: str) -> list[str]:
     """The end-of-run table: one row per bag, detail lines, totals and wall time."""
     width = max([len(o.path) for o in outcomes] + [3])
-    lines = [f"{'bag':<{width}}  {'inputs':>7} {'predictions':>11} {'pairs':>8} {'max |dt| [s]':>12}  verdict"]
+    lines = [
+        f"{'bag':<{width}}  {'inputs':>7} {'predictions':>11} {'pairs':>8} "
+        f"{'max |dt| [s]':>12}  verdict"
+    ]
     for o in outcomes:
-        lines.append(f"{o.path:<{width}}  {o.inputs:>7} {o.predictions:>11} {o.pairs_compared:>8}"
-                     f" {o.max_time_difference:>12.3g}  {o.verdict}"
-                     + (f" (attempts: {o.attempts})" if o.attempts > 1 else ""))
+        lines.append(
+            f"{o.path:<{width}}  {o.inputs:>7} {o.predictions:>11} {o.pairs_compared:>8}"
+            f" {o.max_time_difference:>12.3g}  {o.verdict}"
+            + (f" (attempts: {o.attempts})" if o.attempts > 1 else "")
+        )
     lines += [f"{o.verdict}: {o.detail}" for o in outcomes if o.detail]
-    counts = {v: sum(o.verdict == v for o in outcomes)
-              for v in (Verdict.IDENTICAL, Verdict.MISMATCH, Verdict.UNREADABLE, Verdict.FAILED,
-                        Verdict.NOT_RUN)}
-    lines.append(f"total: {len(outcomes)} bags: " + ", ".join(f"{n} {v}" for v, n in counts.items()
-                                                                 if n or v != Verdict.NOT_RUN)
-                 + f"; {sum(o.inputs for o in outcomes)} inputs, {sum(o.predictions for o in outcomes)}"
-                 f" predictions, {sum(o.pairs_compared for o in outcomes)} pairs compared,"
-                 f" largest time difference {max((o.max_time_difference for o in outcomes), default=0.0)!r} s")
+    counts = {
+        v: sum(o.verdict == v for o in outcomes)
+        for v in (Verdict.IDENTICAL, Verdict.MISMATCH, Verdict.UNREADABLE, Verdict.FAILED,
+                  Verdict.NOT_RUN)
+    }
+    lines.append(
+        f"total: {len(outcomes)} bags: "
+        + ", ".join(f"{n} {v}" for v, n in counts.items() if n or v != Verdict.NOT_RUN)
+        + f"; {sum(o.inputs for o in outcomes)} inputs, {sum(o.predictions for o in outcomes)}"
+        f" predictions, {sum(o.pairs_compared for o in outcomes)} pairs compared,"
+        f" largest time difference "
+        f"{max((o.max_time_difference for o in outcomes), default=0.0)!r} s"
+    )
     lines.append(f"wall time: {wall_seconds:.2f} s ({where})")
     return lines
 
@@ -418,42 +456,64 @@ def write_junit(path: str, outcomes: list[BagOutcome], wall_seconds: float) -> N
     counts = {"tests": str(len(outcomes)), "failures": str(failures), "errors": str(errors),
               "skipped": str(skipped), "time": f"{wall_seconds:.3f}"}
     root = ET.Element("testsuites", counts)
-    suite = ET.SubElement(root, "testsuite", {"name": "replay", **counts,
-                                              "timestamp": time.strftime("%Y-%m-%dT%H:%M:%S"),
-                                              "hostname": socket.gethostname()})
+    suite = ET.SubElement(
+        root,
+        "testsuite",
+        {"name": "replay", **counts, "timestamp": time.strftime("%Y-%m-%dT%H:%M:%S"),
+         "hostname": socket.gethostname()},
+    )
     for o in outcomes:
-        case = ET.SubElement(suite, "testcase", {"classname": "replay", "name": o.path,
-                                                 "time": f"{o.seconds:.3f}"})
+        case = ET.SubElement(
+            suite, "testcase", {"classname": "replay", "name": o.path, "time": f"{o.seconds:.3f}"}
+        )
         if o.verdict == Verdict.MISMATCH:
-            ET.SubElement(case, "failure", {"type": o.verdict, "message": o.detail[:500]}).text = o.detail
+            ET.SubElement(
+                case, "failure", {"type": o.verdict, "message": o.detail[:500]}
+            ).text = o.detail
         elif o.verdict in (Verdict.UNREADABLE, Verdict.FAILED):
-            ET.SubElement(case, "error", {"type": o.verdict, "message": o.detail[:500]}).text = o.detail
+            ET.SubElement(
+                case, "error", {"type": o.verdict, "message": o.detail[:500]}
+            ).text = o.detail
         elif o.verdict == Verdict.NOT_RUN:
             ET.SubElement(case, "skipped", {"message": "interrupted before it was replayed"})
         ET.SubElement(case, "system-out").text = (
             f"inputs={o.inputs} predictions={o.predictions} pairs_compared={o.pairs_compared} "
-            f"max_time_difference={o.max_time_difference!r} attempts={o.attempts}")
+            f"max_time_difference={o.max_time_difference!r} attempts={o.attempts}"
+        )
     ET.indent(root)
     ET.ElementTree(root).write(path, encoding="utf-8", xml_declaration=True)
 
 
 # ---------------------------------------------------------------- command line
 
+
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """replay's corpus options."""
     group = parser.add_argument_group("corpus (several bags, folders, globs)")
     group.add_argument("--jobs", "-j", type=int, default=None,
                        help="local worker processes (default: the CPU count)")
-    group.add_argument("--cluster", metavar="ADDRESS",
-                       help="Dask scheduler address (tcp://host:8786) to replay on instead of locally")
-    group.add_argument("--junit-xml", metavar="FILE", help="write one JUnit testcase per bag to FILE")
-    group.add_argument("--verbose", "-v", action="store_true",
-                       help="also print which worker starts each bag")
+    group.add_argument(
+        "--cluster",
+        metavar="ADDRESS",
+        help="Dask scheduler address (tcp://host:8786) to replay on instead of locally",
+    )
+    group.add_argument(
+        "--junit-xml", metavar="FILE", help="write one JUnit testcase per bag to FILE"
+    )
+    group.add_argument(
+        "--verbose", "-v", action="store_true", help="also print which worker starts each bag"
+    )
 
 
 def is_corpus_run(opts: argparse.Namespace) -> bool:
     """Several paths, a folder of bags, a glob or a corpus option; else the single-bag replay."""
-    if len(opts.bag) != 1 or opts.jobs is not None or opts.cluster or opts.junit_xml or opts.verbose:
+    if (
+        len(opts.bag) != 1
+        or opts.jobs is not None
+        or opts.cluster
+        or opts.junit_xml
+        or opts.verbose
+    ):
         return True
     path = Path(opts.bag[0])
     if _has_glob(opts.bag[0]):
@@ -470,7 +530,11 @@ def run(opts: argparse.Namespace, progress_tty: bool | None = None) -> int:
     bags, problems = find_bags(opts.bag)
     results: Results = {}
     jobs = opts.jobs or os.cpu_count() or 1
-    where = f"Dask cluster {opts.cluster}" if opts.cluster else f"{min(jobs, max(len(bags), 1))} local workers"
+    where = (
+        f"Dask cluster {opts.cluster}"
+        if opts.cluster
+        else f"{min(jobs, max(len(bags), 1))} local workers"
+    )
     progress = Progress(len(bags) + len(problems), tty=progress_tty, verbose=opts.verbose)
     for outcome in problems:
         progress.finished(outcome)
@@ -493,8 +557,10 @@ def run(opts: argparse.Namespace, progress_tty: bool | None = None) -> int:
     if opts.junit_xml:
         write_junit(opts.junit_xml, outcomes, wall)
     if code == EXIT_INTERRUPTED:
-        print(f"replay: interrupted; {sum(o.verdict == Verdict.NOT_RUN for o in outcomes)} bags not replayed",
-              file=sys.stderr)
+        print(
+            f"replay: interrupted; "
+            f"{sum(o.verdict == Verdict.NOT_RUN for o in outcomes)} bags not replayed",
+            file=sys.stderr,
+        )
         return code
     return exit_code(outcomes)
-

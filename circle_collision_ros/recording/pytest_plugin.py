@@ -1,4 +1,4 @@
-"""pytest plugin: recorded runs as tests (loaded through the `pytest11` entry point after pip install).
+"""pytest plugin: recorded runs as tests (loaded via the `pytest11` entry point after pip install).
 
 - ``pytest --replay-bags runs/`` (bag dirs, .mcap files, parent folders, globs;
   repeatable) adds one test per bag, named ``replay[<bag>]``; it fails with the
@@ -14,6 +14,7 @@
 Nothing here imports rclpy until a bag is replayed, so the plugin costs other
 pytest runs nothing (tests/recording/test_pytest_plugin.py, run with pytester).
 """
+
 from __future__ import annotations
 
 import math
@@ -35,11 +36,11 @@ MAX_DETAIL_LINES = 20
 class ReplayedPrediction:
     """One prediction as recomputed by the replay, and whether the recording matched it."""
 
-    log_time_ns: int            # when the node computed (and recorded) it
-    stamp_ns: int               # header stamp: the reference time of every time_to_collision
+    log_time_ns: int  # when the node computed (and recorded) it
+    stamp_ns: int  # header stamp: the reference time of every time_to_collision
     horizon: float
     pairs: tuple[PairPrediction, ...]
-    identical: bool             # recorded message equal to the replayed one, field by field
+    identical: bool  # recorded message equal to the replayed one, field by field
 
     def pair(self, a: str, b: str) -> PairPrediction | None:
         """The entry for bodies a and b (either order), or None if not reported."""
@@ -64,11 +65,15 @@ class ReplayResult:
 
     def pair_history(self, a: str, b: str) -> list[tuple[int, PairPrediction]]:
         """(log_time_ns, entry) for each prediction that reported bodies a and b."""
-        return [(p.log_time_ns, entry) for p in self.predictions if (entry := p.pair(a, b)) is not None]
+        return [
+            (p.log_time_ns, entry) for p in self.predictions if (entry := p.pair(a, b)) is not None
+        ]
 
     def soonest_contact(self, a: str, b: str) -> float:
         """Smallest predicted time to contact of a and b over the run in s (inf if never)."""
-        return min((entry.time_to_collision for _, entry in self.pair_history(a, b)), default=math.inf)
+        return min(
+            (entry.time_to_collision for _, entry in self.pair_history(a, b)), default=math.inf
+        )
 
 
 def replay_bag_result(path: str, tolerant: bool = False) -> ReplayResult:
@@ -79,8 +84,10 @@ def replay_bag_result(path: str, tolerant: bool = False) -> ReplayResult:
 
     def keep(log_time_ns: int, recorded: PredictionArray, replayed: PredictionArray) -> None:
         sec, nanosec, _ = replayed.header
-        predictions.append(ReplayedPrediction(log_time_ns, sec * 1_000_000_000 + nanosec, replayed.horizon,
-                                              replayed.predictions, recorded == replayed))
+        predictions.append(
+            ReplayedPrediction(log_time_ns, sec * 1_000_000_000 + nanosec, replayed.horizon,
+                               replayed.predictions, recorded == replayed)
+        )
 
     report = replay_bag(path, tolerant=tolerant, on_prediction=keep)
     return ReplayResult(str(path), report.inputs, report.pairs_compared, report.max_time_difference,
@@ -89,10 +96,16 @@ def replay_bag_result(path: str, tolerant: bool = False) -> ReplayResult:
 
 # ---------------------------------------------------------------- hooks
 
+
 def pytest_addoption(parser: pytest.Parser) -> None:
     group = parser.getgroup("replay", "replay recorded circle_collision_ros runs")
-    group.addoption("--replay-bags", action="append", default=[], metavar="PATH",
-                    help="replay each bag under PATH (bag dir, .mcap, parent folder or glob) as a test")
+    group.addoption(
+        "--replay-bags",
+        action="append",
+        default=[],
+        metavar="PATH",
+        help="replay each bag under PATH (bag dir, .mcap, parent folder or glob) as a test",
+    )
     group.addoption("--replay-tolerant", action="store_true",
                     help="read truncated bags up to their last complete chunk")
 
@@ -126,10 +139,17 @@ class ReplayBagItem(pytest.Item):
         if not report.ok:
             shown = report.mismatches[:MAX_DETAIL_LINES]
             more = len(report.mismatches) - len(shown)
-            raise ReplayMismatch("\n".join(
-                [f"{self.bag}: {len(report.mismatches)} difference(s) in {report.predictions} predictions"
-                 f" (largest time difference {report.max_time_difference!r} s):", *shown]
-                + ([f"... and {more} more"] if more else [])))
+            raise ReplayMismatch(
+                "\n".join(
+                    [
+                        f"{self.bag}: {len(report.mismatches)} difference(s) in "
+                        f"{report.predictions} predictions"
+                        f" (largest time difference {report.max_time_difference!r} s):",
+                        *shown,
+                    ]
+                    + ([f"... and {more} more"] if more else [])
+                )
+            )
 
     def repr_failure(self, excinfo, style=None):
         if isinstance(excinfo.value, ReplayMismatch):
@@ -141,19 +161,25 @@ class ReplayBagItem(pytest.Item):
 
 
 @pytest.hookimpl(tryfirst=True)  # before -k/-m deselection sees the items
-def pytest_collection_modifyitems(session: pytest.Session, config: pytest.Config,
-                                  items: list[pytest.Item]) -> None:
+def pytest_collection_modifyitems(
+    session: pytest.Session, config: pytest.Config, items: list[pytest.Item]
+) -> None:
     specs = config.getoption("replay_bags")
     if not specs:
         return
     bags, problems = find_bags(specs)
     tolerant = config.getoption("replay_tolerant")
     for problem in problems:
-        items.append(ReplayBagItem.from_parent(session, name=f"replay[{problem.path}]", bag=problem.path,
-                                               problem=problem, tolerant=tolerant))
+        items.append(
+            ReplayBagItem.from_parent(session, name=f"replay[{problem.path}]", bag=problem.path,
+                                      problem=problem, tolerant=tolerant)
+        )
     for bag in bags:
-        items.append(ReplayBagItem.from_parent(session, name=f"replay[{bag}]", bag=bag, problem=None,
-                                               tolerant=tolerant))
+        items.append(
+            ReplayBagItem.from_parent(
+                session, name=f"replay[{bag}]", bag=bag, problem=None, tolerant=tolerant
+            )
+        )
 
 
 @pytest.fixture

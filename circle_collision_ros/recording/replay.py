@@ -23,10 +23,12 @@ import sys
 import time
 
 from circle_collision_ros.pipeline.cdr import CDR_BE, CdrError
-from circle_collision_ros.pipeline.state_codec import decode_states, encode_state, encode_state_array
+from circle_collision_ros.pipeline.state_codec import (decode_states, encode_state,
+                                                       encode_state_array)
 from circle_collision_ros.recording import corpus
 from circle_collision_ros.recording.bag_reader import BagError, BagRecord
-from circle_collision_ros.recording.replay_engine import RecordedLayout, RecordedTypes, load_bag, replay_offline
+from circle_collision_ros.recording.replay_engine import (RecordedLayout, RecordedTypes, load_bag,
+                                                          replay_offline)
 
 
 def current_layout_bytes(record: BagRecord) -> bytes:
@@ -36,8 +38,10 @@ def current_layout_bytes(record: BagRecord) -> bytes:
     written again with an empty covariance (the same states; the array header's frame is
     carried by each state, as the node reads it). Anything else is returned unchanged.
     """
-    if record.type_name not in (RecordedTypes.STATE, RecordedTypes.STATE_ARRAY) \
-            or RecordedLayout.has_uncertainty(record.schema):
+    if record.type_name not in (
+        RecordedTypes.STATE,
+        RecordedTypes.STATE_ARRAY,
+    ) or RecordedLayout.has_uncertainty(record.schema):
         return record.data
     batch = decode_states(record.data, RecordedTypes.INPUTS[record.type_name], uncertainty=False)
     if record.type_name == RecordedTypes.STATE:
@@ -83,11 +87,16 @@ def republish(records: list[BagRecord], rate: float, wait_s: float = 10.0) -> in
         inputs = [r for r in records if r.type_name in RecordedTypes.INPUTS]
         for r in inputs:
             if r.topic not in publishers:
-                publishers[r.topic] = node.create_publisher(RecordedTypes.INPUTS[r.type_name], r.topic, qos)
+                publishers[r.topic] = node.create_publisher(
+                    RecordedTypes.INPUTS[r.type_name], r.topic, qos
+                )
         missing = _wait_for_subscribers(node, publishers, wait_s)
         if missing:
-            print(f"replay: no subscriber on {', '.join(missing)} after {wait_s:g} s; publishing anyway",
-                  file=sys.stderr)
+            print(
+                f"replay: no subscriber on {', '.join(missing)} after {wait_s:g} s; "
+                "publishing anyway",
+                file=sys.stderr,
+            )
         time.sleep(MATCH_GRACE_S)
         start_wall = time.monotonic()
         start_log = inputs[0].log_time_ns if inputs else 0
@@ -97,8 +106,9 @@ def republish(records: list[BagRecord], rate: float, wait_s: float = 10.0) -> in
                 time.sleep(delay)
             try:
                 data = current_layout_bytes(r)  # the recorded bytes, unchanged unless recorded in
-            except CdrError:                    # an older layout (then the same states, re-encoded)
-                data = r.data  # malformed as recorded: sent as recorded, the node rejects it as before
+            except CdrError:  # an older layout (then the same states, re-encoded)
+                # malformed as recorded: sent as recorded, the node rejects it as before
+                data = r.data
             publishers[r.topic].publish(data)
             sent += 1
     except KeyboardInterrupt:
@@ -111,16 +121,24 @@ def republish(records: list[BagRecord], rate: float, wait_s: float = 10.0) -> in
 
 def main(args: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="replay", description=__doc__.splitlines()[0])
-    parser.add_argument("bag", nargs="+",
-                        help="bag directory (metadata.yaml + .mcap) or .mcap file; several, parent "
-                             "folders (searched recursively) or globs replay a corpus")
+    parser.add_argument(
+        "bag",
+        nargs="+",
+        help="bag directory (metadata.yaml + .mcap) or .mcap file; several, parent "
+        "folders (searched recursively) or globs replay a corpus",
+    )
     parser.add_argument("--publish", action="store_true",
                         help="republish the recorded inputs on their topics instead of comparing")
     parser.add_argument("--rate", type=float, default=1.0,
                         help="pace factor for --publish (2 = twice as fast; default 1)")
-    parser.add_argument("--wait-for-subscribers", type=float, default=10.0, metavar="SECONDS",
-                        help="with --publish: wait up to this long for a subscriber on every input "
-                             "topic before the first message (default 10)")
+    parser.add_argument(
+        "--wait-for-subscribers",
+        type=float,
+        default=10.0,
+        metavar="SECONDS",
+        help="with --publish: wait up to this long for a subscriber on every input "
+        "topic before the first message (default 10)",
+    )
     parser.add_argument("--tolerant", action="store_true",
                         help="read a truncated bag (e.g. after a hard kill) up to its last chunk")
     corpus.add_arguments(parser)
@@ -136,12 +154,18 @@ def main(args: list[str] | None = None) -> int:
     opts.bag = opts.bag[0]
     try:
         bag, records = load_bag(opts.bag, opts.tolerant)
-        truncated_note = (f"replay: {opts.bag}: truncated ({bag.problem}); using what was complete"
-                          if bag.truncated else "")
+        truncated_note = (
+            f"replay: {opts.bag}: truncated ({bag.problem}); using what was complete"
+            if bag.truncated
+            else ""
+        )
         if opts.publish:
             if truncated_note:
                 print(truncated_note, file=sys.stderr)
-            print(f"replay: published {republish(records, opts.rate, opts.wait_for_subscribers)} input messages")
+            print(
+                f"replay: published "
+                f"{republish(records, opts.rate, opts.wait_for_subscribers)} input messages"
+            )
             return 0
         report = replay_offline(records)
         if truncated_note:  # only now: an error above must stay a single line
@@ -159,8 +183,11 @@ def main(args: list[str] | None = None) -> int:
         print("replay: the bag holds no recorded predictions to compare", file=sys.stderr)
         return 1
     if not report.ok:
-        print(f"MISMATCH: {len(report.mismatches)} difference(s); first: "
-              + "; ".join(report.mismatches[:5]), file=sys.stderr)
+        print(
+            f"MISMATCH: {len(report.mismatches)} difference(s); first: "
+            + "; ".join(report.mismatches[:5]),
+            file=sys.stderr,
+        )
         return 1
     print("replay: all predictions identical")
     return 0

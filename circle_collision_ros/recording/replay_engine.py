@@ -1,4 +1,5 @@
-"""The single-bag replay engine: recorded inputs through CollisionPredictor, recorded predictions compared.
+"""The single-bag replay engine: recorded inputs through CollisionPredictor, recorded
+predictions compared.
 
 replay_bag opens one recording, feeds its recorded inputs in recorded order and
 with their recorded receive times through the same CollisionPredictor the node
@@ -9,6 +10,7 @@ corpus runner (corpus.py) and the pytest plugin (pytest_plugin.py) all call it.
 Recorded bytes are untrusted: they are decoded by pipeline/state_codec,
 pipeline/odometry and pipeline/prediction_codec, never by rclpy's deserializer.
 """
+
 from __future__ import annotations
 
 import json
@@ -22,14 +24,16 @@ from nav_msgs.msg import Odometry
 from circle_collision_msgs.msg import CircleState, CircleStateArray
 from circle_collision_ros.pipeline.cdr import CdrError, decode_string
 from circle_collision_ros.pipeline.odometry import ODOMETRY_TYPE, OdometrySource, odometry_batch
-from circle_collision_ros.pipeline.prediction_codec import (PredictionArray, decode_prediction_array,
+from circle_collision_ros.pipeline.prediction_codec import (PredictionArray,
+                                                            decode_prediction_array,
                                                             peek_prediction_array)
-from circle_collision_ros.pipeline.predictor import RUNTIME_FIELDS, CollisionPredictor, PredictorConfig
+from circle_collision_ros.pipeline.predictor import (RUNTIME_FIELDS, CollisionPredictor,
+                                                     PredictorConfig)
 from circle_collision_ros.pipeline.state_batch import StateBatch
 from circle_collision_ros.pipeline.state_codec import decode_states
 from circle_collision_ros.pipeline.state_groups import ingest_single_states
-from circle_collision_ros.recording.bag_reader import (RECORDED_TYPES, BagContents, BagError, BagRecord,
-                                                      open_bag)
+from circle_collision_ros.recording.bag_reader import (RECORDED_TYPES, BagContents, BagError,
+                                                       BagRecord, open_bag)
 from circle_collision_ros.recording.ros_type_definitions import DefinitionFormat
 
 
@@ -45,7 +49,7 @@ class RecordedTypes:
 
 
 class RecordedLayout:
-    """Which layout of our interfaces a recorded schema text describes (see pipeline/cdr.py, "Two layouts").
+    """Which layout of our interfaces a recorded schema describes (pipeline/cdr.py, "Two layouts").
 
     A recording made before issue 18 embeds CircleState without `covariance` and
     CollisionPrediction without `collision_probability`; replay decodes its inputs and
@@ -53,8 +57,10 @@ class RecordedLayout:
     names neither type (empty: not recorded by us) is taken as the current layout.
     """
 
-    _FIELD = {"circle_collision_msgs/CircleState": "covariance",
-              "circle_collision_msgs/CollisionPrediction": "collision_probability"}
+    _FIELD = {
+        "circle_collision_msgs/CircleState": "covariance",
+        "circle_collision_msgs/CollisionPrediction": "collision_probability",
+    }
     _cache: dict[str, bool] = {}
 
     @classmethod
@@ -71,16 +77,26 @@ class RecordedLayout:
             head, _, text = section.partition("\n")
             field = cls._FIELD.get(head.removeprefix(DefinitionFormat.DEPENDENCY_PREFIX).strip())
             if field is not None:
-                return any(line.split("#", 1)[0].split()[1:2] == [field] for line in text.splitlines())
+                return any(
+                    line.split("#", 1)[0].split()[1:2] == [field] for line in text.splitlines()
+                )
         # The root type is CircleState itself (single-state topics)
-        if any(line.split("#", 1)[0].split()[1:2] == ["remove"] for line in sections[0].splitlines()):
-            return any(line.split("#", 1)[0].split()[1:2] == ["covariance"] for line in sections[0].splitlines())
+        if any(
+            line.split("#", 1)[0].split()[1:2] == ["remove"] for line in sections[0].splitlines()
+        ):
+            return any(
+                line.split("#", 1)[0].split()[1:2] == ["covariance"]
+                for line in sections[0].splitlines()
+            )
         return True
 
 
 def odometry_from_json(text: str) -> dict[str, OdometrySource]:
     """Odometry topic -> OdometrySource from the node's recorded configuration."""
-    return {topic: OdometrySource(**source) for topic, source in json.loads(text).get("odometry", {}).items()}
+    return {
+        topic: OdometrySource(**source)
+        for topic, source in json.loads(text).get("odometry", {}).items()
+    }
 
 
 def decode_input(record: BagRecord, odometry: dict[str, OdometrySource]) -> StateBatch | None:
@@ -119,8 +135,9 @@ class ReplayReport:
         return not self.mismatches
 
 
-def compare_predictions(recorded: PredictionArray, replayed: PredictionArray,
-                        where: str, report: ReplayReport) -> None:
+def compare_predictions(
+    recorded: PredictionArray, replayed: PredictionArray, where: str, report: ReplayReport
+) -> None:
     """Field-by-field comparison; exact, because replay must be bit-identical."""
     if (recorded.header, recorded.horizon) != (replayed.header, replayed.horizon):
         report.mismatches.append(f"{where}: header/horizon differ")
@@ -137,7 +154,9 @@ def compare_predictions(recorded: PredictionArray, replayed: PredictionArray,
             report.max_time_difference = max(report.max_time_difference, abs(ta - tb))
         if a[key] != b[key]:
             report.mismatches.append(f"{where}: pair {key} differs (ttc {ta!r} vs {tb!r})")
-    if [(p.id_a, p.id_b) for p in recorded.predictions] != [(p.id_a, p.id_b) for p in replayed.predictions]:
+    if [(p.id_a, p.id_b) for p in recorded.predictions] != [
+        (p.id_a, p.id_b) for p in replayed.predictions
+    ]:
         report.mismatches.append(f"{where}: prediction order differs")
 
 
@@ -145,8 +164,9 @@ PredictionHook = Callable[[int, PredictionArray, PredictionArray], None]
 """on_prediction(log_time_ns, recorded, replayed), called once per compared prediction."""
 
 
-def replay_offline(records, config: PredictorConfig | None = None,
-                   on_prediction: PredictionHook | None = None) -> ReplayReport:
+def replay_offline(
+    records, config: PredictorConfig | None = None, on_prediction: PredictionHook | None = None
+) -> ReplayReport:
     """Re-run recorded records (BagRecord iterable, recorded order) through CollisionPredictor.
 
     Each input is received at its recorded log time; each recorded prediction is
@@ -227,7 +247,9 @@ def replay_offline(records, config: PredictorConfig | None = None,
     return report
 
 
-def load_bag(path: str | os.PathLike[str], tolerant: bool = False) -> tuple[BagContents, list[BagRecord]]:
+def load_bag(
+    path: str | os.PathLike[str], tolerant: bool = False
+) -> tuple[BagContents, list[BagRecord]]:
     """Open a recording and read its records; BagError if it holds no circle states to replay."""
     bag = open_bag(path, tolerant=tolerant, message_types=RECORDED_TYPES | {RecordedTypes.CONFIG})
     records = list(bag.records())
@@ -240,7 +262,7 @@ def load_bag(path: str | os.PathLike[str], tolerant: bool = False) -> tuple[BagC
 
 def replay_bag(path: str | os.PathLike[str], *, tolerant: bool = False,
                on_prediction: PredictionHook | None = None) -> ReplayReport:
-    """Replay one recording offline (the single-bag engine the corpus runner and pytest plugin call).
+    """Replay one recording offline (the single-bag engine that the corpus runner and plugin call).
 
     Raises BagError when the bag cannot be read; a message that does not
     decode as its recorded type raises as its decoder does.

@@ -26,13 +26,8 @@ import sys
 from functools import lru_cache
 from pathlib import Path
 
-__all__ = [
-    "DefinitionFormat",
-    "TypeDefinitionError",
-    "full_msg_definition",
-    "split_type_name",
-    "type_description_hash",
-]
+__all__ = ["DefinitionFormat", "TypeDefinitionError", "full_msg_definition", "split_type_name",
+           "type_description_hash"]
 
 
 class DefinitionFormat:

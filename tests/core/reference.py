@@ -8,7 +8,8 @@ with ``mpmath.polyroots`` at 320 + 320 extra bits and keeps the real ones.
 
 Why the real/complex test is safe here: at 640 bits a true double root
 (a tangent graze, or point bodies whose paths cross) comes out with
-``|imag| ~ 1e-95`` relative (square root of the working precision), while a near miss by a gap ``delta`` of
+``|imag| ~ 1e-95`` relative (square root of the working precision), while a near miss by a gap
+``delta`` of
 ``f = |g|^2 - R^2`` has ``|imag| ~ sqrt(delta)/|g'|``; the tests only demand
 a definite answer when ``|f_min| > 1e-9 R^2``, far above the threshold
 ``1e-30`` (relative) used below.  Cases where some local minimum of ``f`` on
@@ -74,7 +75,11 @@ def _roots(coeffs):
         else:  # pragma: no cover
             raise RuntimeError("polyroots failed")
         scale = max(abs(r) for r in rts) + mpf(1e-300)
-        real = [mpmath.re(r) for r in rts if abs(mpmath.im(r)) <= mpf(10) ** -30 * max(abs(r), scale * mpf(10) ** -20)]
+        real = [
+            mpmath.re(r)
+            for r in rts
+            if abs(mpmath.im(r)) <= mpf(10) ** -30 * max(abs(r), scale * mpf(10) ** -20)
+        ]
         return sorted(real)
 
 
@@ -107,8 +112,11 @@ def reference(p_a, v_a, a_a, r_a, p_b, v_b, a_b, r_b, horizon=math.inf) -> Ref:
         slack = mpf("1e-9") * R * R
         # local minima of f on (0, H]: roots of f' where f'' > 0
         crit = _roots([4 * c4, 3 * c3, 2 * c2, c1])
-        mins = [s for s in crit if s > 0 and (H is None or s <= H)
-                and (12 * c4 * s * s + 6 * c3 * s + 2 * c2) >= 0]
+        mins = [
+            s
+            for s in crit
+            if s > 0 and (H is None or s <= H) and (12 * c4 * s * s + 6 * c3 * s + 2 * c2) >= 0
+        ]
         fmins = [f(s) for s in mins]
         ambiguous = any(abs(v) <= slack for v in fmins)
         if H is not None and abs(f(H)) <= slack and c0 > slack:
@@ -208,10 +216,15 @@ def _descartes(p, a, b):
         term = [Fraction(1)]
         for _ in range(i):
             term = [Fraction(0)] + term  # * x
-            term = [term[j] * b + (term[j + 1] * a if j + 1 < len(term) else 0) for j in range(len(term))]
+            term = [
+                term[j] * b + (term[j + 1] * a if j + 1 < len(term) else 0)
+                for j in range(len(term))
+            ]
         for _ in range(n - i):
-            term = [(term[j] if j < len(term) else 0) + (term[j - 1] if j >= 1 else 0)
-                    for j in range(len(term) + 1)]
+            term = [
+                (term[j] if j < len(term) else 0) + (term[j - 1] if j >= 1 else 0)
+                for j in range(len(term) + 1)
+            ]
         for j, t in enumerate(term):
             q[j] += c * t
     signs = [x > 0 for x in q if x != 0]
@@ -262,7 +275,8 @@ def exact_reference(p_a, v_a, a_a, r_a, p_b, v_b, a_b, r_b, horizon=math.inf) ->
     da = [F(x) - F(y) for x, y in zip(a_a, a_b)]
     R = F(r_a) + F(r_b)
     dot = lambda x, y: sum((i * j for i, j in zip(x, y)), Fraction(0))  # noqa: E731
-    c = [dot(dp, dp) - R * R, 2 * dot(dp, dv), dot(dv, dv) + dot(da, dp), dot(da, dv), dot(da, da) / 4]
+    c = [dot(dp, dp) - R * R, 2 * dot(dp, dv), dot(dv, dv) + dot(da, dp), dot(da, dv),
+         dot(da, da) / 4]
     zero = ExactRef(0.0, Fraction(0), Fraction(0))
     never = ExactRef(math.inf, Fraction(0), Fraction(0))
     if c[0] < 0:

@@ -2,7 +2,8 @@
 
 Guarantee proved here: while as many busy processes run as this process has
 cores, ``cores_free()`` is 0 and ``threads_pay`` says serial, whatever the
-work, also right after a threaded kernel; below the work threshold it says serial on any machine.  (Every threaded
+work, also right after a threaded kernel; below the work threshold it says serial on any machine.
+(Every threaded
 kernel is compared bit for bit with its serial twin in the kernels' own tests,
 so the choice can only change timing.)
 """
@@ -31,10 +32,16 @@ def test_cores_free_is_within_the_affinity_set():
 def test_busy_cores_make_kernels_serial():
     """One spinning process per core: no core is free, so no kernel goes threaded."""
     n = len(os.sched_getaffinity(0))
-    spin = "import time\nt = time.time() + 20\nwhile time.time() < t: pass\n"
-    procs = [subprocess.Popen([sys.executable, "-c", spin]) for _ in range(n)]
+    # each spinner says on its pipe that it is about to spin (no sleep and hope)
+    spin = ("import sys, time\nt = time.time() + 20\nsys.stdout.write('r')\nsys.stdout.flush()\n"
+            "while time.time() < t: pass\n")
+    procs = [
+        subprocess.Popen([sys.executable, "-S", "-c", spin], stdout=subprocess.PIPE)
+        for _ in range(n)
+    ]
     try:
-        time.sleep(0.5)  # the spinners are running
+        for p in procs:
+            assert p.stdout.read(1) == b"r"  # this spinner is running
         seen = [pp.cores_free() for _ in range(20)]
         assert max(seen) == 0, seen
         assert not pp.threads_pay(10**9, 1)
@@ -46,11 +53,13 @@ def test_busy_cores_make_kernels_serial():
         for p in procs:
             p.kill()
             p.wait()
+            p.stdout.close()
 
 
 def test_threads_forced_overrides_and_restores() -> None:
     """Warm-ups force each choice so both twins get compiled; the policy decides again after."""
     from circle_collision_ros.core.parallel_policy import threads_forced, threads_pay
+
     with threads_forced(True):
         assert threads_pay(1, 10**9)  # below any threshold: threaded all the same
         with threads_forced(False):

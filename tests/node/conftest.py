@@ -45,3 +45,16 @@ def spin_until(node: Node, done: Callable[[], bool], timeout: float = 10.0,
     finally:
         executor.shutdown()
     return done()
+
+
+def reader_matched(node: Node, topic: str, publishers: int = 1) -> Callable[[], bool]:
+    """A condition for spin_until: `node`'s subscription on `topic` (resolved name) has matched
+    at least `publishers` writers.
+
+    A publisher's get_subscription_count() can report the match before the subscriber's
+    side has matched it, and a best-effort reader drops samples from a writer it has not
+    matched yet: wait on the reader's side before publishing once.
+    """
+    resolved = node.resolve_topic_name(topic)
+    (sub,) = [s for s in node.subscriptions if s.topic_name == resolved]
+    return lambda: sub.get_publisher_count() >= publishers

@@ -21,6 +21,7 @@ import signal
 import subprocess
 import sys
 import time
+from collections.abc import Callable
 
 import pytest
 from diagnostic_msgs.msg import DiagnosticArray
@@ -31,7 +32,7 @@ from visualization_msgs.msg import MarkerArray
 from circle_collision_msgs.msg import CircleState, CircleStateArray, CollisionPredictionArray
 from circle_collision_msgs.srv import PredictCollisions
 from circle_collision_ros.node.collision_node import CollisionNode
-from tests.node.conftest import spin_until
+from tests.node.conftest import reader_matched, spin_until
 from tests.node_helpers import (BASE_NS, assert_no_nan, contacts_of, expected_contacts,
                                     random_states, state, state_array)
 
@@ -59,6 +60,8 @@ class Harness:
     def wait_matched(self) -> None:
         assert spin_until(self.client, lambda: self.pub.get_subscription_count() > 0, 60.0,
                           self.extra), "collision_node never subscribed"
+        for node in self.extra:  # in-process: also the node's (best-effort) reader side
+            assert spin_until(self.client, reader_matched(node, "circle_states"), 60.0, self.extra)
 
     def send(self, msg, until=None, timeout: float = 15.0, pub=None) -> None:
         """Publish `msg` and wait for a prediction.
@@ -77,23 +80,60 @@ class Harness:
                 return
         raise AssertionError("no prediction arrived")
 
-    def spin(self, seconds: float) -> None:
-        spin_until(self.client, lambda: False, seconds, self.extra)
-
 
 @pytest.fixture
 def in_process(ros_context, ros_node):
-    node = CollisionNode(context=ros_context, parameter_overrides=[
-        Parameter("horizon", value=5.0), Parameter("frame_id", value="map"),
-        Parameter("marker_rate", value=100.0),
-        # Expiry runs on a timer: on a busy machine a test's own pauses must not expire its bodies.
-        Parameter("stale_timeout", value=60.0),
-        Parameter("single_state_topics", value=["robot_1/circle_state"]),
-        Parameter("state_topics", value=["circle_states", "lidar/circle_states"])])
+    node = CollisionNode(context=ros_context, parameter_overrides=_in_process_parameters())
     harness = Harness(ros_node, node)
     harness.wait_matched()
     yield node, harness
     node.destroy_node()
+
+
+def _in_process_parameters() -> list[Parameter]:
+    return [Parameter("horizon", value=5.0), Parameter("frame_id", value="map"),
+            Parameter("marker_rate", value=100.0),
+            # Expiry runs on a timer: on a busy machine a test's own pauses must not expire its
+            # bodies.
+            Parameter("stale_timeout", value=60.0),
+            Parameter("single_state_topics", value=["robot_1/circle_state"]),
+            Parameter("state_topics", value=["circle_states", "lidar/circle_states"])]
+
+
+@pytest.fixture(scope="module")
+def shared_in_process():
+    """The in_process node, one for the tests that need no fresh node: each sends only a and b
+    (newer stamps each time; a bad state is never accepted), or calls the service, and changes
+    no parameter. In a namespace of its own, so the other tests' inputs never reach its queue."""
+    import rclpy
+    from rclpy.context import Context
+
+    context = Context()
+    rclpy.init(context=context)
+    client = rclpy.create_node("test_client", namespace="/shared", context=context)
+    node = CollisionNode(
+        context=context, namespace="/shared", parameter_overrides=_in_process_parameters()
+    )
+    try:
+        harness = Harness(client, node)
+        harness.wait_matched()
+        yield node, harness
+    finally:
+        node.destroy_node()
+        client.destroy_node()
+        context.try_shutdown()
+
+
+def _answered(harness: Harness, states) -> Callable[[], bool]:
+    """A new prediction stamped with the newest of `states` (not one left from an earlier send)."""
+    count, newest = len(harness.predictions), max(_ns(s.header.stamp) for s in states)
+    return lambda: (
+        len(harness.predictions) > count and _ns(harness.predictions[-1].header.stamp) == newest
+    )
+
+
+def _ns(stamp) -> int:
+    return stamp.sec * 10**9 + stamp.nanosec
 
 
 def _stamped_now(states, client) -> list[CircleState]:
@@ -154,9 +194,13 @@ def test_shutdown_releases_markers_before_the_context(ros_node, sig) -> None:
     assert "markers not published" not in output and "context is invalid" not in output, output
     assert "Traceback" not in output, output
     # the last array, received after the signal, clears the display
-    assert spin_until(ros_node, lambda: len(harness.markers) > drawn
-                      and [m.action for m in harness.markers[-1].markers] == [3], 10.0), \
-        [[m.action for m in a.markers][:3] for a in harness.markers[drawn:]]
+    assert spin_until(
+        ros_node,
+        lambda: (
+            len(harness.markers) > drawn and [m.action for m in harness.markers[-1].markers] == [3]
+        ),
+        10.0,
+    ), [[m.action for m in a.markers][:3] for a in harness.markers[drawn:]]
 
 
 def test_sigint_stops_a_node_started_with_sigint_ignored(ros_node) -> None:
@@ -186,7 +230,8 @@ def test_in_process_merges_topics_by_id(in_process, ros_node) -> None:
     assert contacts_of(harness.predictions[-1]) == {}  # 9 s > horizon of 5 s
     lidar = ros_node.create_publisher(CircleStateArray, "lidar/circle_states", 10)
     single = ros_node.create_publisher(CircleState, "robot_1/circle_state", 10)
-    assert spin_until(ros_node, lambda: lidar.get_subscription_count() and single.get_subscription_count(),
+    assert spin_until(ros_node,
+                      lambda: lidar.get_subscription_count() and single.get_subscription_count(),
                       15.0, (node,))
     # Stamped like a and b: waiting for the new subscriptions to match can take seconds on a
     # loaded machine, and states stamped "now" after that would meet a and b after they passed.
@@ -203,7 +248,9 @@ def test_in_process_merges_topics_by_id(in_process, ros_node) -> None:
 
 def test_markers_and_diagnostics_are_published(in_process, ros_node) -> None:
     node, harness = in_process
-    harness.send(state_array(_stamped_now([state("a", (0, 0), (1, 0, 0)), state("b", (3, 0))], ros_node)))
+    harness.send(
+        state_array(_stamped_now([state("a", (0, 0), (1, 0, 0)), state("b", (3, 0))], ros_node))
+    )
     assert spin_until(ros_node, lambda: harness.markers and harness.diagnostics, 15.0, (node,))
     markers = harness.markers[-1].markers
     assert markers[0].action == markers[0].DELETEALL
@@ -234,18 +281,22 @@ def test_publish_rate_mode_publishes_without_new_input(in_process, ros_node) -> 
     harness.send(state_array(_stamped_now([state("a", (0, 0))], ros_node)))
     node.set_parameters([Parameter("publish_rate", value=20.0)])
     count = len(harness.predictions)
-    harness.spin(1.0)
-    assert len(harness.predictions) - count >= 5
+    # Counted, not timed: 5 more predictions with no input sent (a deadline only against a hang).
+    assert spin_until(ros_node, lambda: len(harness.predictions) - count >= 5, 30.0, (node,)), (
+        len(harness.predictions) - count
+    )
 
 
-@pytest.mark.parametrize("field, value, reason", [
-    ("radius", -1.0, "radius is negative"), ("radius", math.nan, "radius is nan"),
-    ("position.x", math.inf, "position.x is inf"), ("id", "", "empty id"),
-    ("frame", "odom", "not the scene frame"), ("stamp", 0, "stamp is zero"),
-    ("stamp", 10**6, "in the future"), ("duplicate", None, "more than once"),
-])
-def test_bad_input_rejected_rest_predicted(in_process, ros_node, field, value, reason) -> None:
-    node, harness = in_process
+@pytest.mark.parametrize(
+    "field, value, reason",
+    [("radius", -1.0, "radius is negative"), ("radius", math.nan, "radius is nan"),
+     ("position.x", math.inf, "position.x is inf"), ("id", "", "empty id"),
+     ("frame", "odom", "not the scene frame"), ("stamp", 0, "stamp is zero"),
+     ("stamp", 10**6, "in the future"), ("duplicate", None, "more than once")],
+)
+def test_bad_input_rejected_rest_predicted(shared_in_process, field, value, reason) -> None:
+    node, harness = shared_in_process
+    ros_node = harness.client
     good = [state("a", (0, 0), (1, 0, 0)), state("b", (3, 0))]
     bad = state("bad", (50, 50))
     if field == "radius":
@@ -263,7 +314,7 @@ def test_bad_input_rejected_rest_predicted(in_process, ros_node, field, value, r
     if field == "duplicate":
         states.append(state("bad", (60, 60), stamp_ns=_now_ns(ros_node)))
     rejected_before = node.counters.rejected
-    harness.send(state_array(states))
+    harness.send(state_array(states), until=_answered(harness, good))
     out = harness.predictions[-1]
     assert contacts_of(out) == {("a", "b"): pytest.approx(2.0)}
     assert_no_nan(out)
@@ -271,12 +322,12 @@ def test_bad_input_rejected_rest_predicted(in_process, ros_node, field, value, r
     assert "bad" not in node.predictor
 
 
-def test_empty_array_does_not_break_the_node(in_process, ros_node) -> None:
-    node, harness = in_process
-    harness.pub.publish(CircleStateArray())
-    harness.spin(1.0)
-    assert node.counters.messages >= 1
-    harness.send(state_array(_stamped_now([state("a", (0, 0), (1, 0, 0)), state("b", (3, 0))], ros_node)))
+def test_empty_array_does_not_break_the_node(shared_in_process) -> None:
+    node, harness = shared_in_process
+    messages = node.counters.messages
+    harness.send(CircleStateArray(), until=lambda: node.counters.messages > messages)
+    states = _stamped_now([state("a", (0, 0), (1, 0, 0)), state("b", (3, 0))], harness.client)
+    harness.send(state_array(states), until=_answered(harness, states))
     assert contacts_of(harness.predictions[-1]) == {("a", "b"): pytest.approx(2.0)}
 
 
@@ -285,7 +336,9 @@ def test_huge_array_is_survived(in_process, ros_node) -> None:
     node, harness = in_process
     # The expiry timer would drop bodies if the 50,000-state message took longer than
     # stale_timeout to process on a busy machine; this test is about surviving it.
-    node.set_parameters([Parameter("marker_rate", value=0.0), Parameter("stale_timeout", value=120.0)])
+    node.set_parameters(
+        [Parameter("marker_rate", value=0.0), Parameter("stale_timeout", value=120.0)]
+    )
     huge = random_states(50_000, seed=2, spread=5_000.0)
     harness.send(state_array(_stamped_now(huge, ros_node)), timeout=120.0)
     out = harness.predictions[-1]
@@ -293,13 +346,17 @@ def test_huge_array_is_survived(in_process, ros_node) -> None:
     assert node.counters.rejected >= 40_000
     assert_no_nan(out)
     # Still alive and predicting: two known bodies (new ids would be refused, the scene is full).
-    harness.send(state_array(_stamped_now([state("b000", (0, 0), (1, 0, 0)), state("b001", (3, 0))],
-                                          ros_node)))
+    harness.send(
+        state_array(
+            _stamped_now([state("b000", (0, 0), (1, 0, 0)), state("b001", (3, 0))], ros_node)
+        )
+    )
     assert ("b000", "b001") in contacts_of(harness.predictions[-1])
 
 
-def test_service_good_and_bad_requests(in_process, ros_node) -> None:
-    node, _ = in_process
+def test_service_good_and_bad_requests(shared_in_process) -> None:
+    node, harness = shared_in_process
+    ros_node = harness.client
     client = ros_node.create_client(PredictCollisions, "predict_collisions")
     assert spin_until(ros_node, client.service_is_ready, 15.0, (node,))
 
@@ -311,8 +368,9 @@ def test_service_good_and_bad_requests(in_process, ros_node) -> None:
     states = random_states(30, seed=4)
     good = call(PredictCollisions.Request(circles=states, horizon=0.0))
     assert good.success and good.message == ""
-    assert {(p.id_a, p.id_b): p.time_to_collision for p in good.predictions if p.status} == \
-        expected_contacts(states, 5.0)
+    assert {
+        (p.id_a, p.id_b): p.time_to_collision for p in good.predictions if p.status
+    } == expected_contacts(states, 5.0)
     bad_states = [state("a", (0, 0)), state("b", (1, 1), r=math.nan)]
     bad = call(PredictCollisions.Request(circles=bad_states, horizon=1.0))
     assert not bad.success and bad.message.startswith("circles[1] (id 'b'): radius is nan")
@@ -323,9 +381,10 @@ def test_service_good_and_bad_requests(in_process, ros_node) -> None:
     assert not call(PredictCollisions.Request(circles=states, horizon=1e7)).success  # cap: 3600 s
 
 
-def test_service_takes_unstamped_circles_at_request_time(in_process, ros_node) -> None:
+def test_service_takes_unstamped_circles_at_request_time(shared_in_process) -> None:
     """What `ros2 service call /predict_collisions ...` without stamps sends."""
-    node, _ = in_process
+    node, harness = shared_in_process
+    ros_node = harness.client
     client = ros_node.create_client(PredictCollisions, "predict_collisions")
     assert spin_until(ros_node, client.service_is_ready, 15.0, (node,))
     circles = [state("a", (0, 0), (1, 0, 0)), state("b", (5, 0)), state("c", (0, 9), r=-1.0)]
@@ -337,7 +396,9 @@ def test_service_takes_unstamped_circles_at_request_time(in_process, ros_node) -
     answer = future.result()
     assert answer.success, answer.message
     assert {(p.id_a, p.id_b): p.time_to_collision for p in answer.predictions} == {("a", "b"): 4.0}
-    contact_ns = answer.predictions[0].contact_time.sec * 10**9 + answer.predictions[0].contact_time.nanosec
+    contact_ns = (
+        answer.predictions[0].contact_time.sec * 10**9 + answer.predictions[0].contact_time.nanosec
+    )
     assert before + 4_000_000_000 <= contact_ns <= _now_ns(ros_node) + 4_000_000_000
     future = client.call_async(PredictCollisions.Request(circles=circles, horizon=10.0))
     assert spin_until(ros_node, future.done, 15.0, (node,))
@@ -354,12 +415,17 @@ def test_params_file_and_qos_override(tmp_path) -> None:
 
     params = Path(__file__).resolve().parents[2] / "config" / "collision_node.yaml"
     overrides = tmp_path / "qos.yaml"
-    overrides.write_text("collision_node:\n  ros__parameters:\n    horizon: 7.5\n"
-                         "    qos_overrides:\n      /circle_states:\n        subscription:\n"
-                         "          reliability: reliable\n")
+    overrides.write_text(
+        "collision_node:\n  ros__parameters:\n    horizon: 7.5\n"
+        "    qos_overrides:\n      /circle_states:\n        subscription:\n"
+        "          reliability: reliable\n"
+    )
     context = Context()
-    rclpy.init(context=context, args=["collision_node", "--ros-args", "--params-file", str(params),
-                                      "--params-file", str(overrides)])
+    rclpy.init(
+        context=context,
+        args=["collision_node", "--ros-args", "--params-file", str(params), "--params-file",
+              str(overrides)],
+    )
     try:
         node = CollisionNode(context=context)
         assert node.predictor.config.horizon == 7.5 and node.predictor.config.stale_timeout == 2.0
@@ -370,13 +436,19 @@ def test_params_file_and_qos_override(tmp_path) -> None:
         context.try_shutdown()
 
 
-def test_best_effort_publishers_are_accepted(in_process, ros_node) -> None:
-    node, harness = in_process
-    best_effort = ros_node.create_publisher(
-        CircleStateArray, "circle_states", QoSProfile(depth=10, reliability=ReliabilityPolicy.BEST_EFFORT))
-    harness.send(state_array(_stamped_now([state("a", (0, 0), (1, 0, 0)), state("b", (3, 0))], ros_node)),
-                 pub=best_effort)
-    assert contacts_of(harness.predictions[-1]) == {("a", "b"): pytest.approx(2.0)}
+def test_best_effort_publishers_are_accepted(shared_in_process) -> None:
+    node, harness = shared_in_process
+    best_effort = harness.client.create_publisher(
+        CircleStateArray,
+        "circle_states",
+        QoSProfile(depth=10, reliability=ReliabilityPolicy.BEST_EFFORT),
+    )
+    try:
+        states = _stamped_now([state("a", (0, 0), (1, 0, 0)), state("b", (3, 0))], harness.client)
+        harness.send(state_array(states), until=_answered(harness, states), pub=best_effort)
+        assert contacts_of(harness.predictions[-1]) == {("a", "b"): pytest.approx(2.0)}
+    finally:
+        harness.client.destroy_publisher(best_effort)
 
 
 INTERRUPTED_START = """
@@ -384,7 +456,8 @@ import sys
 from circle_collision_ros.pipeline import predictor
 
 
-def interrupted(self):  # Ctrl-C while numba's kernels load (minutes on a cold cache)
+# Ctrl-C while numba's kernels load (minutes on a cold cache)
+def interrupted(self, *args, **kwargs):
     raise KeyboardInterrupt
 
 
@@ -398,7 +471,8 @@ def test_ctrl_c_during_start_up_exits_cleanly() -> None:
     """Ctrl-C before the node is built (its warm-up loads or compiles the kernels first):
     rclpy's shutdown destroys the half-built node, which has no markers or recorder yet.
     That used to end in an AttributeError traceback and exit code 1; now exit code 0."""
-    run = subprocess.run([sys.executable, "-c", INTERRUPTED_START], capture_output=True, text=True,
-                         timeout=120)
+    run = subprocess.run(
+        [sys.executable, "-c", INTERRUPTED_START], capture_output=True, text=True, timeout=120
+    )
     assert run.returncode == 0, run.stdout + run.stderr
     assert "Traceback" not in run.stderr, run.stderr

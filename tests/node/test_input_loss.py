@@ -1,4 +1,5 @@
-"""InputLossMonitor's accounting rules (the DDS measurements are in tests/node/test_transport_profile.py)."""
+"""InputLossMonitor's accounting rules (DDS measurements: tests/node/test_transport_profile.py)."""
+
 from __future__ import annotations
 
 from circle_collision_ros.node.input_loss import InputLossMonitor, LossThresholds
@@ -10,12 +11,13 @@ def info(seq: int, writer: bytes = b"w1") -> dict:
 
 def test_gaps_are_counted_per_publisher_and_the_first_sample_only_starts_the_count() -> None:
     m = InputLossMonitor()
-    assert m.observe("/s", 100, info(7), 0) == 0          # joined late: 1..6 are not ours to count
+    assert m.observe("/s", 100, info(7), 0) == 0  # joined late: 1..6 are not ours to count
     assert m.observe("/s", 100, info(8), 1) == 0
-    assert m.observe("/s", 100, info(11), 2) == 2         # 9 and 10 never arrived
-    assert m.observe("/s", 100, info(1, b"w2"), 3) == 0   # another publisher has its own numbers
+    assert m.observe("/s", 100, info(11), 2) == 2  # 9 and 10 never arrived
+    assert m.observe("/s", 100, info(1, b"w2"), 3) == 0  # another publisher has its own numbers
     assert m.observe("/s", 100, info(2, b"w2"), 4) == 0
-    assert m.observe("/s", 100, info(10), 5) == 0         # late or repeated: no loss, no double count
+    # late or repeated: no loss, no double count
+    assert m.observe("/s", 100, info(10), 5) == 0
     assert m.observe("/s", 100, info(12), 6) == 0
     assert m.missing == 2 and m.topics["/s"].received == 7
 
@@ -24,7 +26,10 @@ def test_no_sequence_numbers_means_no_claims() -> None:
     m = InputLossMonitor()
     for k in range(5):
         assert m.observe("/s", 100, None, k) == 0
-        assert m.observe("/s", 100, {"publication_sequence_number": None, "publisher_gid": None}, k) == 0
+        assert (
+            m.observe("/s", 100, {"publication_sequence_number": None, "publisher_gid": None}, k)
+            == 0
+        )
     assert m.missing == 0 and m.new_losses() == []
 
 

@@ -30,7 +30,8 @@ def _state(i: int) -> CircleState:
         velocity=Vector3(x=1.0, y=-1.0, z=0.0),
         acceleration=Vector3(x=0.0, y=-9.81, z=1e-12),
         remove=bool(i % 2),
-        covariance=[0.01 * (i + 1) + k / 1024.0 for k in range(36)] if i % 3 else [])  # float64[<=36]
+        # float64[<=36]
+        covariance=[0.01 * (i + 1) + k / 1024.0 for k in range(36)] if i % 3 else [])
 
 
 def _prediction() -> CollisionPrediction:
@@ -109,7 +110,9 @@ def test_service_call_over_dds(ros_node) -> None:
     ros_node.create_service(PredictCollisions, "roundtrip_predict", handle)
     client = ros_node.create_client(PredictCollisions, "roundtrip_predict")
     assert spin_until(ros_node, client.service_is_ready, timeout=15.0)
-    future = client.call_async(PredictCollisions.Request(circles=[_state(0), _state(1)], horizon=2.0))
+    future = client.call_async(
+        PredictCollisions.Request(circles=[_state(0), _state(1)], horizon=2.0)
+    )
     assert spin_until(ros_node, future.done, timeout=15.0)
     result = future.result()
     assert result.success and result.message == "2 circles, horizon 2.0"

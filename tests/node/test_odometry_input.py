@@ -13,7 +13,6 @@ Guarantees proved here:
 from __future__ import annotations
 
 import math
-import time
 from pathlib import Path
 
 import pytest
@@ -28,7 +27,7 @@ from circle_collision_ros.core import time_to_collision
 from circle_collision_ros.node.collision_node import CollisionNode
 from circle_collision_ros.recording.bag_reader import open_bag
 from circle_collision_ros.recording.replay_engine import RecordedTypes, replay_offline
-from tests.node.conftest import spin_until
+from tests.node.conftest import reader_matched, spin_until
 
 S = math.sqrt(0.5)
 
@@ -44,21 +43,35 @@ def _odometry(now_ns: int, p, q, v, frame: str = "map") -> Odometry:
     return msg
 
 
-def test_two_robots_collision_bad_orientations_and_replay(ros_context, ros_node, tmp_path: Path) -> None:
+def test_two_robots_collision_bad_orientations_and_replay(
+    ros_context, ros_node, tmp_path: Path
+) -> None:
     bag = tmp_path / "bag"
-    node = CollisionNode(context=ros_context, parameter_overrides=[
-        Parameter("odometry_topics", value=["robot_1/odom", "robot_2/odom"]),
-        Parameter("odometry_radii", value=[0.5, 0.25]), Parameter("frame_id", value="map"),
-        Parameter("horizon", value=10.0), Parameter("record_path", value=str(bag))])
+    node = CollisionNode(
+        context=ros_context,
+        parameter_overrides=[Parameter("odometry_topics", value=["robot_1/odom", "robot_2/odom"]),
+                             Parameter("odometry_radii", value=[0.5, 0.25]),
+                             Parameter("frame_id", value="map"), Parameter("horizon", value=10.0),
+                             Parameter("record_path", value=str(bag))],
+    )
     predictions: list[CollisionPredictionArray] = []
-    ros_node.create_subscription(CollisionPredictionArray, "collision_predictions", predictions.append, 50)
+    ros_node.create_subscription(
+        CollisionPredictionArray, "collision_predictions", predictions.append, 50
+    )
     qos = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
     pub1 = ros_node.create_publisher(Odometry, "robot_1/odom", qos)
     pub2 = ros_node.create_publisher(Odometry, "robot_2/odom", qos)
     try:
-        assert spin_until(ros_node, lambda: pub1.get_subscription_count() and pub2.get_subscription_count(),
+        assert spin_until(ros_node,
+                          lambda: pub1.get_subscription_count() and pub2.get_subscription_count(),
                           60.0, (node,))
-        time.sleep(0.5)  # best-effort subscription: let the reader side match too
+        # best-effort subscriptions: each sample below is sent once, so the readers must have
+        # matched
+        matched1, matched2 = (
+            reader_matched(node, "robot_1/odom"),
+            reader_matched(node, "robot_2/odom"),
+        )
+        assert spin_until(ros_node, lambda: matched1() and matched2(), 60.0, (node,))
         now = ros_node.get_clock().now().nanoseconds
         # robot_1 heads +x at 1 m/s; robot_2 faces +y (yaw 90 deg) and drives forward
         # (body x) at 1 m/s, i.e. +y in the map: they meet near (5, 0).
@@ -71,11 +84,15 @@ def test_two_robots_collision_bad_orientations_and_replay(ros_context, ros_node,
                     if (p.id_a, p.id_b) == ("robot_1", "robot_2"):
                         return p
             return None
-        assert spin_until(ros_node, lambda: pair() is not None, 20.0, (node,)), \
+
+        assert spin_until(ros_node, lambda: pair() is not None, 20.0, (node,)), (
             f"no robot pair predicted; {node.counters}"
+        )
         world_v2 = (1.0 - 2.0 * S * S, 2.0 * S * S, 0.0)  # what the rotation gives, independently
-        want = float(time_to_collision((0.0, 0.0), (1.0, 0.0), (0.0, 0.0), 0.5,
-                                       (5.0, -5.0), world_v2[:2], (0.0, 0.0), 0.25, 10.0))
+        want = float(
+            time_to_collision((0.0, 0.0), (1.0, 0.0), (0.0, 0.0), 0.5, (5.0, -5.0), world_v2[:2],
+                              (0.0, 0.0), 0.25, 10.0)
+        )
         assert want == pytest.approx(5.0 - 0.75 / math.sqrt(2.0), rel=1e-12)
         assert pair().time_to_collision == want
 
@@ -85,8 +102,9 @@ def test_two_robots_collision_bad_orientations_and_replay(ros_context, ros_node,
         for q in bad:
             pub2.publish(_odometry(later, (5.0, -5.0), q, (1.0, 0.0)))
         pub1.publish(_odometry(later, (0.0, 0.0), (0.0, 0.0, 0.0, 1.0), (1.0, 0.0), frame="odom"))
-        assert spin_until(ros_node, lambda: node.counters.rejected >= rejected + 4, 20.0, (node,)), \
-            node.counters
+        assert spin_until(
+            ros_node, lambda: node.counters.rejected >= rejected + 4, 20.0, (node,)
+        ), node.counters
         assert node.predictor.bodies == 2
         snapshot = node.predictor.snapshot()
         assert snapshot.velocities.tolist()[1] == pytest.approx([0.0, 1.0], abs=1e-15)  # unchanged
@@ -97,8 +115,9 @@ def test_two_robots_collision_bad_orientations_and_replay(ros_context, ros_node,
     finally:
         node.destroy_node()  # closes the recording
 
-    contents = open_bag(bag, message_types={RecordedTypes.ODOMETRY, RecordedTypes.PREDICTIONS,
-                                            RecordedTypes.CONFIG})
+    contents = open_bag(
+        bag, message_types={RecordedTypes.ODOMETRY, RecordedTypes.PREDICTIONS, RecordedTypes.CONFIG}
+    )
     odom = [r for r in contents.records() if r.type_name == RecordedTypes.ODOMETRY]
     assert len(odom) == 7 and {r.topic for r in odom} == {"/robot_1/odom", "/robot_2/odom"}
     report = replay_offline(contents.records())

@@ -116,8 +116,10 @@ def test_dump_has_every_value_and_round_trips_through_params_file(ros_node, tmp_
 
 def test_non_default_dump_round_trips(ros_node, tmp_path: Path) -> None:
     """Non-empty list and changed values survive the round trip too."""
-    context, node = _start(["-p", "single_state_topics:=[robot_1/circle_state]", "-p", "horizon:=2.5",
-                            "-p", "frame_id:=map", "-p", "probability_threshold:=0.25"])
+    context, node = _start(
+        ["-p", "single_state_topics:=[robot_1/circle_state]", "-p", "horizon:=2.5", "-p",
+         "frame_id:=map", "-p", "probability_threshold:=0.25"]
+    )
     try:
         first = param_dump(ros_node, node)
     finally:
@@ -135,13 +137,16 @@ def test_non_default_dump_round_trips(ros_node, tmp_path: Path) -> None:
         context.try_shutdown()
 
 
-@pytest.mark.parametrize("args", [["-p", "horizon:=8"], ["-p", "single_state_topics:=[]", "-p", "horizon:=8"],
-                                  "yaml"])
+@pytest.mark.parametrize(
+    "args", [["-p", "horizon:=8"], ["-p", "single_state_topics:=[]", "-p", "horizon:=8"], "yaml"]
+)
 def test_integer_for_double_at_start(args, tmp_path: Path) -> None:
     if args == "yaml":
         path = tmp_path / "p.yaml"
-        path.write_text("collision_node:\n  ros__parameters:\n    horizon: 8\n    stale_timeout: 3\n"
-                        "    single_state_topics: []\n")
+        path.write_text(
+            "collision_node:\n  ros__parameters:\n    horizon: 8\n    stale_timeout: 3\n"
+            "    single_state_topics: []\n"
+        )
         args = ["--params-file", str(path)]
     context, node = _start(args)
     try:
@@ -157,9 +162,12 @@ def test_integer_for_double_at_start(args, tmp_path: Path) -> None:
 def test_integer_for_double_at_run_time_strings_refused(ros_node) -> None:
     context, node = _start([])
     try:
+
         def set_value(value: ParameterValue):
             request = SetParameters.Request(parameters=[ParameterMsg(name="horizon", value=value)])
-            return _call(ros_node, node, SetParameters, f"{NODE}/set_parameters", request).results[0]
+            return _call(ros_node, node, SetParameters, f"{NODE}/set_parameters", request).results[
+                0
+            ]
 
         ok = set_value(ParameterValue(type=ParameterType.PARAMETER_INTEGER, integer_value=8))
         assert ok.successful, ok.reason
@@ -169,7 +177,9 @@ def test_integer_for_double_at_run_time_strings_refused(ros_node) -> None:
         assert not text.successful and "horizon must be a finite number" in text.reason
         flag = set_value(ParameterValue(type=ParameterType.PARAMETER_BOOL, bool_value=True))
         assert not flag.successful
-        too_big = set_value(ParameterValue(type=ParameterType.PARAMETER_INTEGER, integer_value=4000))
+        too_big = set_value(
+            ParameterValue(type=ParameterType.PARAMETER_INTEGER, integer_value=4000)
+        )
         assert not too_big.successful and "3600" in too_big.reason
         assert node.predictor.config.horizon == 8.0
     finally:
@@ -184,8 +194,9 @@ def test_string_or_bool_for_double_refused_at_start(value: str) -> None:
     import sys
 
     exe = os.path.join(sys.prefix, "lib", "circle_collision_ros", "collision_node")
-    run = subprocess.run([exe, "--ros-args", "-p", f"horizon:={value}"], capture_output=True, text=True,
-                         timeout=120)
+    run = subprocess.run(
+        [exe, "--ros-args", "-p", f"horizon:={value}"], capture_output=True, text=True, timeout=120
+    )
     assert run.returncode == 2, run.stdout + run.stderr
     assert "horizon must be a finite number" in run.stderr and "Traceback" not in run.stderr
 
@@ -198,11 +209,17 @@ def test_probability_threshold_is_in_zero_exclusive_to_one(ros_node) -> None:
         assert node.predictor.config.probability_threshold == 0.05
 
         def set_value(value: ParameterValue):
-            request = SetParameters.Request(parameters=[ParameterMsg(name="probability_threshold", value=value)])
-            return _call(ros_node, node, SetParameters, f"{NODE}/set_parameters", request).results[0]
+            request = SetParameters.Request(
+                parameters=[ParameterMsg(name="probability_threshold", value=value)]
+            )
+            return _call(ros_node, node, SetParameters, f"{NODE}/set_parameters", request).results[
+                0
+            ]
 
         for bad in (0.0, -0.1, 1.5, math.nan):
-            result = set_value(ParameterValue(type=ParameterType.PARAMETER_DOUBLE, double_value=bad))
+            result = set_value(
+                ParameterValue(type=ParameterType.PARAMETER_DOUBLE, double_value=bad)
+            )
             assert not result.successful and "probability_threshold" in result.reason, bad
         zero = set_value(ParameterValue(type=ParameterType.PARAMETER_DOUBLE, double_value=0.0))
         assert "(0, 1]" in zero.reason

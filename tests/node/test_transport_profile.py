@@ -6,7 +6,9 @@ Guarantees proved here:
 - the user's own FASTDDS_DEFAULT_PROFILES_FILE (or the deprecated FASTRTPS_ name)
   is never replaced;
 - with the profile on both sides, 1 MB CircleStateArray frames cross from one
-  process to another to a best-effort reader (the node's default QoS): counts, not timings.
+  process to another to a best-effort reader (the node's default QoS): counts, not timings
+  (a best-effort count depends on the machine's load: these measurements are stress runs;
+  the loss count through the node is exact in tests/node/test_stream.py, queue overrun).
 """
 from __future__ import annotations
 
@@ -24,14 +26,18 @@ ROOT = Path(__file__).resolve().parents[2]
 
 
 def _bench_module():
-    spec = importlib.util.spec_from_file_location("transport_delivery", ROOT / "bench" / "transport_delivery.py")
+    spec = importlib.util.spec_from_file_location(
+        "transport_delivery", ROOT / "bench" / "transport_delivery.py"
+    )
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)
     return module
 
 
 def test_profile_is_installed_and_gives_a_large_shared_memory_segment() -> None:
-    installed = Path(sys.prefix) / "share" / "circle_collision_ros" / "config" / TransportProfile.FILE_NAME
+    installed = (
+        Path(sys.prefix) / "share" / "circle_collision_ros" / "config" / TransportProfile.FILE_NAME
+    )
     assert installed.is_file(), "setup.py data_files must install config/*.xml"
     path = TransportProfile.path()
     assert path is not None and path.is_file()
@@ -39,14 +45,20 @@ def test_profile_is_installed_and_gives_a_large_shared_memory_segment() -> None:
     root = ET.parse(path).getroot()
     participant = root.find("f:profiles/f:participant", ns)
     assert participant is not None and participant.get("is_default_profile") == "true"
-    shm = [d for d in root.iterfind("f:profiles/f:transport_descriptors/f:transport_descriptor", ns)
-           if d.findtext("f:type", namespaces=ns) == "SHM"]
+    shm = [
+        d
+        for d in root.iterfind("f:profiles/f:transport_descriptors/f:transport_descriptor", ns)
+        if d.findtext("f:type", namespaces=ns) == "SHM"
+    ]
     assert shm and int(shm[0].findtext("f:segment_size", namespaces=ns)) >= 32 * 1024 * 1024
     used = {t.text for t in participant.iterfind("f:rtps/f:userTransports/f:transport_id", ns)}
     assert shm[0].findtext("f:transport_id", namespaces=ns) in used
-    # UDPv4 stays, so a user who sets ROS_AUTOMATIC_DISCOVERY_RANGE=SUBNET still reaches other hosts.
-    assert any(d.findtext("f:type", namespaces=ns) == "UDPv4"
-               for d in root.iterfind("f:profiles/f:transport_descriptors/f:transport_descriptor", ns))
+    # UDPv4 stays, so a user who sets ROS_AUTOMATIC_DISCOVERY_RANGE=SUBNET still reaches other
+    # hosts.
+    assert any(
+        d.findtext("f:type", namespaces=ns) == "UDPv4"
+        for d in root.iterfind("f:profiles/f:transport_descriptors/f:transport_descriptor", ns)
+    )
 
 
 def test_the_users_profile_setting_always_wins(monkeypatch: pytest.MonkeyPatch) -> None:
@@ -68,8 +80,9 @@ def test_the_users_profile_setting_always_wins(monkeypatch: pytest.MonkeyPatch) 
 def test_one_megabyte_frames_cross_processes_best_effort_with_the_profile() -> None:
     bench = _bench_module()
     sent = 30
-    delivery = bench.run_pair(size_kb=1000, count=sent, rate=10.0, pub_profile=True, sub_profile=True,
-                              reliable=False)
+    delivery = bench.run_pair(
+        size_kb=1000, count=sent, rate=10.0, pub_profile=True, sub_profile=True, reliable=False
+    )
     # Counts, not timings: with Fast DDS's defaults this size arrived 0-11 times in 60
     # (bench/transport_delivery.py); a frame or two may still be lost on a loaded machine.
     assert delivery.received >= sent - 2, f"only {delivery.received} of {sent} 1 MB frames arrived"
@@ -82,24 +95,33 @@ def test_the_loss_monitor_counts_every_frame_lost_without_the_profile() -> None:
     after the last received frame, which no signal can see) = sent. Without the profile on the
     publisher, 1 MB best-effort frames are lost, and the monitor must say how many."""
     bench = _bench_module()
-    delivery = bench.run_pair(size_kb=1000, count=30, rate=10.0, pub_profile=False, sub_profile=False,
-                              reliable=False)
+    delivery = bench.run_pair(
+        size_kb=1000, count=30, rate=10.0, pub_profile=False, sub_profile=False, reliable=False
+    )
     assert delivery.accounted, delivery
     if delivery.received >= 2:  # a count needs a frame after the gap
-        assert delivery.detected_missing == delivery.sent - delivery.received - delivery.undetectable
+        assert (
+            delivery.detected_missing == delivery.sent - delivery.received - delivery.undetectable
+        )
 
 
+@pytest.mark.stress
 def test_no_loss_is_reported_for_small_frames() -> None:
     bench = _bench_module()
-    delivery = bench.run_pair(size_kb=20, count=100, rate=50.0, pub_profile=True, sub_profile=True,
-                              reliable=False)
+    delivery = bench.run_pair(
+        size_kb=20, count=100, rate=50.0, pub_profile=True, sub_profile=True, reliable=False
+    )
     assert delivery.detected_missing == 0 and delivery.accounted, delivery
 
 
 # -- through collision_node ---------------------------------------------------------------------
-def _node_diagnostics(tmp_path: Path, monkeypatch: pytest.MonkeyPatch, profile: str | None,
-                      **params) -> dict:
-    """Start collision_node with FASTDDS_DEFAULT_PROFILES_FILE = `profile` (None: unset); its /diagnostics."""
+def _node_diagnostics(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, profile: str | None, **params
+) -> dict:
+    """Start collision_node with FASTDDS_DEFAULT_PROFILES_FILE = `profile` (None: unset).
+
+    Returns its /diagnostics.
+    """
     from tests.reliability.node_process import Client, NodeProcess
 
     monkeypatch.delenv(TransportProfile.DEPRECATED_ENV, raising=False)
@@ -128,15 +150,25 @@ def test_the_node_leaves_the_users_profile_in_force(tmp_path, monkeypatch) -> No
     assert values["transport_profile"] == str(theirs)
 
 
-def test_state_reliability_reliable_reports_best_effort_publishers_it_cannot_hear(tmp_path, monkeypatch) -> None:
+def test_state_reliability_reliable_reports_best_effort_publishers_it_cannot_hear(
+    tmp_path, monkeypatch
+) -> None:
     from tests.reliability.node_process import Client, NodeProcess
 
     node = NodeProcess(tmp_path / "node.log", marker_rate=0.0, state_reliability="reliable")
-    reliable, best_effort = Client("reliable_tracker"), Client("best_effort_tracker", reliable=False)
+    reliable, best_effort = (
+        Client("reliable_tracker"),
+        Client("best_effort_tracker", reliable=False),
+    )
     try:
         reliable.wait_matched()
-        assert reliable.spin(30.0, lambda: bool(reliable.diagnostics) and "best_effort" in
-                             reliable.diagnostics[-1].get("input_publishers", ""))
+        assert reliable.spin(
+            30.0,
+            lambda: (
+                bool(reliable.diagnostics)
+                and "best_effort" in reliable.diagnostics[-1].get("input_publishers", "")
+            ),
+        )
         values = reliable.diagnostics[-1]
         assert "1 reliable" in values["input_publishers"], values["input_publishers"]
         assert values["_level"] == 1 and "cannot reach" in values["_message"], values
@@ -157,7 +189,9 @@ def test_bad_state_reliability_stops_the_node_with_one_line(tmp_path) -> None:
 
 
 @pytest.mark.stress
-def test_large_frames_lost_by_the_publishers_transport_show_on_diagnostics(tmp_path, monkeypatch) -> None:
+def test_large_frames_lost_by_the_publishers_transport_show_on_diagnostics(
+    tmp_path, monkeypatch
+) -> None:
     """A publisher without the profile sends 0.7 MB frames best-effort: the node counts what never
     arrived and points to the profile. (With the profile on the publisher nothing is missing:
     test_one_megabyte_frames_cross_processes_best_effort_with_the_profile.)"""
@@ -170,13 +204,16 @@ def test_large_frames_lost_by_the_publishers_transport_show_on_diagnostics(tmp_p
     client = Client()
     try:
         client.wait_matched()
-        publisher = subprocess.Popen([sys.executable, str(ROOT / "bench" / "transport_delivery.py"), "--role",
-                                      "pub", "--bodies", "6000", "--count", "60", "--rate", "30",
-                                      "--topic", "circle_states"], env=bench._profile_env(False))
+        publisher = subprocess.Popen(
+            [sys.executable, str(ROOT / "bench" / "transport_delivery.py"), "--role", "pub",
+             "--bodies", "6000", "--count", "60", "--rate", "30", "--topic", "circle_states"],
+            env=bench._profile_env(False),
+        )
         publisher.wait(timeout=120)
 
         def lost() -> bool:
             return bool(client.diagnostics) and int(client.diagnostics[-1]["inputs_missing"]) > 0
+
         if not client.spin(10.0, lost):
             pytest.skip("this run lost no frames without the profile (nothing to report)")
         values = client.diagnostics[-1]

@@ -33,7 +33,7 @@ from circle_collision_msgs.srv import PredictCollisions
 from circle_collision_ros.node.collision_node import CollisionNode
 from circle_collision_ros.recording.bag_reader import open_bag
 from circle_collision_ros.recording.replay_engine import RecordedTypes, replay_offline
-from tests.node.conftest import spin_until
+from tests.node.conftest import reader_matched, spin_until
 from tests.node_helpers import assert_no_nan, contacts_of, state, state_array
 
 SIGMA = 0.3  # m, position standard deviation of the near-miss bodies
@@ -46,10 +46,12 @@ def _covariance(position_sigma: float, velocity_sigma: float = 0.0) -> list[floa
 
 BAD_COVARIANCES = [
     ("wrong length", [0.01] * 7, "covariance has 7 values"),
-    ("nan", [math.nan if k == 7 else (0.01 if k % 7 == 0 else 0.0) for k in range(36)], "not finite"),
+    ("nan", [math.nan if k == 7 else (0.01 if k % 7 == 0 else 0.0) for k in range(36)],
+     "not finite"),
     ("not symmetric", (np.eye(6) * 0.01 + np.triu(np.full((6, 6), 0.001), 1)).ravel().tolist(),
      "not symmetric"),
-    ("not PSD", np.diag([0.01, -0.04, 0.0, 0.01, 0.01, 0.0]).ravel().tolist(), "not positive semi-definite"),
+    ("not PSD", np.diag([0.01, -0.04, 0.0, 0.01, 0.01, 0.0]).ravel().tolist(),
+     "not positive semi-definite"),
 ]
 
 
@@ -72,12 +74,22 @@ class Client:
         self.predictions: list[CollisionPredictionArray] = []
         self.raw: list[bytes] = []
         self.logs: list[str] = []
-        ros_node.create_subscription(CollisionPredictionArray, predictions, self.predictions.append, 50)
-        ros_node.create_subscription(CollisionPredictionArray, predictions, self.raw.append, 50, raw=True)
+        ros_node.create_subscription(
+            CollisionPredictionArray, predictions, self.predictions.append, 50
+        )
+        ros_node.create_subscription(
+            CollisionPredictionArray, predictions, self.raw.append, 50, raw=True
+        )
         ros_node.create_subscription(Log, "/rosout", lambda m: self.logs.append(m.msg), 100)
         self.pub = ros_node.create_publisher(CircleStateArray, topic, RELIABLE)
         assert spin_until(ros_node, lambda: self.pub.get_subscription_count() > 0, 60.0, self.extra)
-        time.sleep(0.3)  # best-effort subscription: let the reader side match too
+        # best-effort subscription: the reader side must have matched too
+        (reader,) = [
+            n
+            for n in self.extra
+            if any(sub.topic_name == n.resolve_topic_name(topic) for sub in n.subscriptions)
+        ]
+        assert spin_until(ros_node, reader_matched(reader, topic), 60.0, self.extra)
 
     @property
     def extra(self):
@@ -105,15 +117,22 @@ class Client:
 
 @pytest.fixture
 def collision_node(ros_context):
-    node = CollisionNode(context=ros_context, parameter_overrides=[
-        Parameter("horizon", value=5.0), Parameter("frame_id", value="map"),
-        Parameter("marker_rate", value=20.0), Parameter("stale_timeout", value=60.0)])
+    node = CollisionNode(
+        context=ros_context,
+        parameter_overrides=[Parameter("horizon", value=5.0), Parameter("frame_id", value="map"),
+                             Parameter("marker_rate", value=20.0),
+                             Parameter("stale_timeout", value=60.0)],
+    )
     yield node
     node.destroy_node()
 
 
-@pytest.mark.parametrize("name, values, reason", BAD_COVARIANCES, ids=[c[0] for c in BAD_COVARIANCES])
-def test_bad_covariance_rejected_on_topic_and_service(collision_node, ros_node, name, values, reason) -> None:
+@pytest.mark.parametrize(
+    "name, values, reason", BAD_COVARIANCES, ids=[c[0] for c in BAD_COVARIANCES]
+)
+def test_bad_covariance_rejected_on_topic_and_service(
+    collision_node, ros_node, name, values, reason
+) -> None:
     client = Client(ros_node, collision_node)
     good = [state("a", (0, 0), (1, 0, 0)), state("b", (3, 0))]
     bad = state("bad", (50, 50))
@@ -124,11 +143,17 @@ def test_bad_covariance_rejected_on_topic_and_service(collision_node, ros_node, 
     assert contacts_of(out) == {("a", "b"): pytest.approx(2.0)}
     assert_no_nan(out)
     assert collision_node.counters.rejected > rejected and "bad" not in collision_node.predictor
-    assert spin_until(ros_node, lambda: any("/circle_states" in m and "id 'bad'" in m and reason in m
-                                            for m in client.logs), 10.0, client.extra), client.logs
+    assert spin_until(
+        ros_node,
+        lambda: any("/circle_states" in m and "id 'bad'" in m and reason in m for m in client.logs),
+        10.0,
+        client.extra,
+    ), client.logs
     answer = client.call(PredictCollisions.Request(circles=good + [bad], horizon=0.0))
     assert not answer.success
-    assert answer.message.startswith("circles[2] (id 'bad'): covariance") and reason in answer.message
+    assert (
+        answer.message.startswith("circles[2] (id 'bad'): covariance") and reason in answer.message
+    )
     # alive: the node still predicts a newer frame and the service still answers
     client.send(state_array(_stamped(good, _now_ns(ros_node))))
     assert contacts_of(client.predictions[-1]) == {("a", "b"): pytest.approx(2.0)}
@@ -136,17 +161,21 @@ def test_bad_covariance_rejected_on_topic_and_service(collision_node, ros_node, 
 
 
 def _near_miss(ns: int):
-    """a moves along +x; b sits 1.1 m above a's path: radii 0.5 each, the mean paths miss by 0.1 m."""
+    """a moves along +x; b sits 1.1 m above a's path: radii 0.5, the mean paths miss by 0.1 m."""
     a = state("a", (0, 0), (1, 0, 0), stamp_ns=ns)
     b = state("b", (2, 1.1), stamp_ns=ns)
     a.covariance = b.covariance = _covariance(SIGMA)
     return [a, b]
 
 
-def test_near_miss_with_large_covariance_is_reported_with_its_probability(collision_node, ros_node) -> None:
+def test_near_miss_with_large_covariance_is_reported_with_its_probability(
+    collision_node, ros_node
+) -> None:
     client = Client(ros_node, collision_node)
     states = _near_miss(_now_ns(ros_node))
-    client.send(state_array(states), until=lambda: any(len(p.predictions) for p in client.predictions))
+    client.send(
+        state_array(states), until=lambda: any(len(p.predictions) for p in client.predictions)
+    )
     out = next(p for p in reversed(client.predictions) if p.predictions)
     (row,) = out.predictions
     assert (row.id_a, row.id_b, row.status) == ("a", "b", row.NO_CONTACT)
@@ -158,8 +187,11 @@ def test_near_miss_with_large_covariance_is_reported_with_its_probability(collis
     assert answer.success, answer.message
     (same,) = answer.predictions
     assert (same.collision_probability, same.collision_probability_bound,
-            same.plausible_time_to_collision) == (row.collision_probability, row.collision_probability_bound,
-                                                  row.plausible_time_to_collision)
+            same.plausible_time_to_collision) == (
+        row.collision_probability,
+        row.collision_probability_bound,
+        row.plausible_time_to_collision,
+    )
     # Exact states of the same scene: nothing within the horizon, nothing reported.
     exact = _near_miss(_now_ns(ros_node))
     for s in exact:
@@ -168,39 +200,58 @@ def test_near_miss_with_large_covariance_is_reported_with_its_probability(collis
 
 
 def test_zero_covariance_publishes_the_bytes_of_no_covariance(ros_context, ros_node) -> None:
-    nodes = [CollisionNode(context=ros_context, namespace=ns, parameter_overrides=[
-        Parameter("horizon", value=5.0), Parameter("frame_id", value="map"), Parameter("marker_rate", value=0.0),
-        Parameter("stale_timeout", value=60.0)]) for ns in ("/exact", "/zero")]
+    nodes = [
+        CollisionNode(
+            context=ros_context,
+            namespace=ns,
+            parameter_overrides=[Parameter("horizon", value=5.0),
+                                 Parameter("frame_id", value="map"),
+                                 Parameter("marker_rate", value=0.0),
+                                 Parameter("stale_timeout", value=60.0)],
+        )
+        for ns in ("/exact", "/zero")
+    ]
     try:
         exact = Client(ros_node, nodes, "/exact/circle_states", "/exact/collision_predictions")
         zero = Client(ros_node, nodes, "/zero/circle_states", "/zero/collision_predictions")
         ns = _now_ns(ros_node)
         states = [state("a", (0, 0), (1, 0, 0), stamp_ns=ns), state("b", (3, 0.5), stamp_ns=ns),
-                  state("c", (9, 9), (-1, -1, 0), stamp_ns=ns - 7), state("d", (2.0, 0), stamp_ns=ns)]
+                  state("c", (9, 9), (-1, -1, 0), stamp_ns=ns - 7),
+                  state("d", (2.0, 0), stamp_ns=ns)]
         exact.send(state_array(states))
         for s in states:
             s.covariance = [0.0] * 36
         zero.send(state_array(states))
         assert exact.raw[-1] == zero.raw[-1]
         rows = exact.predictions[-1].predictions
-        assert rows and all((p.collision_probability, p.collision_probability_bound,
-                             p.plausible_time_to_collision) == (1.0, 0.0, p.time_to_collision) for p in rows)
+        assert rows and all(
+            (p.collision_probability, p.collision_probability_bound, p.plausible_time_to_collision)
+            == (1.0, 0.0, p.time_to_collision)
+            for p in rows
+        )
     finally:
         for node in nodes:
             node.destroy_node()
 
 
 def test_odometry_covariance_is_rotated_into_the_header_frame(ros_context, ros_node) -> None:
-    node = CollisionNode(context=ros_context, parameter_overrides=[
-        Parameter("odometry_topics", value=["robot_1/odom"]), Parameter("frame_id", value="map"),
-        Parameter("stale_timeout", value=60.0), Parameter("dimensions", value=3)])
+    node = CollisionNode(
+        context=ros_context,
+        parameter_overrides=[Parameter("odometry_topics", value=["robot_1/odom"]),
+                             Parameter("frame_id", value="map"),
+                             Parameter("stale_timeout", value=60.0),
+                             Parameter("dimensions", value=3)],
+    )
     try:
         pub = ros_node.create_publisher(Odometry, "robot_1/odom", RELIABLE)
         assert spin_until(ros_node, lambda: pub.get_subscription_count() > 0, 60.0, (node,))
         yaw = math.pi / 2  # the robot faces +y: its body x (forward) is the map's y
         msg = Odometry()
         msg.header.frame_id, msg.child_frame_id = "map", "base_link"
-        msg.pose.pose.orientation.z, msg.pose.pose.orientation.w = math.sin(yaw / 2), math.cos(yaw / 2)
+        msg.pose.pose.orientation.z, msg.pose.pose.orientation.w = (
+            math.sin(yaw / 2),
+            math.cos(yaw / 2),
+        )
         msg.twist.twist.linear.x = 1.0
         pose = np.diag([0.04, 0.09, 0.01, 1.0, 1.0, 1.0])
         twist = np.diag([0.25, 0.01, 0.0, 2.0, 2.0, 2.0])  # forward speed the most uncertain
@@ -220,30 +271,43 @@ def test_odometry_covariance_is_rotated_into_the_header_frame(ros_context, ros_n
         node.destroy_node()
 
 
-def test_covariance_run_is_recorded_read_independently_and_replayed(ros_context, ros_node,
-                                                                    tmp_path: Path) -> None:
+def test_covariance_run_is_recorded_read_independently_and_replayed(
+    ros_context, ros_node, tmp_path: Path
+) -> None:
     from mcap.reader import make_reader
     from mcap_ros2.decoder import DecoderFactory
     from rosbags.highlevel import AnyReader
 
     bag = tmp_path / "bag"
-    node = CollisionNode(context=ros_context, parameter_overrides=[
-        Parameter("horizon", value=5.0), Parameter("frame_id", value="map"), Parameter("marker_rate", value=0.0),
-        Parameter("stale_timeout", value=60.0), Parameter("record_path", value=str(bag))])
+    node = CollisionNode(
+        context=ros_context,
+        parameter_overrides=[Parameter("horizon", value=5.0), Parameter("frame_id", value="map"),
+                             Parameter("marker_rate", value=0.0),
+                             Parameter("stale_timeout", value=60.0),
+                             Parameter("record_path", value=str(bag))],
+    )
     try:
         client = Client(ros_node, node)
         base = _now_ns(ros_node)
         for k in range(5):
             states = _near_miss(base + k * 50_000_000)
-            states.append(state("c", (0, -3), (1, 1, 0), stamp_ns=base + k * 50_000_000))  # exact, hits a
+            # exact, hits a
+            states.append(state("c", (0, -3), (1, 1, 0), stamp_ns=base + k * 50_000_000))
             states[0].covariance = _covariance(SIGMA, 0.05 * k)
             client.send(state_array(states))
-        assert any(p.collision_probability < 1.0 for out in client.predictions for p in out.predictions)
+        assert any(
+            p.collision_probability < 1.0 for out in client.predictions for p in out.predictions
+        )
     finally:
         node.destroy_node()
     contents = open_bag(bag)
-    report = replay_offline(open_bag(bag, message_types={RecordedTypes.STATE_ARRAY, RecordedTypes.PREDICTIONS,
-                                                         RecordedTypes.CONFIG}).records())
+    report = replay_offline(
+        open_bag(
+            bag,
+            message_types={RecordedTypes.STATE_ARRAY, RecordedTypes.PREDICTIONS,
+                           RecordedTypes.CONFIG},
+        ).records()
+    )
     assert report.ok and report.predictions >= 5, report.mismatches[:3]
     assert contents.topics["/circle_states"].message_count >= 5
     with open(next(bag.glob("*.mcap")), "rb") as stream:
@@ -252,12 +316,28 @@ def test_covariance_run_is_recorded_read_independently_and_replayed(ros_context,
         for _, channel, _, msg in reader.iter_decoded_messages():
             by_topic.setdefault(channel.topic, []).append(msg)
     last = by_topic["/circle_states"][-1]
-    assert list(last.circles[0].covariance) == _covariance(SIGMA, 0.2) and list(last.circles[2].covariance) == []
+    assert (
+        list(last.circles[0].covariance) == _covariance(SIGMA, 0.2)
+        and list(last.circles[2].covariance) == []
+    )
     rows = [p for out in by_topic["/collision_predictions"] for p in out.predictions]
     assert any(0.0 < p.collision_probability < 1.0 for p in rows)
     with AnyReader([bag]) as reader:
         conns = [c for c in reader.connections if c.topic == "/collision_predictions"]
-        decoded = [reader.deserialize(raw, conn.msgtype) for conn, _, raw in reader.messages(connections=conns)]
-    assert [[(p.id_a, p.id_b, p.collision_probability, p.plausible_time_to_collision) for p in m.predictions]
-            for m in decoded] == [[(p.id_a, p.id_b, p.collision_probability, p.plausible_time_to_collision)
-                                   for p in m.predictions] for m in by_topic["/collision_predictions"]]
+        decoded = [
+            reader.deserialize(raw, conn.msgtype)
+            for conn, _, raw in reader.messages(connections=conns)
+        ]
+    assert [
+        [
+            (p.id_a, p.id_b, p.collision_probability, p.plausible_time_to_collision)
+            for p in m.predictions
+        ]
+        for m in decoded
+    ] == [
+        [
+            (p.id_a, p.id_b, p.collision_probability, p.plausible_time_to_collision)
+            for p in m.predictions
+        ]
+        for m in by_topic["/collision_predictions"]
+    ]

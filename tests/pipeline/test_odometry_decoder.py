@@ -29,7 +29,9 @@ from rclpy.serialization import deserialize_message, serialize_message
 
 from circle_collision_ros.pipeline.cdr import CdrError
 from circle_collision_ros.pipeline.odometry import (OdometryError, OdometrySource, body_id_of_topic,
-                                                    decode_odometry, odometry_batch, odometry_sources)
+                                                    decode_odometry, odometry_batch,
+                                                    odometry_sources)
+from tests.stress import examples
 
 SOURCE = OdometrySource("robot_1", 0.4)
 
@@ -71,23 +73,29 @@ def big_endian(msg: Odometry) -> bytes:
     t = msg.twist.twist
     out.extend(struct.pack(">7d", p.x, p.y, p.z, o.x, o.y, o.z, o.w))
     out.extend(struct.pack(">36d", *msg.pose.covariance))
-    out.extend(struct.pack(">6d", t.linear.x, t.linear.y, t.linear.z, t.angular.x, t.angular.y, t.angular.z))
+    out.extend(
+        struct.pack(
+            ">6d", t.linear.x, t.linear.y, t.linear.z, t.angular.x, t.angular.y, t.angular.z
+        )
+    )
     out.extend(struct.pack(">36d", *msg.twist.covariance))
     return bytes(out)
 
 
 def _fields_of(msg: Odometry):
     p, o, v = msg.pose.pose.position, msg.pose.pose.orientation, msg.twist.twist.linear
-    return (msg.header.stamp.sec * 10**9 + msg.header.stamp.nanosec, msg.header.frame_id, msg.child_frame_id,
-            (p.x, p.y, p.z), (o.x, o.y, o.z, o.w), (v.x, v.y, v.z), tuple(msg.pose.covariance),
-            tuple(msg.twist.covariance))
+    return (msg.header.stamp.sec * 10**9 + msg.header.stamp.nanosec, msg.header.frame_id,
+            msg.child_frame_id, (p.x, p.y, p.z), (o.x, o.y, o.z, o.w), (v.x, v.y, v.z),
+            tuple(msg.pose.covariance), tuple(msg.twist.covariance))
 
 
-@pytest.mark.parametrize("frame, child", [("map", "base_link"), ("", ""), ("odom", "robot_7/base_footprint"),
-                                          ("ü", "x" * 13)])
+@pytest.mark.parametrize(
+    "frame, child",
+    [("map", "base_link"), ("", ""), ("odom", "robot_7/base_footprint"), ("ü", "x" * 13)],
+)
 def test_both_byte_orders_decode_to_what_rclpy_reads(frame, child) -> None:
-    msg = odometry(p=(1e6 + 0.1, -3.5, 2.0), q=(0.1, 0.2, 0.3, math.sqrt(1 - 0.14)), v=(1.5, -0.25, 0.125),
-                   stamp=(-5, 999_999_999), frame=frame, child=child)
+    msg = odometry(p=(1e6 + 0.1, -3.5, 2.0), q=(0.1, 0.2, 0.3, math.sqrt(1 - 0.14)),
+                   v=(1.5, -0.25, 0.125), stamp=(-5, 999_999_999), frame=frame, child=child)
     le = serialize_message(msg)
     assert tuple(decode_odometry(le)) == _fields_of(deserialize_message(le, Odometry))
     assert tuple(decode_odometry(big_endian(msg))) == _fields_of(msg)
@@ -101,11 +109,15 @@ def test_every_truncation_is_a_cdr_error() -> None:
         assert len(odometry_batch(data, SOURCE)) == 1
 
 
-@settings(max_examples=1500, deadline=None, suppress_health_check=[HealthCheck.too_slow])
-@given(st.binary(max_size=900) | st.builds(
-    lambda data, k, b: data[:k % len(data)] + bytes([b]) + data[k % len(data) + 1:],
-    st.sampled_from([serialize_message(odometry()), big_endian(odometry())]),
-    st.integers(0, 10_000), st.integers(0, 255)))
+@settings(
+    max_examples=examples(300, 1500), deadline=None, suppress_health_check=[HealthCheck.too_slow]
+)
+@given(
+    st.binary(max_size=900)
+    | st.builds(lambda data, k, b: data[: k % len(data)] + bytes([b]) + data[k % len(data) + 1 :],
+                st.sampled_from([serialize_message(odometry()), big_endian(odometry())]),
+                st.integers(0, 10_000), st.integers(0, 255))
+)
 def test_garbage_is_a_result_or_cdr_error(data: bytes) -> None:
     try:
         batch = odometry_batch(data, SOURCE)
@@ -128,7 +140,9 @@ def _rotation_reference(q, v):
 
 def test_velocity_is_rotated_into_the_header_frame() -> None:
     s = math.sqrt(0.5)
-    yaw90 = odometry_batch(serialize_message(odometry(q=(0.0, 0.0, s, s), v=(2.0, 0.0, 0.0))), SOURCE)
+    yaw90 = odometry_batch(
+        serialize_message(odometry(q=(0.0, 0.0, s, s), v=(2.0, 0.0, 0.0))), SOURCE
+    )
     assert yaw90.velocity[0].tolist() == pytest.approx([0.0, 2.0, 0.0], abs=1e-15)
     assert yaw90.acceleration.tolist() == [[0.0, 0.0, 0.0]]
     assert yaw90.position.tolist() == [[1.0, 2.0, 0.0]] and yaw90.radius.tolist() == [0.4]
@@ -139,15 +153,22 @@ def test_velocity_is_rotated_into_the_header_frame() -> None:
         q /= np.linalg.norm(q)
         q *= 1.0 + rng.uniform(-9e-4, 9e-4)  # within the tolerance: normalised
         v = rng.uniform(-5, 5, 3)
-        got = odometry_batch(serialize_message(odometry(q=tuple(q), v=tuple(v))), SOURCE).velocity[0]
+        got = odometry_batch(serialize_message(odometry(q=tuple(q), v=tuple(v))), SOURCE).velocity[
+            0
+        ]
         assert got.tolist() == pytest.approx(_rotation_reference(q, v), rel=1e-14, abs=1e-14)
 
 
-@pytest.mark.parametrize("q, words", [((0.0, 0.0, 0.0, 0.0), "zero or not finite"),
-                                      ((math.nan, 0.0, 0.0, 1.0), "zero or not finite"),
-                                      ((0.0, 0.0, math.inf, 1.0), "zero or not finite"),
-                                      ((0.0, 0.0, 0.0, 2.0), "not a unit quaternion (norm 2"),
-                                      ((0.0, 0.0, 0.0, 1.0011), "not a unit quaternion")])
+@pytest.mark.parametrize(
+    "q, words",
+    [
+        ((0.0, 0.0, 0.0, 0.0), "zero or not finite"),
+        ((math.nan, 0.0, 0.0, 1.0), "zero or not finite"),
+        ((0.0, 0.0, math.inf, 1.0), "zero or not finite"),
+        ((0.0, 0.0, 0.0, 2.0), "not a unit quaternion (norm 2"),
+        ((0.0, 0.0, 0.0, 1.0011), "not a unit quaternion"),
+    ],
+)
 def test_bad_quaternions_are_refused(q, words) -> None:
     with pytest.raises(OdometryError, match=r"pose\.orientation") as info:
         odometry_batch(serialize_message(odometry(q=q)), SOURCE)
@@ -203,9 +224,10 @@ def test_zero_covariance_is_exact_and_bad_blocks_name_their_field() -> None:
     msg.pose.covariance, msg.twist.covariance = [0.0] * 36, [0.0] * 36
     assert odometry_batch(serialize_message(msg), SOURCE).covariance is None
     for field, values, reason in [
-            ("pose", np.diag([1.0, -1.0, 1.0, 0, 0, 0]), "not positive semi-definite"),
-            ("twist", np.triu(np.ones((6, 6))), "not symmetric"),
-            ("pose", np.diag([math.nan, 1.0, 1.0, 0, 0, 0]), "not finite")]:
+        ("pose", np.diag([1.0, -1.0, 1.0, 0, 0, 0]), "not positive semi-definite"),
+        ("twist", np.triu(np.ones((6, 6))), "not symmetric"),
+        ("pose", np.diag([math.nan, 1.0, 1.0, 0, 0, 0]), "not finite"),
+    ]:
         msg = odometry()
         msg.pose.covariance, msg.twist.covariance = [0.0] * 36, [0.0] * 36
         getattr(msg, field).covariance = values.ravel().tolist()

@@ -38,7 +38,8 @@ from std_msgs.msg import String
 from circle_collision_msgs.msg import CollisionPrediction, CollisionPredictionArray
 from circle_collision_ros.pipeline.cdr import CdrError, decode_string
 from circle_collision_ros.pipeline.prediction_codec import (PairPrediction, PredictionArray,
-                                                            decode_prediction_array, encode_contact_rows,
+                                                            decode_prediction_array,
+                                                            encode_contact_rows,
                                                             encode_prediction_array)
 from circle_collision_ros.pipeline.predictor import CollisionPredictor, PredictorConfig
 from circle_collision_ros.pipeline.state_batch import StateBatch
@@ -48,8 +49,10 @@ from tests.node_helpers import BASE_NS, random_states
 
 # ---------------------------------------------------------------- encoder
 
-def reference_encoding(stamp, frame_id: str, horizon: float, rows,
-                       uncertainty: bool = True) -> tuple[bytes, list[int]]:
+
+def reference_encoding(
+    stamp, frame_id: str, horizon: float, rows, uncertainty: bool = True
+) -> tuple[bytes, list[int]]:
     """Little-endian XCDR1 written field by field with struct (the pre-compiled encoder),
     and the positions of its alignment padding."""
     buf = bytearray(b"\x00\x01\x00\x00")
@@ -90,7 +93,8 @@ def reference_encoding(stamp, frame_id: str, horizon: float, rows,
         time(*r.contact_time)
         f64s(*r.contact_point, *r.normal, r.closing_speed)
         if uncertainty:
-            f64s(r.collision_probability, r.collision_probability_bound, r.plausible_time_to_collision)
+            f64s(r.collision_probability, r.collision_probability_bound,
+                 r.plausible_time_to_collision)
     return bytes(buf), padding
 
 
@@ -98,30 +102,37 @@ def predictions(seed: int, n: int, dimensions: int, report_all: bool, frame: str
     states = random_states(n, seed=seed, dimensions=dimensions, spread=12.0)
     rng = np.random.default_rng(seed)
     for s in states:
-        s.id = rng.choice(["", "körper_", "b", "x" * 40]) + s.id  # non-ASCII, long, and unchanged ids
+        # non-ASCII, long, and unchanged ids
+        s.id = rng.choice(["", "körper_", "b", "x" * 40]) + s.id
     seen = set()
     states = [s for s in states if not (s.id in seen or seen.add(s.id))]
-    predictor = CollisionPredictor(PredictorConfig(horizon=float(rng.uniform(0.5, 6.0)), dimensions=dimensions,
-                                                   report_all_pairs=report_all, frame_id=frame))
+    predictor = CollisionPredictor(
+        PredictorConfig(horizon=float(rng.uniform(0.5, 6.0)), dimensions=dimensions,
+                        report_all_pairs=report_all, frame_id=frame)
+    )
     for s in states:
         s.header.frame_id = frame
     predictor.receive_batch(StateBatch.from_messages(states), BASE_NS)
     return predictor.predict()
 
 
-CASES = [(seed, n, dim, report_all, frame)
-         for seed, (n, dim, report_all, frame) in enumerate([
-             (0, 2, False, "map"), (1, 2, True, "map"), (2, 3, True, ""), (30, 2, False, "map"),
-             (30, 2, True, "a_frame_with_an_odd_length"), (40, 3, False, "odom"), (60, 2, False, "m"),
-             (25, 3, True, "wörld"), (90, 2, True, "map"), (200, 2, False, "map")])]
+CASES = [
+    (seed, n, dim, report_all, frame)
+    for seed, (n, dim, report_all, frame) in enumerate(
+        [(0, 2, False, "map"), (1, 2, True, "map"), (2, 3, True, ""), (30, 2, False, "map"),
+         (30, 2, True, "a_frame_with_an_odd_length"), (40, 3, False, "odom"), (60, 2, False, "m"),
+         (25, 3, True, "wörld"), (90, 2, True, "map"), (200, 2, False, "map")]
+    )
+]
 
 
 @pytest.mark.parametrize("seed, n, dim, report_all, frame", CASES)
 def test_compiled_encoder_equals_reference_and_rclpy(seed, n, dim, report_all, frame) -> None:
     prediction = predictions(seed, n, dim, report_all, frame)
     data = prediction.to_cdr()
-    reference, padding = reference_encoding(prediction.stamp, prediction.frame_id, prediction.horizon,
-                                            prediction.rows())
+    reference, padding = reference_encoding(
+        prediction.stamp, prediction.frame_id, prediction.horizon, prediction.rows()
+    )
     assert data == reference
     old, _ = reference_encoding(prediction.stamp, prediction.frame_id, prediction.horizon,
                                 prediction.rows(), uncertainty=False)
@@ -161,8 +172,12 @@ def test_encoded_ids_survive_churn() -> None:
         prediction = predictor.predict()
         data = prediction.to_cdr()
         assert len(prediction.contacts) > 0
-        assert data == reference_encoding(prediction.stamp, prediction.frame_id, prediction.horizon,
-                                          prediction.rows())[0]
+        assert (
+            data
+            == reference_encoding(
+                prediction.stamp, prediction.frame_id, prediction.horizon, prediction.rows()
+            )[0]
+        )
         if k % 20 == 0:
             kept.append((prediction, data))
     for prediction, data in kept:
@@ -186,8 +201,12 @@ def test_kept_rows_follow_their_ids_when_the_blob_is_compacted() -> None:
     predictor = CollisionPredictor(PredictorConfig(horizon=5.0, frame_id="map", stale_timeout=1e3))
     churn = [f"early{j}_" + "x" * 40 for j in range(10)]  # ahead of the staying ids in the blob
     stay = [state(f"stay{k:02d}", 10.0 * (k // 2) + 1.5 * (k % 2), BASE_NS) for k in range(20)]
-    predictor.receive_batch(StateBatch.from_messages(
-        [state(i, 1000.0 + 10.0 * j, BASE_NS) for j, i in enumerate(churn)] + stay), BASE_NS)
+    predictor.receive_batch(
+        StateBatch.from_messages(
+            [state(i, 1000.0 + 10.0 * j, BASE_NS) for j, i in enumerate(churn)] + stay
+        ),
+        BASE_NS,
+    )
     serial = predictor._scene._utf8_serial
     for k in range(1, 80):
         stamp = BASE_NS + k * 1_000_000
@@ -197,8 +216,12 @@ def test_kept_rows_follow_their_ids_when_the_blob_is_compacted() -> None:
         predictor.receive_batch(StateBatch.from_messages(gone + new), stamp)
         prediction = predictor.predict()
         assert len(prediction.contacts) == 10  # the staying pairs, overlapping
-        assert prediction.to_cdr() == reference_encoding(prediction.stamp, prediction.frame_id,
-                                                         prediction.horizon, prediction.rows())[0]
+        assert (
+            prediction.to_cdr()
+            == reference_encoding(
+                prediction.stamp, prediction.frame_id, prediction.horizon, prediction.rows()
+            )[0]
+        )
     assert predictor._scene._utf8_serial > serial  # the blob was compacted on the way
 
 
@@ -211,13 +234,17 @@ def test_exact_contacts_encoder_equals_the_columns_path(seed, n, dim, report_all
     fast = encode_contact_rows(prediction.stamp, prediction.frame_id, prediction.horizon,
                                prediction.contacts, CollisionPrediction.CONTACT,
                                CollisionPrediction.OVERLAPPING)
-    general = encode_prediction_array(prediction.stamp, prediction.frame_id, prediction.horizon,
-                                      prediction.columns)
+    general = encode_prediction_array(
+        prediction.stamp, prediction.frame_id, prediction.horizon, prediction.columns
+    )
     assert fast is not None and fast == general == prediction.to_cdr()
 
 
-@pytest.mark.parametrize("field, value", [("closing_speed", np.nan), ("ttc", np.inf),
-                                          ("point", np.nan), ("normal", -np.inf), ("point", np.inf)])
+@pytest.mark.parametrize(
+    "field, value",
+    [("closing_speed", np.nan), ("ttc", np.inf), ("point", np.nan), ("normal", -np.inf),
+     ("point", np.inf)],
+)
 def test_non_finite_contact_row_takes_the_general_path(field, value) -> None:
     """A contact row with a non-finite value is left out (the "never publishes NaN" guarantee):
     the one-pass encoder refuses it and to_cdr falls back to the columns path, which drops it."""
@@ -230,8 +257,11 @@ def test_non_finite_contact_row_takes_the_general_path(field, value) -> None:
     else:
         column[1] = value
     bad = dataclasses.replace(prediction, contacts=dataclasses.replace(c, **{field: column}))
-    assert encode_contact_rows(bad.stamp, bad.frame_id, bad.horizon, bad.contacts,
-                               CollisionPrediction.CONTACT, CollisionPrediction.OVERLAPPING) is None
+    assert (
+        encode_contact_rows(bad.stamp, bad.frame_id, bad.horizon, bad.contacts,
+                            CollisionPrediction.CONTACT, CollisionPrediction.OVERLAPPING)
+        is None
+    )
     rows = list(bad.rows())
     assert len(rows) == len(c) - 1
     assert bad.to_cdr() == reference_encoding(bad.stamp, bad.frame_id, bad.horizon, rows)[0]
@@ -252,28 +282,41 @@ def test_uncertain_rows_encode_from_the_scenes_ids(seed, n, dim, report_all, fra
         s.header.frame_id = frame
         if rng.random() < 0.8:
             sigma = float(rng.uniform(0.05, 0.6))
-            s.covariance = np.diag([sigma ** 2] * 3 + [(sigma / 2) ** 2] * 3).ravel().tolist()
+            s.covariance = np.diag([sigma**2] * 3 + [(sigma / 2) ** 2] * 3).ravel().tolist()
     states = [s for s in states if not (s.id in seen or seen.add(s.id))]
-    predictor = CollisionPredictor(PredictorConfig(horizon=5.0, dimensions=dim, report_all_pairs=report_all,
-                                                   frame_id=frame, uncertain_pair_budget=3))
+    predictor = CollisionPredictor(
+        PredictorConfig(horizon=5.0, dimensions=dim, report_all_pairs=report_all, frame_id=frame,
+                        uncertain_pair_budget=3)
+    )
     predictor.receive_batch(StateBatch.from_messages(states), BASE_NS)
     prediction = predictor.predict()
     columns = prediction.columns
     extra = len(columns) - len(prediction.contacts)
-    assert extra > 0 and (columns.status[len(prediction.contacts):] == CollisionPrediction.NO_CONTACT).all()
+    assert (
+        extra > 0
+        and (columns.status[len(prediction.contacts) :] == CollisionPrediction.NO_CONTACT).all()
+    )
     data = prediction.to_cdr()
     if not (report_all and n <= 100):
         u = prediction.uncertainty
         found, extra = prediction._uncertain_join
         assert data == encode_contact_rows(
-            prediction.stamp, prediction.frame_id, prediction.horizon, prediction.contacts,
-            CollisionPrediction.CONTACT, CollisionPrediction.OVERLAPPING,
+            prediction.stamp,
+            prediction.frame_id,
+            prediction.horizon,
+            prediction.contacts,
+            CollisionPrediction.CONTACT,
+            CollisionPrediction.OVERLAPPING,
             (found, u.probability, u.probability_bound, u.plausible_ttc, extra, u.id_utf8),
-            CollisionPrediction.NO_CONTACT)
-    reference, padding = reference_encoding(prediction.stamp, prediction.frame_id, prediction.horizon,
-                                            prediction.rows())
+            CollisionPrediction.NO_CONTACT,
+        )
+    reference, padding = reference_encoding(
+        prediction.stamp, prediction.frame_id, prediction.horizon, prediction.rows()
+    )
     assert data == reference
-    assert data == encode_prediction_array(prediction.stamp, prediction.frame_id, prediction.horizon, columns)
+    assert data == encode_prediction_array(
+        prediction.stamp, prediction.frame_id, prediction.horizon, columns
+    )
     message = prediction.to_message()
     theirs = bytearray(serialize_message(message))
     for k in padding:
@@ -282,7 +325,7 @@ def test_uncertain_rows_encode_from_the_scenes_ids(seed, n, dim, report_all, fra
     # the uncertain rows after the contacts (report_all_pairs rows follow them) are ordered by
     # (plausible time, id_a, id_b)
     probable = len(prediction.contacts) + prediction._uncertain_join[1].size
-    rows = list(prediction.rows())[len(prediction.contacts):probable]
+    rows = list(prediction.rows())[len(prediction.contacts) : probable]
     assert len(rows) > 1
     keys = [(r.plausible_time_to_collision, r.id_a, r.id_b) for r in rows]
     assert keys == sorted(keys)
@@ -296,14 +339,28 @@ DATA = Path(__file__).resolve().parents[1] / "data"
 def _as_rows(msg, uncertainty: bool = True) -> PredictionArray:
     """Our rows from a message object (rclpy's, or mcap-ros2-support's dynamic one)."""
     return PredictionArray(
-        (msg.header.stamp.sec, msg.header.stamp.nanosec, msg.header.frame_id), msg.horizon,
-        tuple(PairPrediction(p.id_a, p.id_b, p.status, p.time_to_collision,
-                             (p.contact_time.sec, p.contact_time.nanosec),
-                             (p.contact_point.x, p.contact_point.y, p.contact_point.z),
-                             (p.normal.x, p.normal.y, p.normal.z), p.closing_speed,
-                             *((p.collision_probability, p.collision_probability_bound,
-                                p.plausible_time_to_collision) if uncertainty else ()))
-              for p in msg.predictions))
+        (msg.header.stamp.sec, msg.header.stamp.nanosec, msg.header.frame_id),
+        msg.horizon,
+        tuple(
+            PairPrediction(
+                p.id_a,
+                p.id_b,
+                p.status,
+                p.time_to_collision,
+                (p.contact_time.sec, p.contact_time.nanosec),
+                (p.contact_point.x, p.contact_point.y, p.contact_point.z),
+                (p.normal.x, p.normal.y, p.normal.z),
+                p.closing_speed,
+                *(
+                    (p.collision_probability, p.collision_probability_bound,
+                     p.plausible_time_to_collision)
+                    if uncertainty
+                    else ()
+                ),
+            )
+            for p in msg.predictions
+        ),
+    )
 
 
 def _recorded(name: str, type_name: str) -> list[bytes]:
@@ -317,12 +374,19 @@ def test_decoder_agrees_with_the_recorded_schema_and_rclpy(bag: str) -> None:
 
     with open(next((DATA / bag).glob("*.mcap")), "rb") as f:
         reader = make_reader(f, decoder_factories=[DecoderFactory()])
-        recorded = [(m.data, ros_msg) for _, _, m, ros_msg in
-                    reader.iter_decoded_messages(topics=["/collision_predictions"])]
+        recorded = [
+            (m.data, ros_msg)
+            for _, _, m, ros_msg in reader.iter_decoded_messages(topics=["/collision_predictions"])
+        ]
     assert len(recorded) > 20
     for data, by_schema in recorded:  # the old layout, decoded by the file's own schema
-        assert not hasattr(by_schema.predictions[0] if by_schema.predictions else by_schema, "collision_probability")
-        assert decode_prediction_array(data, uncertainty=False) == _as_rows(by_schema, uncertainty=False)
+        assert not hasattr(
+            by_schema.predictions[0] if by_schema.predictions else by_schema,
+            "collision_probability",
+        )
+        assert decode_prediction_array(data, uncertainty=False) == _as_rows(
+            by_schema, uncertainty=False
+        )
     predictor_bytes = [p.to_cdr() for p in _replayed_predictions(bag)]
     assert len(predictor_bytes) > 20
     for data in predictor_bytes:  # the current layout: the node's encoder, and rclpy's bytes

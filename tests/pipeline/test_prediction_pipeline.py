@@ -17,16 +17,18 @@ import numpy as np
 import pytest
 
 from circle_collision_msgs.msg import CollisionPrediction
-from circle_collision_ros.pipeline.predictor import (CollisionPredictor, IntakeReport, PredictorConfig,
-                                                      predict_once)
+from circle_collision_ros.pipeline.predictor import (CollisionPredictor, IntakeReport,
+                                                     PredictorConfig, predict_once)
 from circle_collision_ros.pipeline.state_batch import StateBatch
 from tests.node_helpers import (BASE_NS, assert_no_nan, contacts_of, expected_contacts,
-                                    random_states, state)
+                                random_states, state)
 
 NOW = BASE_NS + 10_000_000
 
 
-def receive(predictor: CollisionPredictor, states, now_ns: int, array_frame: str = "") -> IntakeReport:
+def receive(
+    predictor: CollisionPredictor, states, now_ns: int, array_frame: str = ""
+) -> IntakeReport:
     """One received message of CircleState objects (the node's receive_batch path)."""
     return predictor.receive_batch(StateBatch.from_messages(states, array_frame), now_ns)
 
@@ -43,7 +45,8 @@ def test_matches_core_on_every_pair() -> None:
     times = [p.time_to_collision for p in out.predictions]
     assert times == sorted(times)
     assert out.header.stamp.sec * 10**9 + out.header.stamp.nanosec == max(
-        s.header.stamp.sec * 10**9 + s.header.stamp.nanosec for s in states)
+        s.header.stamp.sec * 10**9 + s.header.stamp.nanosec for s in states
+    )
     assert_no_nan(out)
 
 
@@ -51,7 +54,9 @@ def test_three_d_scene_matches_core() -> None:
     states = random_states(40, seed=5, dimensions=3, spread=10.0)
     predictor = CollisionPredictor(PredictorConfig(horizon=4.0, dimensions=3))
     receive(predictor, states, NOW)
-    assert contacts_of(predictor.predict().to_message()) == expected_contacts(states, 4.0, dimensions=3)
+    assert contacts_of(predictor.predict().to_message()) == expected_contacts(
+        states, 4.0, dimensions=3
+    )
 
 
 def test_two_d_mode_ignores_z() -> None:
@@ -65,8 +70,12 @@ def test_two_d_mode_ignores_z() -> None:
 
 def test_overlapping_status_and_details() -> None:
     predictor = CollisionPredictor(PredictorConfig(horizon=10.0))
-    receive(predictor, [state("a", (0, 0), r=1.0), state("b", (1.5, 0), r=1.0),
-                       state("c", (10, 0), (-1, 0, 0), r=1.0)], NOW)
+    receive(
+        predictor,
+        [state("a", (0, 0), r=1.0), state("b", (1.5, 0), r=1.0),
+         state("c", (10, 0), (-1, 0, 0), r=1.0)],
+        NOW,
+    )
     out = {(p.id_a, p.id_b): p for p in predictor.predict().to_message().predictions}
     assert out[("a", "b")].status == CollisionPrediction.OVERLAPPING
     assert out[("a", "b")].time_to_collision == 0.0
@@ -79,19 +88,28 @@ def test_overlapping_status_and_details() -> None:
     assert stamp_ns == BASE_NS + 6_500_000_000
 
 
-@pytest.mark.parametrize("mutate, reason", [
-    (lambda s: setattr(s.position, "x", math.nan), "position.x is nan"),
-    (lambda s: setattr(s.velocity, "y", math.inf), "velocity.y is inf"),
-    (lambda s: setattr(s.acceleration, "z", -math.inf), "acceleration.z is -inf"),
-    (lambda s: setattr(s, "radius", math.nan), "radius is nan"),
-    (lambda s: setattr(s, "radius", -0.5), "radius is negative"),
-    (lambda s: setattr(s, "id", ""), "empty id"),
-    (lambda s: setattr(s.header, "frame_id", "odom"), "frame 'odom' is not the scene frame 'map'"),
-    (lambda s: (setattr(s.header.stamp, "sec", 0), setattr(s.header.stamp, "nanosec", 0)),
-     "header.stamp is zero"),
-    (lambda s: setattr(s.header.stamp, "sec", s.header.stamp.sec + 3600), "in the future"),
-], ids=["nan", "inf", "neg-inf", "nan-radius", "negative-radius", "empty-id", "wrong-frame",
-        "zero-stamp", "future-stamp"])
+@pytest.mark.parametrize(
+    "mutate, reason",
+    [
+        (lambda s: setattr(s.position, "x", math.nan), "position.x is nan"),
+        (lambda s: setattr(s.velocity, "y", math.inf), "velocity.y is inf"),
+        (lambda s: setattr(s.acceleration, "z", -math.inf), "acceleration.z is -inf"),
+        (lambda s: setattr(s, "radius", math.nan), "radius is nan"),
+        (lambda s: setattr(s, "radius", -0.5), "radius is negative"),
+        (lambda s: setattr(s, "id", ""), "empty id"),
+        (
+            lambda s: setattr(s.header, "frame_id", "odom"),
+            "frame 'odom' is not the scene frame 'map'",
+        ),
+        (
+            lambda s: (setattr(s.header.stamp, "sec", 0), setattr(s.header.stamp, "nanosec", 0)),
+            "header.stamp is zero",
+        ),
+        (lambda s: setattr(s.header.stamp, "sec", s.header.stamp.sec + 3600), "in the future"),
+    ],
+    ids=["nan", "inf", "neg-inf", "nan-radius", "negative-radius", "empty-id", "wrong-frame",
+         "zero-stamp", "future-stamp"],
+)
 def test_bad_state_rejected_rest_predicted(mutate, reason) -> None:
     states = [state("a", (0, 0), (1, 0, 0)), state("b", (5, 0)), state("bad", (2.5, 3), (0, -1, 0))]
     mutate(states[2])
@@ -122,7 +140,9 @@ def test_first_frame_is_adopted_then_enforced() -> None:
     predictor = CollisionPredictor(PredictorConfig(frame_id=""))
     receive(predictor, [state("a", (0, 0), frame="odom")], NOW)
     report = receive(predictor, [state("b", (0, 0), frame="map")], NOW)
-    assert predictor.frame_id == "odom" and "not the scene frame 'odom'" in report.rejected[0].reason
+    assert (
+        predictor.frame_id == "odom" and "not the scene frame 'odom'" in report.rejected[0].reason
+    )
 
 
 def test_latest_stamp_wins_and_late_states_are_ignored() -> None:
@@ -137,8 +157,14 @@ def test_latest_stamp_wins_and_late_states_are_ignored() -> None:
 def test_states_are_propagated_to_the_newest_stamp() -> None:
     # a was seen 2 s before b: at b's stamp a has moved 2 m, so contact is 2 s sooner.
     predictor = CollisionPredictor(PredictorConfig(horizon=100.0))
-    receive(predictor, [state("a", (0, 0), (1, 0, 0), stamp_ns=BASE_NS - 2_000_000_000),
-                       state("b", (10, 0), stamp_ns=BASE_NS)], NOW)
+    receive(
+        predictor,
+        [
+            state("a", (0, 0), (1, 0, 0), stamp_ns=BASE_NS - 2_000_000_000),
+            state("b", (10, 0), stamp_ns=BASE_NS),
+        ],
+        NOW,
+    )
     assert contacts_of(predictor.predict().to_message()) == {("a", "b"): 7.0}
 
 
@@ -149,7 +175,9 @@ def test_removal_and_expiry() -> None:
     assert report.removed == 1 and "a" not in predictor
     report = receive(predictor, [], NOW + 1_500_000_000)
     assert report.expired == ["b"] and len(predictor) == 0
-    assert not receive(predictor, [state("zz", (0, 0), stamp_ns=BASE_NS + 2, remove=True)], NOW).changed
+    assert not receive(
+        predictor, [state("zz", (0, 0), stamp_ns=BASE_NS + 2, remove=True)], NOW
+    ).changed
 
 
 def test_max_bodies_bounds_the_scene() -> None:
@@ -175,7 +203,9 @@ def test_same_inputs_give_bit_identical_outputs() -> None:
         predictor = CollisionPredictor(PredictorConfig())
         outs = []
         for k in range(5):
-            receive(predictor, random_states(30, seed=k, stamp_ns=BASE_NS + k * 33_000_000), NOW + k)
+            receive(
+                predictor, random_states(30, seed=k, stamp_ns=BASE_NS + k * 33_000_000), NOW + k
+            )
             outs.append(predictor.predict().to_message())
         runs.append(outs)
     assert runs[0] == runs[1]  # message equality compares float fields exactly
@@ -186,8 +216,9 @@ def test_predict_once_names_the_bad_circle() -> None:
     ok, message, out = predict_once(states, PredictorConfig())
     assert not ok and out is None
     assert message.startswith("circles[1] (id 'b'): radius is negative")
-    ok, message, out = predict_once([state("a", (0, 0), (1, 0, 0)), state("b", (5, 0))],
-                                    PredictorConfig(), horizon=10.0)
+    ok, message, out = predict_once(
+        [state("a", (0, 0), (1, 0, 0)), state("b", (5, 0))], PredictorConfig(), horizon=10.0
+    )
     assert ok and contacts_of(out.to_message()) == {("a", "b"): 4.0}
 
 
@@ -196,18 +227,26 @@ def test_late_state_after_removal_is_ignored() -> None:
     predictor = CollisionPredictor(PredictorConfig(horizon=5.0))
     receive(predictor, [state("a", (0, 0), r=1.0), state("g", (3, 0), (-1, 0, 0), r=1.0)], NOW)
     assert contacts_of(predictor.predict().to_message()) == {("a", "g"): 1.0}
-    removal = receive(predictor, [state("g", (0, 0), stamp_ns=BASE_NS + 200_000_000, remove=True)], NOW)
+    removal = receive(
+        predictor, [state("g", (0, 0), stamp_ns=BASE_NS + 200_000_000, remove=True)], NOW
+    )
     assert removal.removed == 1 and predictor.predict().to_message().predictions == []
-    late = receive(predictor, [state("g", (2.9, 0), (-1, 0, 0), r=1.0, stamp_ns=BASE_NS + 100_000_000)], NOW)
+    late = receive(
+        predictor, [state("g", (2.9, 0), (-1, 0, 0), r=1.0, stamp_ns=BASE_NS + 100_000_000)], NOW
+    )
     assert late.accepted == 0 and late.ignored == 1 and not late.changed
     assert predictor.predict().to_message().predictions == [] and "g" not in predictor
-    newer = receive(predictor, [state("g", (2.7, 0), (-1, 0, 0), r=1.0, stamp_ns=BASE_NS + 300_000_000)], NOW)
+    newer = receive(
+        predictor, [state("g", (2.7, 0), (-1, 0, 0), r=1.0, stamp_ns=BASE_NS + 300_000_000)], NOW
+    )
     assert newer.accepted == 1 and "g" in predictor  # a newer state is a new track
 
 
 def test_removal_memory_is_kept_for_stale_timeout() -> None:
     predictor = CollisionPredictor(PredictorConfig(stale_timeout=1.0))
-    receive(predictor, [state(f"r{k}", (0, 0), stamp_ns=BASE_NS, remove=True) for k in range(100)], NOW)
+    receive(
+        predictor, [state(f"r{k}", (0, 0), stamp_ns=BASE_NS, remove=True) for k in range(100)], NOW
+    )
     late = receive(predictor, [state("r1", (0, 0), stamp_ns=BASE_NS - 1)], NOW + 500_000_000)
     assert late.ignored == 1 and late.accepted == 0
     # One stale_timeout (receive clock) after the removals they are forgotten: memory stays bounded.
@@ -221,8 +260,14 @@ def test_max_bodies_counts_after_removals_in_the_same_message() -> None:
     """Issue 14 repro: full scene (3 of 3), one message [remove g, add h] must accept h."""
     predictor = CollisionPredictor(PredictorConfig(max_bodies=3))
     receive(predictor, [state("a", (0, 0)), state("b", (5, 0)), state("g", (10, 0))], NOW)
-    report = receive(predictor, [state("g", (0, 0), stamp_ns=BASE_NS + 1, remove=True),
-                                 state("h", (20, 0), stamp_ns=BASE_NS + 1)], NOW)
+    report = receive(
+        predictor,
+        [
+            state("g", (0, 0), stamp_ns=BASE_NS + 1, remove=True),
+            state("h", (20, 0), stamp_ns=BASE_NS + 1),
+        ],
+        NOW,
+    )
     assert not report.rejected, report.rejected
     assert (report.removed, report.accepted) == (1, 1) and "h" in predictor and len(predictor) == 3
     full = receive(predictor, [state("i", (30, 0), stamp_ns=BASE_NS + 2)], NOW)
@@ -259,6 +304,7 @@ def test_one_state_validation_on_scalars_equals_the_vectorised_checks() -> None:
     bad single states (each bad-input class, removals, frames, stamps) check_batch gives the same
     verdict, reasons and adopted frame as for the same state checked in a two-state batch."""
     from circle_collision_ros.pipeline.state_validation import check_batch, clean_single_state
+
     rng = np.random.default_rng(3)
     bad_values = [math.nan, math.inf, -math.inf, 2e12, -2e12, -1.0]
     fast_taken = 0
@@ -283,8 +329,9 @@ def test_one_state_validation_on_scalars_equals_the_vectorised_checks() -> None:
         got = check_batch(one, frame_id=frame, now_ns=now)
         want = check_batch(StateBatch.from_messages([s, other]), frame_id=frame, now_ns=now)
         assert bool(got.good[0]) == bool(want.good[0]), (k, s)
-        assert [(r.index, r.body_id, r.reason) for r in got.rejections] == \
-            [(r.index, r.body_id, r.reason) for r in want.rejections if r.index == 0], (k, s)
+        assert [(r.index, r.body_id, r.reason) for r in got.rejections] == [
+            (r.index, r.body_id, r.reason) for r in want.rejections if r.index == 0
+        ], (k, s)
         if got.good[0] and not s.remove:
             assert got.frame_id == (frame or s.header.frame_id)
         assert not got.uncertain[0]
@@ -305,7 +352,9 @@ def spy(self, *args, **kwargs):
 dispatcher.Dispatcher._compile_for_args = spy
 """
 
-_FIRST_REBUILD = _AFTER_WARM_UP + """
+_FIRST_REBUILD = (
+    _AFTER_WARM_UP
+    + """
 from circle_collision_ros.core.scene import Scene
 k = 120  # a rebuild of k (k - 1) / 2 = 7,140 overlapping pairs: the vectorised, threaded path
 scene = Scene(5.0, {d})
@@ -314,6 +363,7 @@ scene.upsert_many([f"b{{i}}" for i in range(k)], np.random.default_rng(1).unifor
 assert len(scene.predictions()) == k * (k - 1) // 2
 print("loaded:", loaded)
 """
+)
 
 
 @pytest.mark.parametrize("dimensions", [2, 3])
@@ -324,18 +374,22 @@ def test_warm_up_loads_the_large_scene_kernels(dimensions) -> None:
     tests must not have loaded them."""
     import subprocess
     import sys
-    out = subprocess.run([sys.executable, "-c", _FIRST_REBUILD.format(d=dimensions)], capture_output=True,
-                         text=True, timeout=600)
+
+    out = subprocess.run([sys.executable, "-c", _FIRST_REBUILD.format(d=dimensions)],
+                         capture_output=True, text=True, timeout=600)
     assert out.returncode == 0, out.stderr
     assert "loaded: []" in out.stdout, out.stdout
 
 
-_FIRST_MESSAGES = _AFTER_WARM_UP + """
+_FIRST_MESSAGES = (
+    _AFTER_WARM_UP
+    + """
 from dataclasses import replace
 from itertools import product
 from circle_collision_msgs.msg import CircleState, CircleStateArray
 from circle_collision_ros.core.parallel_policy import threads_forced
-from circle_collision_ros.pipeline.state_codec import decode_states, encode_state, encode_state_array
+from circle_collision_ros.pipeline.state_codec import (
+    decode_states, encode_state, encode_state_array)
 from circle_collision_ros.pipeline.state_batch import StateBatch
 rng = np.random.default_rng(3)
 n, t = 40, 1_700_000_000 * 10**9
@@ -349,7 +403,8 @@ for threaded, uncertain, report_all in product((False, True), repeat=3):
                            acceleration=rng.normal(0, 0.2, (n, 3)), remove=np.zeros(n, dtype=bool),
                            covariance=cov if uncertain else None,
                            covariance_size=np.full(n, 36, np.int64) if uncertain else None)
-        node = CollisionPredictor(PredictorConfig(dimensions={d}, frame_id="odom", report_all_pairs=report_all))
+        node = CollisionPredictor(PredictorConfig(dimensions={d}, frame_id="odom",
+                                                  report_all_pairs=report_all))
         node.receive_batch(decode_states(encode_state_array(batch, t, "odom"), CircleStateArray), t)
         node.predict().to_cdr()
         for k in range(5):
@@ -358,11 +413,15 @@ for threaded, uncertain, report_all in product((False, True), repeat=3):
             node.predict().to_cdr()
 # a first prediction with no contact (bodies far apart), as a node's often is
 lonely = CollisionPredictor(PredictorConfig(dimensions={d}, frame_id="odom"))
-lonely.receive_batch(decode_states(encode_state_array(batch.select(np.array([0])), t, "odom"), CircleStateArray), t)
+lonely.receive_batch(
+    decode_states(encode_state_array(batch.select(np.array([0])), t, "odom"), CircleStateArray),
+    t,
+)
 assert len(lonely.predict().contacts) == 0
 lonely.predict().to_cdr()
 print("loaded:", loaded)
 """
+)
 
 
 @pytest.mark.parametrize("dimensions", [2, 3])
@@ -373,7 +432,8 @@ def test_warm_up_loads_the_message_path_kernels(dimensions) -> None:
     bench/bench_node.py's first scenario. Fresh process: earlier tests must not have loaded them."""
     import subprocess
     import sys
-    out = subprocess.run([sys.executable, "-c", _FIRST_MESSAGES.format(d=dimensions)], capture_output=True,
-                         text=True, timeout=600)
+
+    out = subprocess.run([sys.executable, "-c", _FIRST_MESSAGES.format(d=dimensions)],
+                         capture_output=True, text=True, timeout=600)
     assert out.returncode == 0, out.stderr
     assert "loaded: []" in out.stdout, out.stdout

@@ -22,10 +22,17 @@ from tests.node_helpers import BASE_NS, random_states, state
 
 def _as_row(data: bytes) -> tuple:
     b = decode_states(data, CircleState)
-    cov = () if b.covariance is None else tuple(b.covariance[0].tolist())[:int(b.covariance_size[0])]
-    return (int(b.stamp_ns[0]), b.frames[0], b.ids[0],
-            tuple(np.concatenate([b.radius, b.position[0], b.velocity[0], b.acceleration[0]]).tolist()),
-            bool(b.remove[0]), cov)
+    cov = (
+        () if b.covariance is None else tuple(b.covariance[0].tolist())[: int(b.covariance_size[0])]
+    )
+    return (
+        int(b.stamp_ns[0]),
+        b.frames[0],
+        b.ids[0],
+        tuple(np.concatenate([b.radius, b.position[0], b.velocity[0], b.acceleration[0]]).tolist()),
+        bool(b.remove[0]),
+        cov,
+    )
 
 
 def test_group_decoder_matches_decode_states_on_valid_messages() -> None:
@@ -70,14 +77,20 @@ def test_group_equals_one_by_one_ingestion_with_repeated_bodies() -> None:
     messages = []
     for k in range(60):  # 20 bodies, three states each, interleaved; one removal
         body = f"b{k % 20:02d}"
-        messages.append(serialize_message(state(body, (3.0 * (k % 20), 0.0), (-1.0 * (k % 2), 0, 0),
-                                                stamp_ns=BASE_NS + k * 1000,
-                                                remove=(k == 45))))
+        messages.append(
+            serialize_message(
+                state(body, (3.0 * (k % 20), 0.0), (-1.0 * (k % 2), 0, 0),
+                      stamp_ns=BASE_NS + k * 1000, remove=(k == 45))
+            )
+        )
     grouped = CollisionPredictor(PredictorConfig())
     outcome = ingest_single_states(grouped, messages, now)
     assert not any(outcome.errors)
     assert sum(len(r.rejected) for r in outcome.reports) == 0
-    assert sum(r.accepted for r in outcome.reports) == 59 and sum(r.removed for r in outcome.reports) == 1
+    assert (
+        sum(r.accepted for r in outcome.reports) == 59
+        and sum(r.removed for r in outcome.reports) == 1
+    )
     single = CollisionPredictor(PredictorConfig())
     for data in messages:
         single.receive_batch(decode_states(data, CircleState), now)

@@ -21,13 +21,15 @@ def nudge_first_contact(record) -> bytes:
         return record.data
     layout = RecordedLayout.has_uncertainty(record.schema)
     before = decode_prediction_array(record.data, uncertainty=layout)
-    k = next((k for k, p in enumerate(before.predictions) if 0 < p.time_to_collision < math.inf), None)
+    k = next(
+        (k for k, p in enumerate(before.predictions) if 0 < p.time_to_collision < math.inf), None
+    )
     if k is None:
         return record.data
     old = before.predictions[k].time_to_collision
     new = float(np.nextafter(old, math.inf))
     at = record.data.find(struct.pack("<d", old), 4)
-    data = record.data[:at] + struct.pack("<d", new) + record.data[at + 8:]
+    data = record.data[:at] + struct.pack("<d", new) + record.data[at + 8 :]
     after = decode_prediction_array(data, uncertainty=layout)
     rows = list(before.predictions)
     rows[k] = rows[k]._replace(time_to_collision=new)

@@ -1,4 +1,5 @@
-"""A small replay corpus built from the recorded test bags (real node runs), for corpus and plugin tests."""
+"""A small replay corpus from the recorded test bags (real node runs), for corpus/plugin tests."""
+
 from __future__ import annotations
 
 import shutil
@@ -13,8 +14,9 @@ from tests.recording.bag_edits import nudge_first_contact
 DATA = Path(__file__).resolve().parents[1] / "data"
 
 
-def copy_bag(source: Path, out: Path, keep_predictions: int | None = None,
-             change: Callable | None = None) -> Path:
+def copy_bag(
+    source: Path, out: Path, keep_predictions: int | None = None, change: Callable | None = None
+) -> Path:
     """Copy a bag record by record: the first `keep_predictions` predictions and what precedes them.
 
     A prefix of a recording replays exactly as the whole did up to that point,
@@ -28,7 +30,8 @@ def copy_bag(source: Path, out: Path, keep_predictions: int | None = None,
     predictions = 0
     with BagRecorder(out) as rec:
         for info in contents.topics.values():
-            rec.add_topic(info.topic, info.type_name, definition=info.definition)  # the bytes' own layout
+            # the bytes' own layout
+            rec.add_topic(info.topic, info.type_name, definition=info.definition)
         for r in contents.records():
             if r.type_name == RecordedTypes.PREDICTIONS:
                 predictions += 1
@@ -39,11 +42,11 @@ def copy_bag(source: Path, out: Path, keep_predictions: int | None = None,
 
 
 class Corpus(NamedTuple):
-    root: Path                 # parent folder holding everything below
-    identical: list[Path]      # short copies of the recorded bags, in nested folders
-    mismatch: Path             # a bag with one-ulp changes in its recorded predictions
-    truncated: Path            # a .mcap cut in half
-    not_a_bag: Path            # a text file named like a recording
+    root: Path  # parent folder holding everything below
+    identical: list[Path]  # short copies of the recorded bags, in nested folders
+    mismatch: Path  # a bag with one-ulp changes in its recorded predictions
+    truncated: Path  # a .mcap cut in half
+    not_a_bag: Path  # a text file named like a recording
 
 
 @pytest.fixture(scope="session")

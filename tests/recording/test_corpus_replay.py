@@ -1,4 +1,4 @@
-"""`replay` over a corpus: discovery, summary, exit codes, JUnit, progress, dead workers, Ctrl-C, Dask.
+"""`replay` on a corpus: discovery, summary, exit code, JUnit, progress, dead workers, Ctrl-C, Dask.
 
 Guarantees proved here (all through the real `replay` command in a subprocess):
 - any mix of bag dirs, parent folders (searched recursively), .mcap files and
@@ -12,13 +12,17 @@ Guarantees proved here (all through the real `replay` command in a subprocess):
 - a progress bar on a terminal, plain lines otherwise;
 - the same corpus on a Dask LocalCluster (addressed like a real cluster) gives
   the same verdicts, and killing its workers mid-run loses no bag.
+The killed-worker tests (local and Dask) are marked stress: they run under --stress (CI);
+the default run keeps one Dask run (the only test of --cluster).
 """
+
 from __future__ import annotations
 
 import fcntl
 import os
 import pty
 import re
+import shutil
 import signal
 import struct
 import subprocess
@@ -37,8 +41,11 @@ def _rows(stdout: str) -> dict[str, str]:
     rows = {}
     lines = stdout.splitlines()
     start = next(i for i, line in enumerate(lines) if line.startswith("bag "))
-    for line in lines[start + 1:]:
-        m = re.match(r"^(\S+)\s+\d+\s+\d+\s+\d+\s+\S+\s+(identical|mismatch|unreadable|failed|not run)(.*)$", line)
+    for line in lines[start + 1 :]:
+        m = re.match(
+            r"^(\S+)\s+\d+\s+\d+\s+\d+\s+\S+\s+(identical|mismatch|unreadable|failed|not run)(.*)$",
+            line,
+        )
         if not m:
             break
         rows[m.group(1)] = m.group(2) + m.group(3)
@@ -52,10 +59,17 @@ def _replay(*args: str, timeout: float = 300) -> subprocess.CompletedProcess:
 def test_mixed_corpus_summary_exit_code_and_junit(small_corpus, tmp_path: Path) -> None:
     c = small_corpus
     junit = tmp_path / "replay.xml"
-    run = _replay(str(c.root / "robot_a"),                 # parent folder: two bags
-                  str(c.root / "robot_b" / "*"),           # glob: a nested folder and a bag
-                  str(c.truncated), str(c.not_a_bag),      # bad files named explicitly
-                  str(tmp_path / "missing"), "--jobs", "2", "--junit-xml", str(junit))
+    run = _replay(
+        str(c.root / "robot_a"),  # parent folder: two bags
+        str(c.root / "robot_b" / "*"),  # glob: a nested folder and a bag
+        str(c.truncated),
+        str(c.not_a_bag),  # bad files named explicitly
+        str(tmp_path / "missing"),
+        "--jobs",
+        "2",
+        "--junit-xml",
+        str(junit),
+    )
     assert run.returncode == 2, run.stdout + run.stderr
     assert "Traceback" not in run.stderr
     rows = _rows(run.stdout)
@@ -64,11 +78,20 @@ def test_mixed_corpus_summary_exit_code_and_junit(small_corpus, tmp_path: Path) 
                     str(tmp_path / "missing"): "unreadable"}
     # One line naming each bad path, and the first difference of the mismatch.
     assert re.search(rf"^unreadable: {re.escape(str(c.truncated))}: truncated", run.stdout, re.M)
-    assert re.search(rf"^unreadable: {re.escape(str(c.not_a_bag))}: not an MCAP file", run.stdout, re.M)
-    assert re.search(rf"^unreadable: {re.escape(str(tmp_path / 'missing'))}: no such file", run.stdout, re.M)
-    assert re.search(rf"^mismatch: {re.escape(str(c.mismatch))}: \d+ difference\(s\); first: prediction #\d+: "
-                     r"pair \(.*\) differs", run.stdout, re.M)
-    assert re.search(r"^total: 7 bags: 3 identical, 1 mismatch, 3 unreadable, 0 failed; \d+ inputs", run.stdout, re.M)
+    assert re.search(
+        rf"^unreadable: {re.escape(str(c.not_a_bag))}: not an MCAP file", run.stdout, re.M
+    )
+    assert re.search(
+        rf"^unreadable: {re.escape(str(tmp_path / 'missing'))}: no such file", run.stdout, re.M
+    )
+    assert re.search(
+        rf"^mismatch: {re.escape(str(c.mismatch))}: \d+ difference\(s\); first: prediction #\d+: "
+        r"pair \(.*\) differs",
+        run.stdout,
+        re.M,
+    )
+    assert re.search(r"^total: 7 bags: 3 identical, 1 mismatch, 3 unreadable, 0 failed; \d+ inputs",
+                     run.stdout, re.M)
     assert re.search(r"^wall time: [\d.]+ s \(2 local workers\)$", run.stdout, re.M)
     assert len(re.findall(r"^\[\d/7\] ", run.stdout, re.M)) == 7  # plain progress lines, not a bar
 
@@ -79,8 +102,10 @@ def test_mixed_corpus_summary_exit_code_and_junit(small_corpus, tmp_path: Path) 
     assert cases[str(c.mismatch)].find("failure") is not None
     assert "differs" in cases[str(c.mismatch)].find("failure").get("message")
     assert cases[str(c.truncated)].find("error").get("type") == "unreadable"
-    assert all(cases[str(b)].find("failure") is None and cases[str(b)].find("error") is None
-               for b in c.identical)
+    assert all(
+        cases[str(b)].find("failure") is None and cases[str(b)].find("error") is None
+        for b in c.identical
+    )
 
 
 def test_exit_codes_identical_and_mismatch(small_corpus, good_corpus: Path) -> None:
@@ -100,8 +125,9 @@ def test_single_bag_keeps_its_own_output(small_corpus) -> None:
 
 def _kill_on_start(args: list[str], kills: dict[str, int]) -> tuple[int, str, str]:
     """Run replay -v and SIGKILL the worker that starts bag B, kills[B] times."""
-    proc = subprocess.Popen(REPLAY + args + ["--verbose"], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                            text=True)
+    proc = subprocess.Popen(
+        REPLAY + args + ["--verbose"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True
+    )
     out = []
     for line in proc.stdout:
         out.append(line)
@@ -117,28 +143,40 @@ def _kill_on_start(args: list[str], kills: dict[str, int]) -> tuple[int, str, st
 def test_a_killed_worker_is_retried_once_then_the_bag_fails(small_corpus, tmp_path: Path) -> None:
     from tests.recording.conftest import DATA, copy_bag
 
-    once = copy_bag(DATA / "plain_2d", tmp_path / "killed_once")      # whole bags: ~1 s of work
+    once = copy_bag(DATA / "plain_2d", tmp_path / "killed_once")  # whole bags: ~1 s of work
     twice = copy_bag(DATA / "spheres_3d", tmp_path / "killed_twice")
     others = [str(b) for b in small_corpus.identical]
-    code, out, err = _kill_on_start([str(once), str(twice), *others, "--jobs", "2"],
-                                    {str(once): 1, str(twice): 2})
+    code, out, err = _kill_on_start(
+        [str(once), str(twice), *others, "--jobs", "2"], {str(once): 1, str(twice): 2}
+    )
     rows = _rows(out)
     assert code == 2, out + err
     assert rows[str(once)] == "identical (attempts: 2)"
     assert rows[str(twice)] == "failed (attempts: 2)"
     assert all(rows[b] == "identical" for b in others)
-    assert re.search(rf"^retry {re.escape(str(once))}: worker \d+ died \(signal SIGKILL\)", out, re.M)
-    assert re.search(rf"^failed: {re.escape(str(twice))}: worker \d+ died \(signal SIGKILL\) on each of 2",
-                     out, re.M)
+    assert re.search(
+        rf"^retry {re.escape(str(once))}: worker \d+ died \(signal SIGKILL\)", out, re.M
+    )
+    assert re.search(
+        rf"^failed: {re.escape(str(twice))}: worker \d+ died \(signal SIGKILL\) on each of 2",
+        out,
+        re.M,
+    )
 
 
 def test_ctrl_c_prints_the_partial_summary(small_corpus, tmp_path: Path) -> None:
     from tests.recording.conftest import DATA
 
-    bags = [str(b) for b in small_corpus.identical] + [str(DATA / name) for name in
-                                                        ("plain_2d", "spheres_3d", "bad_inputs_2d")] * 2
-    proc = subprocess.Popen(REPLAY + bags + ["--jobs", "1"], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                            text=True)
+    # Enough distinct bags that the replay is still running when the signal arrives (a bag
+    # given twice is replayed once): 40 copies of the recorded data, ~0.1 s of work each.
+    copies = []
+    for k in range(40):
+        name = ("plain_2d", "spheres_3d", "bad_inputs_2d")[k % 3]
+        copies.append(shutil.copytree(DATA / name, tmp_path / f"copy_{k:02d}_{name}"))
+    bags = [str(b) for b in small_corpus.identical] + [str(c) for c in copies]
+    proc = subprocess.Popen(
+        REPLAY + bags + ["--jobs", "1"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True
+    )
     first = proc.stdout.readline()
     assert first.startswith("[1/"), first
     proc.send_signal(signal.SIGINT)
@@ -175,6 +213,7 @@ def test_progress_bar_on_a_terminal(good_corpus: Path) -> None:
 
 # ---------------------------------------------------------------- Dask
 
+
 @pytest.fixture(scope="module")
 def dask_cluster():
     """A local Dask cluster of 2 worker processes, addressed like a remote one.
@@ -191,14 +230,16 @@ def dask_cluster():
             yield cluster
 
 
-@pytest.mark.stress
 def test_dask_cluster_gives_the_same_verdicts(small_corpus, dask_cluster, tmp_path: Path) -> None:
     c = small_corpus
     junit = tmp_path / "dask.xml"
-    run = _replay(str(c.root), "--cluster", dask_cluster.scheduler_address, "--junit-xml", str(junit))
+    run = _replay(
+        str(c.root), "--cluster", dask_cluster.scheduler_address, "--junit-xml", str(junit)
+    )
     assert run.returncode == 2, run.stdout + run.stderr
-    assert _rows(run.stdout) == {**{str(b): "identical" for b in c.identical}, str(c.mismatch): "mismatch",
-                                 str(c.truncated): "unreadable", str(c.not_a_bag): "unreadable"}
+    assert _rows(run.stdout) == {**{str(b): "identical" for b in c.identical},
+                                 str(c.mismatch): "mismatch", str(c.truncated): "unreadable",
+                                 str(c.not_a_bag): "unreadable"}
     assert f"(Dask cluster {dask_cluster.scheduler_address})" in run.stdout
     assert ET.parse(junit).getroot().get("tests") == "6"
 
@@ -209,7 +250,9 @@ def test_dask_workers_killed_mid_run_lose_no_bag(good_corpus: Path, dask_cluster
 
     from tests.recording.conftest import DATA
 
-    bags = [str(good_corpus)] + [str(DATA / name) for name in ("plain_2d", "spheres_3d", "bad_inputs_2d")]
+    bags = [str(good_corpus)] + [
+        str(DATA / name) for name in ("plain_2d", "spheres_3d", "bad_inputs_2d")
+    ]
     with Client(dask_cluster.scheduler_address) as client:
         client.run(lambda: __import__("circle_collision_ros.recording.replay"))  # warm the workers
         pids = list(client.run(os.getpid).values())
@@ -236,6 +279,6 @@ def test_find_bags_follows_symlinks_once(small_corpus, tmp_path: Path) -> None:
     (links / "a").symlink_to(small_corpus.identical[0])
     (links / "nested" / "b").symlink_to(small_corpus.identical[1])
     (links / "nested" / "again").symlink_to(small_corpus.identical[0])  # same bag twice
-    (links / "nested" / "loop").symlink_to(links)                       # a cycle
+    (links / "nested" / "loop").symlink_to(links)  # a cycle
     bags, problems = find_bags([str(links)])
     assert bags == [str(links / "a"), str(links / "nested" / "b")] and problems == []

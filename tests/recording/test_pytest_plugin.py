@@ -26,28 +26,37 @@ def test_registered_as_a_pytest11_entry_point() -> None:
 
 
 def test_replay_bags_gives_one_test_per_bag(pytester: pytest.Pytester, small_corpus) -> None:
-    result = pytester.runpytest_subprocess("--replay-bags", str(small_corpus.root), "-p", "no:cacheprovider",
-                                           "-v")
+    result = pytester.runpytest_subprocess(
+        "--replay-bags", str(small_corpus.root), "-p", "no:cacheprovider", "-v"
+    )
     result.assert_outcomes(passed=3, failed=3)
     for bag in small_corpus.identical:
         result.stdout.fnmatch_lines([f"*replay?{bag}? PASSED*"])
-    result.stdout.fnmatch_lines([
-        f"*replay?{small_corpus.mismatch}? FAILED*",
-        f"{small_corpus.mismatch}: * difference(s) in 30 predictions (largest time difference *",
-        "prediction #*: pair (*) differs (ttc *",
-    ])
+    result.stdout.fnmatch_lines(
+        [
+            f"*replay?{small_corpus.mismatch}? FAILED*",
+            f"{small_corpus.mismatch}: * difference(s) in 30 predictions "
+            "(largest time difference *",
+            "prediction #*: pair (*) differs (ttc *",
+        ]
+    )
     result.stdout.fnmatch_lines([f"unreadable: {small_corpus.truncated}: truncated*"])
     result.stdout.fnmatch_lines([f"unreadable: {small_corpus.not_a_bag}: not an MCAP file*"])
 
 
-def test_replay_bags_selects_with_k_and_passes_a_good_corpus(pytester: pytest.Pytester, good_corpus) -> None:
-    result = pytester.runpytest_subprocess("--replay-bags", str(good_corpus), "-k", "run_1",
-                                           "-p", "no:cacheprovider")
+def test_replay_bags_selects_with_k_and_passes_a_good_corpus(
+    pytester: pytest.Pytester, good_corpus
+) -> None:
+    result = pytester.runpytest_subprocess(
+        "--replay-bags", str(good_corpus), "-k", "run_1", "-p", "no:cacheprovider"
+    )
     result.assert_outcomes(passed=1, deselected=2)
     assert result.ret == 0
 
 
-def test_replay_bag_fixture_gives_per_prediction_access(pytester: pytest.Pytester, small_corpus) -> None:
+def test_replay_bag_fixture_gives_per_prediction_access(
+    pytester: pytest.Pytester, small_corpus
+) -> None:
     bag = small_corpus.identical[0]
     pytester.makepyfile(f'''
         import math
@@ -62,7 +71,8 @@ def test_replay_bag_fixture_gives_per_prediction_access(pytester: pytest.Pyteste
         def recorded_predictions():
             with open(next(BAG.glob("*.mcap")), "rb") as f:
                 reader = make_reader(f, decoder_factories=[DecoderFactory()])
-                return [m for _, c, _, m in reader.iter_decoded_messages(topics=["/collision_predictions"])]
+                return [m for _, c, _, m
+                        in reader.iter_decoded_messages(topics=["/collision_predictions"])]
 
 
         def test_custom_assertions(replay_bag):
@@ -94,8 +104,10 @@ def test_replay_bag_fixture_gives_per_prediction_access(pytester: pytest.Pyteste
 
 def test_loading_the_plugin_imports_no_ros_or_numba() -> None:
     """pytest loads it in every run of every project in the environment: it must stay cheap."""
-    code = ("import sys, circle_collision_ros.recording.pytest_plugin; "
-            "print(sorted({m.split('.')[0] for m in sys.modules} & {'rclpy', 'numba', 'numpy', "
-            "'circle_collision_msgs', 'distributed', 'tqdm'}))")
+    code = (
+        "import sys, circle_collision_ros.recording.pytest_plugin; "
+        "print(sorted({m.split('.')[0] for m in sys.modules} & {'rclpy', 'numba', 'numpy', "
+        "'circle_collision_msgs', 'distributed', 'tqdm'}))"
+    )
     run = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
     assert run.returncode == 0 and run.stdout.strip() == "[]", run.stdout + run.stderr

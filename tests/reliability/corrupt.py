@@ -97,9 +97,12 @@ def corrupted_message(draw, prefix: str, now_ns: int, offset: float = 0.0, dimen
     # Removal of a body from an earlier message (`removable`) or of an unknown id.
     taken = {b.id for b in bodies}
     if draw(st.booleans()):
-        target = draw(st.sampled_from([i for i in removable if i not in taken] or [f"{prefix}unknown"]))
-        bodies.append(Body(target, math.nan, (math.nan,) * 3, stamp_ns=now_ns, frame="odom",
-                           remove=True))
+        target = draw(
+            st.sampled_from([i for i in removable if i not in taken] or [f"{prefix}unknown"])
+        )
+        bodies.append(
+            Body(target, math.nan, (math.nan,) * 3, stamp_ns=now_ns, frame="odom", remove=True)
+        )
     order = draw(st.permutations(range(1, len(bodies))))
     bodies = [bodies[0]] + [bodies[k] for k in order]
     counts: dict[str, int] = {}

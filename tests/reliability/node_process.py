@@ -82,16 +82,22 @@ class Client:
         self.executor.add_node(self.node)
         self.predictions: list[tuple[float, CollisionPredictionArray]] = []  # (receive time, msg)
         self.diagnostics: list[dict] = []
-        self.node.create_subscription(CollisionPredictionArray, "collision_predictions",
-                                      self._on_raw_prediction if raw_predictions else self._on_prediction,
-                                      QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE),
-                                      raw=raw_predictions)
+        self.node.create_subscription(
+            CollisionPredictionArray,
+            "collision_predictions",
+            self._on_raw_prediction if raw_predictions else self._on_prediction,
+            QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE),
+            raw=raw_predictions,
+        )
         self.node.create_subscription(DiagnosticArray, "/diagnostics", self._on_diagnostics, 50)
-        qos = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE if reliable
-                         else ReliabilityPolicy.BEST_EFFORT)
+        qos = QoSProfile(
+            depth=1000,
+            reliability=ReliabilityPolicy.RELIABLE if reliable else ReliabilityPolicy.BEST_EFFORT,
+        )
         self.pub = self.node.create_publisher(CircleStateArray, "circle_states", qos)
-        self.single_pub = (self.node.create_publisher(CircleState, single_topic, qos)
-                           if single_topic else None)
+        self.single_pub = (
+            self.node.create_publisher(CircleState, single_topic, qos) if single_topic else None
+        )
 
     def _on_prediction(self, msg: CollisionPredictionArray) -> None:
         self.predictions.append((time.time(), msg))
@@ -104,8 +110,11 @@ class Client:
         for status in msg.status:
             if status.name.startswith("collision_node"):
                 values = {kv.key: kv.value for kv in status.values}
-                values["_level"] = int.from_bytes(status.level, "little") if isinstance(status.level, bytes) \
+                values["_level"] = (
+                    int.from_bytes(status.level, "little")
+                    if isinstance(status.level, bytes)
                     else int(status.level)
+                )
                 values["_message"] = status.message
                 self.diagnostics.append(values)
 
@@ -117,18 +126,25 @@ class Client:
             self.executor.spin_once(timeout_sec=0.02)
         return bool(until and until())
 
-    def wait_matched(self, timeout: float = 60.0) -> None:
-        assert self.spin(timeout, lambda: self.pub.get_subscription_count() > 0), \
+    def wait_matched(self, timeout: float = 180.0) -> None:
+        # Only a guard against a hang: a first start after a code change compiles the kernels
+        # (minutes on a loaded 2-core machine) before the node subscribes.
+        assert self.spin(timeout, lambda: self.pub.get_subscription_count() > 0), (
             "collision_node never subscribed"
+        )
 
-    def send_until_answered(self, data: bytes, stamp_ns: int, timeout: float = 20.0) -> CollisionPredictionArray:
+    def send_until_answered(
+        self, data: bytes, stamp_ns: int, timeout: float = 20.0
+    ) -> CollisionPredictionArray:
         """Publish raw bytes (re-sent each second: the first best-effort sample can be lost)
         until a prediction stamped `stamp_ns` arrives; returns it."""
+
         def answer():
             for _, msg in reversed(self.predictions):
                 if msg.header.stamp.sec * 10**9 + msg.header.stamp.nanosec == stamp_ns:
                     return msg
             return None
+
         deadline = time.monotonic() + timeout
         self.sends = 0  # how often it went out (a re-sent message counts its rejections again)
         while time.monotonic() < deadline:

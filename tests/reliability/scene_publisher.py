@@ -12,14 +12,14 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
 import signal
 import sys
 import time
 
 from circle_collision_ros.cli import apply_ros_environment_defaults  # noqa: E402
 
-apply_ros_environment_defaults()  # local discovery; large-scene transport profile, as our executables
+# local discovery; large-scene transport profile, as our executables
+apply_ros_environment_defaults()
 
 import rclpy  # noqa: E402
 from rclpy.qos import QoSProfile, ReliabilityPolicy  # noqa: E402
@@ -35,7 +35,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--rate", type=float, default=30.0)
     ap.add_argument("--seconds", type=float, default=10.0)
     ap.add_argument("--prefix", default="body_")
-    ap.add_argument("--area", type=float, default=0.0, help="square side in m (default: sqrt(40 m^2 x count), at least 30)")
+    ap.add_argument("--area", type=float, default=0.0,
+                    help="square side in m (default: sqrt(40 m^2 x count), at least 30)")
     ap.add_argument("--seed", type=int, default=1)
     ap.add_argument("--stamp-offset", type=float, default=0.0, help="s added to every stamp")
     ap.add_argument("--topic", default="circle_states")
@@ -45,8 +46,9 @@ def main(argv: list[str] | None = None) -> int:
     ids = [f"{opts.prefix}{k:05d}".encode() for k in range(opts.count)]
     rclpy.init()
     node = rclpy.create_node("scene_publisher")
-    pub = node.create_publisher(CircleStateArray, opts.topic,
-                                QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE))
+    pub = node.create_publisher(
+        CircleStateArray, opts.topic, QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
+    )
     stats = {"messages": 0, "states": 0, "first_stamp_ns": 0, "last_stamp_ns": 0, "late_ticks": 0}
     stop = {"now": False}
 

@@ -8,6 +8,7 @@ Guarantees proved here:
 - the byte strings that made the old code crash (SIGSEGV inside rclpy's
   deserializer, ValueError for 2-3 byte CircleStates) are now CdrError; the
   SIGSEGV itself is shown in a subprocess so that this session survives it.
+Example counts: a quick sample by default, the full counts under --stress (tests/stress.py).
 """
 from __future__ import annotations
 
@@ -28,6 +29,7 @@ from circle_collision_ros.pipeline.cdr import CdrError
 from circle_collision_ros.pipeline.state_codec import decode_states
 from circle_collision_ros.pipeline.state_batch import StateBatch
 from tests.reliability.conftest import tally
+from tests.stress import examples
 from tests.reliability.wire import Body, encode_array, encode_state
 from tests.node_helpers import random_states, state_array
 
@@ -38,7 +40,8 @@ RCLPY_CRASHERS = [(b"\x00\x00\x90\xfa", "CircleState"), (b"\x00\x00\x90\xfa", "C
                   (b"\x00\x01\x90\xfa", "CircleStateArray")]
 SHORT = [b"", b"\x00", b"\x00\x01", b"\x00\x01\x00", b"\x00\x00\x00"]
 
-FUZZ = settings(max_examples=1500, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+FUZZ = settings(max_examples=examples(150, 1500), deadline=None,
+                suppress_health_check=[HealthCheck.too_slow])
 
 _VALID = [serialize_message(state_array(random_states(n, seed=n))) for n in (0, 1, 3, 7)]
 _WITH_COVARIANCE = state_array(random_states(4, seed=5))
@@ -119,7 +122,9 @@ def test_short_buffers_are_cdr_errors(data: bytes) -> None:
             decode_states(data, msg_type)
 
 
-@pytest.mark.parametrize("data, type_name", RCLPY_CRASHERS, ids=lambda x: x.hex() if isinstance(x, bytes) else x)
+@pytest.mark.parametrize(
+    "data, type_name", RCLPY_CRASHERS, ids=lambda x: x.hex() if isinstance(x, bytes) else x
+)
 def test_rclpy_crashers_are_cdr_errors_and_crash_rclpy(data: bytes, type_name: str) -> None:
     msg_type = {"CircleState": CircleState, "CircleStateArray": CircleStateArray}[type_name]
     with pytest.raises(CdrError):
@@ -127,9 +132,11 @@ def test_rclpy_crashers_are_cdr_errors_and_crash_rclpy(data: bytes, type_name: s
     if (data, type_name) != RCLPY_CRASHERS[0]:
         return  # the others crash less reliably or only after seconds of allocation
     # Why decode_states must never fall back to rclpy for untrusted bytes.
-    probe = ("from rclpy.serialization import deserialize_message\n"
-             "from circle_collision_msgs.msg import CircleState, CircleStateArray\n"
-             "try:\n    deserialize_message(%r, %s)\nexcept Exception:\n    pass\n" % (data, type_name))
+    probe = (
+        "from rclpy.serialization import deserialize_message\n"
+        "from circle_collision_msgs.msg import CircleState, CircleStateArray\n"
+        "try:\n    deserialize_message(%r, %s)\nexcept Exception:\n    pass\n" % (data, type_name)
+    )
     run = subprocess.run([sys.executable, "-c", probe], capture_output=True, timeout=60)
     assert run.returncode in (0, -11), run  # -11 (SIGSEGV) with rclpy 9.1.2 / Fast CDR 2
     if run.returncode == -11:
@@ -137,11 +144,15 @@ def test_rclpy_crashers_are_cdr_errors_and_crash_rclpy(data: bytes, type_name: s
 
 
 def _finite_or_special():
-    return st.one_of(st.floats(allow_nan=True, allow_infinity=True),
-                     st.sampled_from([0.0, -0.0, 5e-324, -1e308, 1e308]))
+    return st.one_of(
+        st.floats(allow_nan=True, allow_infinity=True),
+        st.sampled_from([0.0, -0.0, 5e-324, -1e308, 1e308]),
+    )
 
 
-_text = st.text(st.characters(blacklist_categories=("Cs",), blacklist_characters="\x00"), max_size=40)
+_text = st.text(
+    st.characters(blacklist_categories=("Cs",), blacklist_characters="\x00"), max_size=40
+)
 
 
 @st.composite
@@ -150,50 +161,62 @@ def _messages(draw):
     circles = []
     for _ in range(n):
         s = CircleState()
-        s.header = Header(stamp=Time(sec=draw(st.integers(-2**31, 2**31 - 1)),
-                                     nanosec=draw(st.integers(0, 2**32 - 1))), frame_id=draw(_text))
+        s.header = Header(
+            stamp=Time(
+                sec=draw(st.integers(-(2**31), 2**31 - 1)), nanosec=draw(st.integers(0, 2**32 - 1))
+            ),
+            frame_id=draw(_text),
+        )
         s.id = draw(_text)
         s.radius = draw(_finite_or_special())
         for vec in (s.position, s.velocity, s.acceleration):
             vec.x, vec.y, vec.z = (draw(_finite_or_special()) for _ in range(3))
         s.remove = draw(st.booleans())
         # empty, the full 6x6, or a wrong length (decoded, then rejected by validation)
-        s.covariance = draw(st.one_of(st.just([]), st.lists(_finite_or_special(), min_size=36, max_size=36),
-                                      st.lists(_finite_or_special(), min_size=1, max_size=35)))
+        s.covariance = draw(
+            st.one_of(st.just([]), st.lists(_finite_or_special(), min_size=36, max_size=36),
+                      st.lists(_finite_or_special(), min_size=1, max_size=35))
+        )
         circles.append(s)
-    return CircleStateArray(header=Header(stamp=Time(sec=draw(st.integers(0, 2**31 - 1))),
-                                          frame_id=draw(_text)), circles=circles)
+    return CircleStateArray(
+        header=Header(stamp=Time(sec=draw(st.integers(0, 2**31 - 1))), frame_id=draw(_text)),
+        circles=circles,
+    )
 
 
-@settings(max_examples=300, deadline=None)
+@settings(max_examples=examples(50, 300), deadline=None)
 @given(_messages())
 def test_valid_bytes_decode_like_rclpy(msg: CircleStateArray) -> None:
     tally("examples")
     tally("states", len(msg.circles))
     data = serialize_message(msg)
-    _same(decode_states(data, CircleStateArray), deserialize_message(data, CircleStateArray), CircleStateArray)
+    _same(decode_states(data, CircleStateArray), deserialize_message(data, CircleStateArray),
+          CircleStateArray)
     for s in msg.circles[:2]:
         one = serialize_message(s)
         _same(decode_states(one, CircleState), deserialize_message(one, CircleState), CircleState)
 
 
-@settings(max_examples=200, deadline=None)
+@settings(max_examples=examples(40, 200), deadline=None)
 @given(_messages())
 def test_big_endian_decodes_like_little_endian(msg: CircleStateArray) -> None:
     """Our own big-endian encoding (rclpy writes only little endian) decodes to the same
     batch as rclpy's little-endian bytes; rclpy reads the big-endian bytes the same too."""
     tally("examples")
     stamp = msg.header.stamp.sec * 10**9
-    bodies = [Body(s.id, s.radius, (s.position.x, s.position.y, s.position.z),
-                   (s.velocity.x, s.velocity.y, s.velocity.z),
-                   (s.acceleration.x, s.acceleration.y, s.acceleration.z),
-                   0, s.header.frame_id, s.remove, stamp=(s.header.stamp.sec, s.header.stamp.nanosec),
-                   covariance=tuple(s.covariance))
-              for s in msg.circles]
+    bodies = [
+        Body(s.id, s.radius, (s.position.x, s.position.y, s.position.z),
+             (s.velocity.x, s.velocity.y, s.velocity.z),
+             (s.acceleration.x, s.acceleration.y, s.acceleration.z), 0, s.header.frame_id, s.remove,
+             stamp=(s.header.stamp.sec, s.header.stamp.nanosec), covariance=tuple(s.covariance))
+        for s in msg.circles
+    ]
     be = encode_array(bodies, stamp, msg.header.frame_id, big_endian=True)
     le = serialize_message(msg)
-    _same(decode_states(be, CircleStateArray), deserialize_message(le, CircleStateArray), CircleStateArray)
-    _same(decode_states(be, CircleStateArray), deserialize_message(be, CircleStateArray), CircleStateArray)
+    _same(decode_states(be, CircleStateArray), deserialize_message(le, CircleStateArray),
+          CircleStateArray)
+    _same(decode_states(be, CircleStateArray), deserialize_message(be, CircleStateArray),
+          CircleStateArray)
     if bodies:
         one = encode_state(bodies[0], big_endian=True)
         _same(decode_states(one, CircleState), msg.circles[0], CircleState)
@@ -202,11 +225,13 @@ def test_big_endian_decodes_like_little_endian(msg: CircleStateArray) -> None:
 def test_our_encoder_matches_rclpy() -> None:
     """The fuzzers' and the soak's encoder (tests/reliability/wire.py) is itself right."""
     states = random_states(5, seed=4)
-    bodies = [Body(s.id, s.radius, (s.position.x, s.position.y, s.position.z),
-                   (s.velocity.x, s.velocity.y, s.velocity.z),
-                   (s.acceleration.x, s.acceleration.y, s.acceleration.z),
-                   s.header.stamp.sec * 10**9 + s.header.stamp.nanosec, s.header.frame_id)
-              for s in states]
+    bodies = [
+        Body(s.id, s.radius, (s.position.x, s.position.y, s.position.z),
+             (s.velocity.x, s.velocity.y, s.velocity.z),
+             (s.acceleration.x, s.acceleration.y, s.acceleration.z),
+             s.header.stamp.sec * 10**9 + s.header.stamp.nanosec, s.header.frame_id)
+        for s in states
+    ]
     msg = state_array(states)
     data = encode_array(bodies, msg.header.stamp.sec * 10**9 + msg.header.stamp.nanosec)
     got = deserialize_message(data, CircleStateArray)
@@ -220,12 +245,9 @@ def test_strings_decode_one_by_one_semantics() -> None:
     UTF-8, empty ids, an empty frame taking the array's, all frames equal or
     not, an id holding a NUL (the one-by-one fallback) -- and an invalid UTF-8 id
     is a CdrError naming UTF-8."""
-    cases = [
-        [Body("a"), Body("β-7"), Body(""), Body("日本語", frame="odom"), Body("x", frame="")],
-        [Body(f"b{k}") for k in range(50)],
-        [Body("n\x00ul"), Body("plain")],
-        [Body("solo", frame="")],
-    ]
+    cases = [[Body("a"), Body("β-7"), Body(""), Body("日本語", frame="odom"), Body("x", frame="")],
+             [Body(f"b{k}") for k in range(50)], [Body("n\x00ul"), Body("plain")],
+             [Body("solo", frame="")]]
     for bodies in cases:
         data = encode_array(bodies, 10**9, "arrayframe")
         batch = decode_states(data, CircleStateArray)

@@ -9,6 +9,7 @@ field, every bad-value class, see tests/reliability/corrupt.py):
 - removals, late and duplicated states are counted the same way.
 A body far outside the core's input range (radius 1e160) used to be accepted
 and silently hid two overlapping pairs; see test_huge_radius_is_rejected.
+Example counts: a quick sample by default, the full counts under --stress (tests/stress.py).
 """
 from __future__ import annotations
 
@@ -21,6 +22,7 @@ from circle_collision_msgs.msg import CircleStateArray
 from circle_collision_ros.pipeline.state_codec import decode_states
 from circle_collision_ros.pipeline.predictor import CollisionPredictor, PredictorConfig
 from tests.reliability.conftest import tally
+from tests.stress import examples
 from tests.reliability.corrupt import corrupted_message
 from tests.reliability.wire import Body, encode_array
 from tests.node_helpers import BASE_NS
@@ -50,7 +52,8 @@ def message_sequences(draw):
     return dims, messages
 
 
-@settings(max_examples=600, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@settings(max_examples=examples(60, 600), deadline=None,
+          suppress_health_check=[HealthCheck.too_slow])
 @given(message_sequences())
 def test_bad_states_rejected_exactly_and_without_effect(seq) -> None:
     dims, messages = seq
@@ -61,14 +64,16 @@ def test_bad_states_rejected_exactly_and_without_effect(seq) -> None:
         tally("messages")
         tally("states", len(bodies))
         tally("bad_states", len(bad))
-        report = mixed.receive_batch(decode_states(encode_array(bodies, now), CircleStateArray), now)
+        report = mixed.receive_batch(
+            decode_states(encode_array(bodies, now), CircleStateArray), now
+        )
         good = [b for k, b in enumerate(bodies) if k not in bad]
         clean = twin.receive_batch(decode_states(encode_array(good, now), CircleStateArray), now)
         assert sorted(r.index for r in report.rejected) == bad, [r.reason for r in report.rejected]
         assert all(r.reason for r in report.rejected)
         assert not clean.rejected
-        assert (report.accepted, report.removed, report.ignored) == \
-            (clean.accepted, clean.removed, clean.ignored)
+        assert (report.accepted, report.removed, report.ignored) == (clean.accepted, clean.removed,
+                                                                     clean.ignored)
         rows, data = _rows(mixed)
         twin_rows, twin_data = _rows(twin)
         assert rows == twin_rows
@@ -81,11 +86,16 @@ def test_huge_radius_is_rejected() -> None:
     """A radius of 1e160 (finite, beyond the core's range) overlapping two bodies used to be
     accepted and predicted as no contact at all; now it is rejected with a reason."""
     now = BASE_NS
-    bodies = [Body("big", 1e160, (0.0, 0.0, 0.0), stamp_ns=now), Body("b", 0.5, (3.0, 0.0, 0.0), stamp_ns=now),
+    bodies = [Body("big", 1e160, (0.0, 0.0, 0.0), stamp_ns=now),
+              Body("b", 0.5, (3.0, 0.0, 0.0), stamp_ns=now),
               Body("c", 0.5, (-3.0, 0.0, 0.0), stamp_ns=now)]
     predictor = CollisionPredictor(PredictorConfig(horizon=5.0, frame_id="map"))
-    report = predictor.receive_batch(decode_states(encode_array(bodies, now), CircleStateArray), now)
-    assert [(r.body_id, r.reason) for r in report.rejected] == [("big", "radius is 1e+160, beyond 1e+12")]
+    report = predictor.receive_batch(
+        decode_states(encode_array(bodies, now), CircleStateArray), now
+    )
+    assert [(r.body_id, r.reason) for r in report.rejected] == [
+        ("big", "radius is 1e+160, beyond 1e+12")
+    ]
     assert report.accepted == 2
 
 
@@ -97,7 +107,9 @@ def test_huge_acceleration_with_old_stamp_stays_predictable() -> None:
               Body("a", 0.5, (0.0, 0.0, 0.0), v=(1.0, 0.0, 0.0), stamp_ns=now),
               Body("b", 0.5, (3.0, 0.0, 0.0), stamp_ns=now)]
     predictor = CollisionPredictor(PredictorConfig(horizon=5.0, frame_id="map"))
-    report = predictor.receive_batch(decode_states(encode_array(bodies, now), CircleStateArray), now)
+    report = predictor.receive_batch(
+        decode_states(encode_array(bodies, now), CircleStateArray), now
+    )
     assert report.accepted == 3
     rows, _ = _rows(predictor)
     assert [(r[0], r[1], r[3]) for r in rows] == [("a", "b", 2.0)]

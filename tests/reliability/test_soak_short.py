@@ -30,9 +30,9 @@ def _soak_module():
 @pytest.mark.stress
 def test_soak_30_seconds(tmp_path: Path) -> None:
     result = _soak_module().soak(SECONDS, BODIES, RATE, warmup=5.0, log_dir=tmp_path)
-    for key in ("bodies", "rate_hz", "seconds", "inputs_sent", "inputs_received_by_node", "dropped_inputs",
-                "predictions_received", "dropped_output", "max_gap_s", "rss_kb_start", "rss_kb_end",
-                "rss_growth_pct"):
+    for key in ("bodies", "rate_hz", "seconds", "inputs_sent", "inputs_received_by_node",
+                "dropped_inputs", "predictions_received", "dropped_output", "max_gap_s",
+                "rss_kb_start", "rss_kb_end", "rss_growth_pct"):
         fact(key, result[key])
     for part in ("latency_first_third", "latency_last_third"):
         fact(f"{part}_p50_ms", result[part]["p50_ms"])

@@ -59,7 +59,9 @@ def test_share_holds_package_xml_launch_and_config() -> None:
     assert (share / "package.xml").read_text() == (ROOT / "package.xml").read_text()
     for dest, files in SETUP["data_files"]:
         for f in files:
-            assert (Path(sys.prefix) / dest / Path(f).name).is_file(), f"{f} not installed to {dest}"
+            assert (Path(sys.prefix) / dest / Path(f).name).is_file(), (
+                f"{f} not installed to {dest}"
+            )
     assert list((share / "launch").glob("*.launch.py")), "no launch file installed"
     assert list((share / "config").glob("*.yaml")), "no parameter file installed"
 

@@ -60,7 +60,7 @@ def _push(I, J, k, i, j):
 
 @njit(cache=True, inline="always")
 def _consider(I, J, k, n_box, i, j, lo, hi, p, v, a, r, tref, t_start, t_end, use_rel):
-    """Keep pair (i, j) if its boxes overlap (counted) and, with use_rel, the relative test passes."""
+    """Keep (i, j) if its boxes overlap (counted) and, with use_rel, the relative test passes."""
     if not _boxes_overlap(lo, hi, i, j):
         return I, J, k, n_box
     a_ = min(i, j)
@@ -86,7 +86,7 @@ def grid_kernel(lo, hi, cell, origin, p, v, a, r, tref, t_start, t_end, use_rel,
             h_ = np.int64(math.floor((hi[i, k] - origin[k]) / cell))
             clo[i, k] = l_
             chi[i, k] = h_
-            c *= (h_ - l_ + 1)
+            c *= h_ - l_ + 1
             if c > max_cells:
                 c = max_cells + 1
             span[k] = max(span[k], h_ + 1)
@@ -145,8 +145,9 @@ def grid_kernel(lo, hi, cell, origin, p, v, a, r, tref, t_start, t_end, use_rel,
                         mine = False
                         break
                 if mine:
-                    I, J, k_out, n_box = _consider(I, J, k_out, n_box, i, j, lo, hi, p, v, a, r,
-                                                   tref, t_start, t_end, use_rel)
+                    I, J, k_out, n_box = _consider(
+                        I, J, k_out, n_box, i, j, lo, hi, p, v, a, r, tref, t_start, t_end, use_rel
+                    )
         s = t
     # bodies too large for the grid: test against everyone
     for i in range(n):
@@ -155,8 +156,9 @@ def grid_kernel(lo, hi, cell, origin, p, v, a, r, tref, t_start, t_end, use_rel,
         for j in range(n):
             if j == i or (big[j] and j < i):
                 continue
-            I, J, k_out, n_box = _consider(I, J, k_out, n_box, i, j, lo, hi, p, v, a, r, tref,
-                                           t_start, t_end, use_rel)
+            I, J, k_out, n_box = _consider(
+                I, J, k_out, n_box, i, j, lo, hi, p, v, a, r, tref, t_start, t_end, use_rel
+            )
     return I[:k_out].copy(), J[:k_out].copy(), n_box
 
 
@@ -184,6 +186,7 @@ def choose_cell_size(lo: np.ndarray, hi: np.ndarray) -> tuple[float, np.ndarray]
 # ---------------------------------------------------------------------------
 # hashed grid for incremental (per body) neighbour queries
 # ---------------------------------------------------------------------------
+
 
 @njit(cache=True, inline="always")
 def _hash_cell(idx):
@@ -218,7 +221,7 @@ def cell_keys(lo, hi, cell, max_cells):
                 h_ = 0.0
             clo[i, k] = np.int64(l_)
             chi[i, k] = np.int64(h_)
-            c *= (chi[i, k] - clo[i, k] + 1)
+            c *= chi[i, k] - clo[i, k] + 1
             if c > max_cells:
                 c = max_cells + 1
         if c > max_cells:

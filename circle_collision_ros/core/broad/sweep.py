@@ -14,8 +14,10 @@ import math
 import numpy as np
 from numba import njit, prange
 
-from circle_collision_ros.core.broad.grid import MAX_CELLS_PER_BODY, choose_cell_size, grid_kernel, grow
-from circle_collision_ros.core.broad.relative import PARALLEL_MIN_PAIRS, gather_states, rel_mask, rel_mask_par
+from circle_collision_ros.core.broad.grid import (MAX_CELLS_PER_BODY, choose_cell_size, grid_kernel,
+                                                  grow)
+from circle_collision_ros.core.broad.relative import (PARALLEL_MIN_PAIRS, gather_states, rel_mask,
+                                                      rel_mask_par)
 from circle_collision_ros.core.parallel_policy import threads_pay
 
 __all__ = ["candidate_pairs", "PARALLEL_MIN_BODIES"]
@@ -213,7 +215,7 @@ def _sweep_strips_par(lo, hi, ax, first, start, body):
     cnt = np.empty(G, dtype=np.int64)
     for g in prange(G):
         cnt[g] = _sweep_strip_range(lx, hx, elo, ehi, fs, start, kcut[g], kcut[g + 1],
-                                    S[off[g]:off[g + 1]], T[off[g]:off[g + 1]], 0)
+                                    S[off[g] : off[g + 1]], T[off[g] : off[g + 1]], 0)
     for g in range(G):
         if cnt[g] < 0:
             return _sweep_strips(lo, hi, ax, first, start, body)
@@ -282,8 +284,8 @@ def _sweep(lo, hi, p, v, a, r, tref, t_start, t_end, use_rel):
     return body[S], body[T], n_box
 
 
-def candidate_pairs(lo: np.ndarray, hi: np.ndarray, *, p=None, v=None, a=None, r=None,
-                    tref=None, t_start: float = 0.0, t_end: float = 0.0,
+def candidate_pairs(lo: np.ndarray, hi: np.ndarray, *, p=None, v=None, a=None, r=None, tref=None,
+                    t_start: float = 0.0, t_end: float = 0.0,
                     method: str = "sweep") -> tuple[np.ndarray, np.ndarray, int]:
     """Pairs ``(i, j)``, ``i < j``, whose bounds overlap (and that pass the relative test).
 
@@ -319,5 +321,5 @@ def candidate_pairs(lo: np.ndarray, hi: np.ndarray, *, p=None, v=None, a=None, r
     if method == "grid":
         cell, origin = choose_cell_size(lo, hi)
         return grid_kernel(lo, hi, cell, origin, p, v, a, r, tref, float(t_start), float(t_end),
-                            use_rel, MAX_CELLS_PER_BODY)
+                           use_rel, MAX_CELLS_PER_BODY)
     raise ValueError(f"unknown broad-phase method {method!r}")

@@ -308,16 +308,17 @@ def certified_pair3(pax, pay, paz, vax, vay, vaz, aax, aay, aaz, r_a,
     if straight or horizon < INF:
         chk = (pax + pay + paz + vax + vay + vaz + aax + aay + aaz + r_a
                + pbx + pby + pbz + vbx + vby + vbz + abx + aby + abz + r_b)
-        Ph, Pl, Vh, Vl, Ah, Al, Rh, Rl, fine = rel3(pax, pay, paz, vax, vay, vaz, aax, aay, aaz, r_a,
-                                                     pbx, pby, pbz, vbx, vby, vbz, abx, aby, abz, r_b)
+        Ph, Pl, Vh, Vl, Ah, Al, Rh, Rl, fine = rel3(pax, pay, paz, vax, vay, vaz, aax, aay, aaz,
+                                                    r_a, pbx, pby, pbz, vbx, vby, vbz, abx, aby,
+                                                    abz, r_b)
         h = horizon if (valid_row(chk, r_a, r_b, horizon) & fine) else NAN
         if straight:
             t = straight_rel(Ph, Pl, Vh, Vl, Ah, Al, Rh, Rl, h)
         else:
             t = fast_rel(Ph, Pl, Vh, Vl, Ah, Al, Rh, Rl, h)
     if t == UNDECIDED:
-        t = robust_pair3(pax, pay, paz, vax, vay, vaz, aax, aay, aaz, r_a,
-                          pbx, pby, pbz, vbx, vby, vbz, abx, aby, abz, r_b, horizon)
+        t = robust_pair3(pax, pay, paz, vax, vay, vaz, aax, aay, aaz, r_a, pbx, pby, pbz, vbx, vby,
+                         vbz, abx, aby, abz, r_b, horizon)
     return t
 
 
@@ -327,42 +328,47 @@ def certified_pair2(pax, pay, vax, vay, aax, aay, r_a, pbx, pby, vbx, vby, abx, 
     t = UNDECIDED
     straight = (aax == abx) & (aay == aby)
     if straight or horizon < INF:
-        chk = (pax + pay + vax + vay + aax + aay + r_a + pbx + pby + vbx + vby + abx + aby + r_b)
-        Ph, Pl, Vh, Vl, Ah, Al, Rh, Rl, fine = rel2(pax, pay, vax, vay, aax, aay, r_a,
-                                                     pbx, pby, vbx, vby, abx, aby, r_b)
+        chk = pax + pay + vax + vay + aax + aay + r_a + pbx + pby + vbx + vby + abx + aby + r_b
+        Ph, Pl, Vh, Vl, Ah, Al, Rh, Rl, fine = rel2(
+            pax, pay, vax, vay, aax, aay, r_a, pbx, pby, vbx, vby, abx, aby, r_b
+        )
         h = horizon if (valid_row(chk, r_a, r_b, horizon) & fine) else NAN
         if straight:
             t = straight_rel(Ph, Pl, Vh, Vl, Ah, Al, Rh, Rl, h)
         else:
             t = fast_rel(Ph, Pl, Vh, Vl, Ah, Al, Rh, Rl, h)
     if t == UNDECIDED:
-        t = robust_pair2(pax, pay, vax, vay, aax, aay, r_a, pbx, pby, vbx, vby, abx, aby, r_b, horizon)
+        t = robust_pair2(
+            pax, pay, vax, vay, aax, aay, r_a, pbx, pby, vbx, vby, abx, aby, r_b, horizon
+        )
     return t
 
 
 @njit(cache=True, error_model="numpy")
-def ttc_scalar(pax, pay, paz, vax, vay, vaz, aax, aay, aaz, r_a,
-                pbx, pby, pbz, vbx, vby, vbz, abx, aby, abz, r_b, horizon):
+def ttc_scalar(pax, pay, paz, vax, vay, vaz, aax, aay, aaz, r_a, pbx, pby, pbz, vbx, vby, vbz, abx,
+               aby, abz, r_b, horizon):
     """First-contact time of one pair (numba-callable, same contract and
     bitwise the same result as ``time_to_collision``; pass 0.0 for z in
     2-D).  NaN for invalid input."""
-    t = certified_pair3(pax, pay, paz, vax, vay, vaz, aax, aay, aaz, r_a,
-                         pbx, pby, pbz, vbx, vby, vbz, abx, aby, abz, r_b, horizon)
+    t = certified_pair3(pax, pay, paz, vax, vay, vaz, aax, aay, aaz, r_a, pbx, pby, pbz, vbx, vby,
+                        vbz, abx, aby, abz, r_b, horizon)
     if t == UNDECIDED:
         with objmode(t="float64"):
-            t = _exact_pair(pax, pay, paz, vax, vay, vaz, aax, aay, aaz, r_a,
-                            pbx, pby, pbz, vbx, vby, vbz, abx, aby, abz, r_b, horizon)
+            t = _exact_pair(pax, pay, paz, vax, vay, vaz, aax, aay, aaz, r_a, pbx, pby, pbz, vbx,
+                            vby, vbz, abx, aby, abz, r_b, horizon)
     return t
 
 
 @njit(cache=True, error_model="numpy")
 def ttc_scalar2(pax, pay, vax, vay, aax, aay, r_a, pbx, pby, vbx, vby, abx, aby, r_b, horizon):
     """Planar twin of ``ttc_scalar`` (bitwise the same result with z = 0)."""
-    t = certified_pair2(pax, pay, vax, vay, aax, aay, r_a, pbx, pby, vbx, vby, abx, aby, r_b, horizon)
+    t = certified_pair2(
+        pax, pay, vax, vay, aax, aay, r_a, pbx, pby, vbx, vby, abx, aby, r_b, horizon
+    )
     if t == UNDECIDED:
         with objmode(t="float64"):
-            t = _exact_pair(pax, pay, 0.0, vax, vay, 0.0, aax, aay, 0.0, r_a,
-                            pbx, pby, 0.0, vbx, vby, 0.0, abx, aby, 0.0, r_b, horizon)
+            t = _exact_pair(pax, pay, 0.0, vax, vay, 0.0, aax, aay, 0.0, r_a, pbx, pby, 0.0, vbx,
+                            vby, 0.0, abx, aby, 0.0, r_b, horizon)
     return t
 
 
@@ -424,20 +430,46 @@ def _as_rows(x: np.ndarray, batch: tuple, n: int, D: int) -> np.ndarray:
 def _rows_ok(p_a, v_a, a_a, r_a, p_b, v_b, a_b, r_b) -> bool:
     """True if the inputs are already what the kernels take: C-contiguous
     float64 ndarrays, vectors (n, D) with D in {2, 3}, radii (n,)."""
-    if not (type(p_a) is _ND and type(v_a) is _ND and type(a_a) is _ND and type(r_a) is _ND
-            and type(p_b) is _ND and type(v_b) is _ND and type(a_b) is _ND and type(r_b) is _ND):
+    if not (
+        type(p_a) is _ND
+        and type(v_a) is _ND
+        and type(a_a) is _ND
+        and type(r_a) is _ND
+        and type(p_b) is _ND
+        and type(v_b) is _ND
+        and type(a_b) is _ND
+        and type(r_b) is _ND
+    ):
         return False
     shp = p_a.shape
     if len(shp) != 2 or not (shp[1] == 2 or shp[1] == 3):
         return False
     n1 = shp[:1]
-    return (v_a.shape == shp and a_a.shape == shp and p_b.shape == shp and v_b.shape == shp
-            and a_b.shape == shp and r_a.shape == n1 and r_b.shape == n1
-            and p_a.dtype is _F8 and v_a.dtype is _F8 and a_a.dtype is _F8 and r_a.dtype is _F8
-            and p_b.dtype is _F8 and v_b.dtype is _F8 and a_b.dtype is _F8 and r_b.dtype is _F8
-            and p_a.flags.c_contiguous and v_a.flags.c_contiguous and a_a.flags.c_contiguous
-            and r_a.flags.c_contiguous and p_b.flags.c_contiguous and v_b.flags.c_contiguous
-            and a_b.flags.c_contiguous and r_b.flags.c_contiguous)
+    return (
+        v_a.shape == shp
+        and a_a.shape == shp
+        and p_b.shape == shp
+        and v_b.shape == shp
+        and a_b.shape == shp
+        and r_a.shape == n1
+        and r_b.shape == n1
+        and p_a.dtype is _F8
+        and v_a.dtype is _F8
+        and a_a.dtype is _F8
+        and r_a.dtype is _F8
+        and p_b.dtype is _F8
+        and v_b.dtype is _F8
+        and a_b.dtype is _F8
+        and r_b.dtype is _F8
+        and p_a.flags.c_contiguous
+        and v_a.flags.c_contiguous
+        and a_a.flags.c_contiguous
+        and r_a.flags.c_contiguous
+        and p_b.flags.c_contiguous
+        and v_b.flags.c_contiguous
+        and a_b.flags.c_contiguous
+        and r_b.flags.c_contiguous
+    )
 
 
 _VEC_NAMES = ("p_a", "v_a", "a_a", "p_b", "v_b", "a_b")
@@ -510,17 +542,21 @@ def time_to_collision(p_a, v_a, a_a, r_a, p_b, v_b, a_b, r_b, horizon=math.inf) 
     # a scalar horizon -- no conversions, no temporaries besides the output.
     th = type(horizon)
     if (th is float or th is int or th is np.float64) and _rows_ok(
-            p_a, v_a, a_a, r_a, p_b, v_b, a_b, r_b):
+        p_a, v_a, a_a, r_a, p_b, v_b, a_b, r_b
+    ):
         n = r_a.shape[0]
         out = np.empty(n)
-        _run(threads_pay(n, PARALLEL_MIN_ROWS), p_a, v_a, a_a, r_a, p_b, v_b, a_b, r_b, float(horizon), out)
+        _run(threads_pay(n, PARALLEL_MIN_ROWS), p_a, v_a, a_a, r_a, p_b, v_b, a_b, r_b,
+             float(horizon), out)
         return out
     vecs = [_floats(x, nm) for x, nm in zip((p_a, v_a, a_a, p_b, v_b, a_b), _VEC_NAMES)]
     D = vecs[0].shape[-1] if vecs[0].ndim else 0
     if D not in (2, 3) or any(x.ndim == 0 or x.shape[-1] != D for x in vecs):
-        raise ValueError("time_to_collision: position/velocity/acceleration must share a last axis "
-                         "of size 2 or 3; got shapes "
-                         + ", ".join(f"{nm} {x.shape}" for nm, x in zip(_VEC_NAMES, vecs)))
+        raise ValueError(
+            "time_to_collision: position/velocity/acceleration must share a last axis "
+            "of size 2 or 3; got shapes "
+            + ", ".join(f"{nm} {x.shape}" for nm, x in zip(_VEC_NAMES, vecs))
+        )
     sc = [_floats(x, nm) for x, nm in zip((r_a, r_b, horizon), ("r_a", "r_b", "horizon"))]
     shapes = {x.shape[:-1] for x in vecs} | {x.shape for x in sc[:2]}
     if sc[2].ndim:
@@ -528,9 +564,11 @@ def time_to_collision(p_a, v_a, a_a, r_a, p_b, v_b, a_b, r_b, horizon=math.inf) 
     try:
         batch = shapes.pop() if len(shapes) == 1 else np.broadcast_shapes(*shapes)
     except ValueError:
-        raise ValueError("time_to_collision: batch shapes do not broadcast: "
-                         + ", ".join(f"{nm} {x.shape[:-1]}" for nm, x in zip(_VEC_NAMES, vecs))
-                         + f", r_a {sc[0].shape}, r_b {sc[1].shape}, horizon {sc[2].shape}") from None
+        raise ValueError(
+            "time_to_collision: batch shapes do not broadcast: "
+            + ", ".join(f"{nm} {x.shape[:-1]}" for nm, x in zip(_VEC_NAMES, vecs))
+            + f", r_a {sc[0].shape}, r_b {sc[1].shape}, horizon {sc[2].shape}"
+        ) from None
     n = math.prod(batch)
     out = np.empty(n, dtype=np.float64)
     pa, va, aa, pb, vb, ab = (_as_rows(x, batch, n, D) for x in vecs)

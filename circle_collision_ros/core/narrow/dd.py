@@ -88,11 +88,15 @@ if config.DISABLE_JIT:  # pure-Python debugging mode
     def next_down(x):
         """The float64 below a finite x > 0 (bit pattern - 1; 0 for the
         smallest subnormal): ``nextafter(x, 0)`` without a libm call."""
-        return struct.unpack("<d", struct.pack("<q", struct.unpack("<q", struct.pack("<d", x))[0] - 1))[0]
+        return struct.unpack(
+            "<d", struct.pack("<q", struct.unpack("<q", struct.pack("<d", x))[0] - 1)
+        )[0]
 
     def next_up(x):
         """The float64 above a finite x >= 0 (bit pattern + 1): ``nextafter(x, inf)``."""
-        return struct.unpack("<d", struct.pack("<q", struct.unpack("<q", struct.pack("<d", x))[0] + 1))[0]
+        return struct.unpack(
+            "<d", struct.pack("<q", struct.unpack("<q", struct.pack("<d", x))[0] + 1)
+        )[0]
 
 else:
 
@@ -132,7 +136,7 @@ def pow2_scales(m: float):
     not underflow: s1 = 2^600 lifts a tiny m (< 2^-300, subnormal included)
     into the normal range, s2 = 2^(1024 - e) for the exponent e of m * s1.
     Branch-free (selects and bit operations)."""
-    s1 = 4.149515568880993e+180 if m < 4.909093465297727e-91 else 1.0  # 2^600, 2^-300
+    s1 = 4.149515568880993e180 if m < 4.909093465297727e-91 else 1.0  # 2^600, 2^-300
     s2 = pow2(2047 - exponent(m * s1))
     s2 = s2 if m > 0.0 else 1.0
     return s1, (s2 if m < math.inf else math.nan)

@@ -208,11 +208,8 @@ def _ov_g(P, V, A, t):
 
     def impl3(P, V, A, t):
         h = 0.5 * t
-        return (
-            P[0] + t * (V[0] + h * A[0]),
-            P[1] + t * (V[1] + h * A[1]),
-            P[2] + t * (V[2] + h * A[2]),
-        )
+        return (P[0] + t * (V[0] + h * A[0]), P[1] + t * (V[1] + h * A[1]),
+                P[2] + t * (V[2] + h * A[2]))
     return impl3
 
 

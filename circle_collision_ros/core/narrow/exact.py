@@ -180,9 +180,9 @@ def _scaled_ints(vals: list) -> list:
     return [n << (s - (d.bit_length() - 1)) for n, d in ratios]
 
 
-def exact_first_contact(p_a: Sequence[float], v_a: Sequence[float], a_a: Sequence[float], r_a: float,
-                        p_b: Sequence[float], v_b: Sequence[float], a_b: Sequence[float], r_b: float,
-                        horizon: float = math.inf) -> float:
+def exact_first_contact(p_a: Sequence[float], v_a: Sequence[float], a_a: Sequence[float],
+                        r_a: float, p_b: Sequence[float], v_b: Sequence[float],
+                        a_b: Sequence[float], r_b: float, horizon: float = math.inf) -> float:
     """First-contact time of one pair decided in exact integer arithmetic.
 
     Same contract as ``time_to_collision`` for valid input (finite values,

@@ -71,30 +71,11 @@ from numba.extending import overload, register_jitable
 
 from circle_collision_ros.core.narrow.dd import exponent, pow2
 from circle_collision_ros.core.narrow.straight import straight_rel
-from circle_collision_ros.core.narrow.evaluate import (
-    EPS,
-    F_ERR,
-    INF,
-    NAN,
-    UNDECIDED,
-    c_bound,
-    c_err,
-    dot,
-    f0_err,
-    f_dd_inline,
-    g_at,
-    gd_at,
-    fmax,
-    fmin,
-    model_err,
-    model_root,
-    polish_done,
-    rel2,
-    rel3,
-    scale_at,
-    turning_points,
-    valid_row,
-)
+from circle_collision_ros.core.narrow.evaluate import (EPS, F_ERR, INF, NAN, UNDECIDED, c_bound,
+                                                       c_err, dot, f0_err, f_dd_inline, g_at, gd_at,
+                                                       fmax, fmin, model_err, model_root,
+                                                       polish_done, rel2, rel3, scale_at,
+                                                       turning_points, valid_row)
 
 
 # Newton steps on c and float64 model steps for the entry root (written out
@@ -433,7 +414,8 @@ def _ov_load(pa, va, aa, ra, pb, vb, ab, rb, i, Z):
 @njit(cache=True, error_model="numpy", inline="always")
 def _flat(pa, va, aa, pb, vb, ab):
     """Flat 1-D views of the (n, D) vector inputs (see below)."""
-    return pa.reshape(-1), va.reshape(-1), aa.reshape(-1), pb.reshape(-1), vb.reshape(-1), ab.reshape(-1)
+    return (pa.reshape(-1), va.reshape(-1), aa.reshape(-1),
+            pb.reshape(-1), vb.reshape(-1), ab.reshape(-1))
 
 
 @njit(cache=True, error_model="numpy", inline="always")
@@ -478,15 +460,21 @@ def _raw_straight(aa, ab, i, Z):
 @overload(_raw_straight, inline="always")
 def _ov_raw_straight(aa, ab, i, Z):
     if Z.count == 2:
+
         def impl2(aa, ab, i, Z):
             x = np.uint64(2) * i
             return (aa[x] == ab[x]) & (aa[x + np.uint64(1)] == ab[x + np.uint64(1)])
+
         return impl2
 
     def impl3(aa, ab, i, Z):
         x = np.uint64(3) * i
-        return ((aa[x] == ab[x]) & (aa[x + np.uint64(1)] == ab[x + np.uint64(1)])
-                & (aa[x + np.uint64(2)] == ab[x + np.uint64(2)]))
+        return (
+            (aa[x] == ab[x])
+            & (aa[x + np.uint64(1)] == ab[x + np.uint64(1)])
+            & (aa[x + np.uint64(2)] == ab[x + np.uint64(2)])
+        )
+
     return impl3
 
 

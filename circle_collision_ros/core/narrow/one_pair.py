@@ -58,7 +58,9 @@ def _install_kernels() -> None:
     from circle_collision_ros.core.narrow import one_pair_entry
 
     if not _compiled:
-        _compiled.extend(cfunc(_SIG, cache=True, error_model="numpy")(k) for k in (_kernel2, _kernel3))
+        _compiled.extend(
+            cfunc(_SIG, cache=True, error_model="numpy")(k) for k in (_kernel2, _kernel3)
+        )
     one_pair_entry.set_kernels(_compiled[0].address, _compiled[1].address)
 
 
@@ -84,10 +86,14 @@ def public_entry(general: Callable) -> Callable:
     try:
         from circle_collision_ros.core.narrow import one_pair_entry
     except ImportError as exc:  # a source tree whose extension was not built
-        warnings.warn(f"circle_collision_ros.core.narrow.one_pair_entry is not built ({exc}); one-pair calls of "
-                      f"{general.__name__} take the slower general path. Build it with "
-                      "scripts/bootstrap.sh, pip install -e . or colcon build.", RuntimeWarning,
-                      stacklevel=2)
+        warnings.warn(
+            f"circle_collision_ros.core.narrow.one_pair_entry is not built ({exc}); "
+            "one-pair calls of "
+            f"{general.__name__} take the slower general path. Build it with "
+            "scripts/bootstrap.sh, pip install -e . or colcon build.",
+            RuntimeWarning,
+            stacklevel=2,
+        )
         return general
     if general.__name__ != "time_to_collision":  # the builtin's name is fixed in one_pair_entry.c
         raise ValueError(f"public_entry: expected time_to_collision, got {general.__name__}")

@@ -66,30 +66,11 @@ from numba import njit
 from numba.extending import register_jitable
 
 from circle_collision_ros.core.narrow.dd import dd_add, dd_sqr
-from circle_collision_ros.core.narrow.evaluate import (
-    DD_ERR,
-    EPS,
-    F_ERR,
-    INF,
-    NAN,
-    c_at,
-    c_err,
-    cross2,
-    dot,
-    entry_step,
-    f0_err,
-    f_dd,
-    g_at,
-    gd_at,
-    model_err,
-    polish_done,
-    reach_miss,
-    rel2,
-    rel3,
-    scale_at,
-    turning_points,
-    valid_row,
-)
+from circle_collision_ros.core.narrow.evaluate import (DD_ERR, EPS, F_ERR, INF, NAN, c_at, c_err,
+                                                       cross2, dot, entry_step, f0_err, f_dd, g_at,
+                                                       gd_at, model_err, polish_done, reach_miss,
+                                                       rel2, rel3, scale_at, turning_points,
+                                                       valid_row)
 from circle_collision_ros.core.narrow.evaluate import UNDECIDED
 from circle_collision_ros.core.narrow.straight import straight
 
@@ -591,11 +572,8 @@ def _ttc_walk(Ph, Pl, Vh, Vl, Ah, Al, Rh, Rl, H, f0, P2):
             # Fujiwara bound on the roots of c (c3 = |da|^2/2, c2 = 1.5 da.dv,
             # c1 = |dv|^2 + da.dp, c0 = dp.dv), bounded with norms; doubled
             # until c(b) >= 0 in case rounding puts c(b) slightly negative.
-            b = 2.0 * max(
-                3.0 * nV / nA,
-                math.sqrt(2.0 * (nV * nV + nA * nP)) / nA,
-                (nP * nV / A2) ** (1.0 / 3.0),
-            )
+            b = 2.0 * max(3.0 * nV / nA, math.sqrt(2.0 * (nV * nV + nA * nP)) / nA,
+                          (nP * nV / A2) ** (1.0 / 3.0))
             b = max(b, 2.0 * a) + 1e-300
             cb = c_at(Ph, Vh, Ah, b)
             for _ in range(64):
@@ -622,7 +600,9 @@ def _ttc_walk(Ph, Pl, Vh, Vl, Ah, Al, Rh, Rl, H, f0, P2):
                 dec_start = -1.0
         else:
             if ca >= 0.0 and cb < 0.0:
-                dec_start, _hit_unused = _root_c(Ph, Vh, Ah, a, b, ca, -1.0, nP, nV, nA, t0, q0, c_t0, which)
+                dec_start, _hit_unused = _root_c(
+                    Ph, Vh, Ah, a, b, ca, -1.0, nP, nV, nA, t0, q0, c_t0, which
+                )
         a = b
         ca = cb
         if last:
@@ -647,16 +627,36 @@ def _ttc_walk(Ph, Pl, Vh, Vl, Ah, Al, Rh, Rl, H, f0, P2):
 
 
 @njit(cache=True, error_model="numpy")
-def robust_pair3(pax, pay, paz, vax, vay, vaz, aax, aay, aaz, r_a,
-                  pbx, pby, pbz, vbx, vby, vbz, abx, aby, abz, r_b, horizon):
+def robust_pair3(pax, pay, paz, vax, vay, vaz, aax, aay, aaz, r_a, pbx, pby, pbz, vbx, vby, vbz,
+                 abx, aby, abz, r_b, horizon):
     """The robust solver on absolute 3-D inputs (NaN for invalid input): the
     batch kernels' answer for a row the fast path leaves undecided."""
-    chk = (pax + pay + paz + vax + vay + vaz + aax + aay + aaz + r_a
-           + pbx + pby + pbz + vbx + vby + vbz + abx + aby + abz + r_b)
+    chk = (
+        pax
+        + pay
+        + paz
+        + vax
+        + vay
+        + vaz
+        + aax
+        + aay
+        + aaz
+        + r_a
+        + pbx
+        + pby
+        + pbz
+        + vbx
+        + vby
+        + vbz
+        + abx
+        + aby
+        + abz
+        + r_b
+    )
     if not valid_row(chk, r_a, r_b, horizon):
         return NAN
     Ph, Pl, Vh, Vl, Ah, Al, Rh, Rl, fine = rel3(pax, pay, paz, vax, vay, vaz, aax, aay, aaz, r_a,
-                                                 pbx, pby, pbz, vbx, vby, vbz, abx, aby, abz, r_b)
+                                                pbx, pby, pbz, vbx, vby, vbz, abx, aby, abz, r_b)
     if Rh != Rh:  # the relative state overflowed (out of range): NaN, see pow2_scales
         return NAN
     if not fine:  # outside the span of magnitudes solved in floating point (_SPAN)
@@ -669,11 +669,12 @@ def robust_pair3(pax, pay, paz, vax, vay, vaz, aax, aay, aaz, r_a,
 def robust_pair2(pax, pay, vax, vay, aax, aay, r_a, pbx, pby, vbx, vby, abx, aby, r_b, horizon):
     """Planar ``robust_pair3`` (2-component tuples throughout; same result
     as ``robust_pair3`` with z = 0, bit for bit)."""
-    chk = (pax + pay + vax + vay + aax + aay + r_a + pbx + pby + vbx + vby + abx + aby + r_b)
+    chk = pax + pay + vax + vay + aax + aay + r_a + pbx + pby + vbx + vby + abx + aby + r_b
     if not valid_row(chk, r_a, r_b, horizon):
         return NAN
-    Ph, Pl, Vh, Vl, Ah, Al, Rh, Rl, fine = rel2(pax, pay, vax, vay, aax, aay, r_a,
-                                                 pbx, pby, vbx, vby, abx, aby, r_b)
+    Ph, Pl, Vh, Vl, Ah, Al, Rh, Rl, fine = rel2(
+        pax, pay, vax, vay, aax, aay, r_a, pbx, pby, vbx, vby, abx, aby, r_b
+    )
     if Rh != Rh:  # the relative state overflowed (out of range): NaN, see pow2_scales
         return NAN
     if not fine:  # outside the span of magnitudes solved in floating point (_SPAN)

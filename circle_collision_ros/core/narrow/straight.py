@@ -23,18 +23,8 @@ from numba import njit
 from numba.extending import overload, register_jitable
 
 from circle_collision_ros.core.narrow.dd import next_down, next_up, dd_add, dd_mul
-from circle_collision_ros.core.narrow.evaluate import (
-    DD_ERR,
-    EPS,
-    INF,
-    UNDECIDED,
-    dot,
-    f0_err,
-    f_dd_inline,
-    fmax,
-    reach_miss,
-    scale_at,
-)
+from circle_collision_ros.core.narrow.evaluate import (DD_ERR, EPS, INF, UNDECIDED, dot, f0_err,
+                                                       f_dd_inline, fmax, reach_miss, scale_at)
 
 
 def _dd_cross2(Ph, Pl, Vh, Vl):

@@ -30,8 +30,8 @@ from circle_collision_ros.core.narrow.batch import ttc_scalar
 #: the call passes ten array structs per pair (measured faster: bench/bench_scene_updates.py).
 _contact_row_inlined = njit(inline="always", error_model="numpy")(contact_row.py_func)
 
-__all__ = ["evaluate_rows", "order_rows", "split_past", "record_keys", "assemble", "swept_bound_rows",
-           "link_records", "kill_records", "split_and_order", "reported_rows",
+__all__ = ["evaluate_rows", "order_rows", "split_past", "record_keys", "assemble",
+           "swept_bound_rows", "link_records", "kill_records", "split_and_order", "reported_rows",
            "incremental_pairs", "evaluate_and_store", "ordered_query"]
 
 #: Overlap decided without the narrow phase: only for values well inside the
@@ -40,7 +40,7 @@ _SAFE = 1e100
 #: |p_a - p_b|^2 computed in floats is within ~6 units in the last place of
 #: the exact value, (r_a + r_b)^2 within ~3: below (1 - 2^-30) of it, the
 #: exact f(0) = |p_a - p_b|^2 - (r_a + r_b)^2 is certainly negative.
-_OVERLAP_MARGIN = 1.0 - 2.0 ** -30
+_OVERLAP_MARGIN = 1.0 - 2.0**-30
 
 
 @njit(cache=True, error_model="numpy")
@@ -83,12 +83,14 @@ def evaluate_rows(P, V, A, Rad, T, ia, ib, t_eval, horizon, tau, point, normal, 
             t = 0.0
         else:
             t = ttc_scalar(pa[0], pa[1], pa[2], va[0], va[1], va[2], aa[0], aa[1], aa[2], Rad[a],
-                            pb[0], pb[1], pb[2], vb[0], vb[1], vb[2], ab[0], ab[1], ab[2], Rad[b],
-                            horizon)
+                           pb[0], pb[1], pb[2], vb[0], vb[1], vb[2], ab[0], ab[1], ab[2], Rad[b],
+                           horizon)
         tau[k] = t
         overlap[k] = False
         if t <= horizon:
-            closing[k] = _contact_row_inlined(pa2, va2, aa2, 0, Rad[a], pb2, vb2, ab2, 0, t, point, normal, k, g, w)
+            closing[k] = _contact_row_inlined(
+                pa2, va2, aa2, 0, Rad[a], pb2, vb2, ab2, 0, t, point, normal, k, g, w
+            )
             if t == 0.0:  # the overlap test of Scene._resolve: norm(p_a - p_b) - (r_a + r_b) < 0
                 overlap[k] = math.sqrt(s) - rs < 0.0
     return ia.shape[0]
@@ -216,7 +218,8 @@ def record_keys(first, end, ra, rb, rank, cap, id_start, id_len, rkey, rids):
 
 
 @njit(cache=True)
-def assemble(F, ttc_f, key_f, Pr, tau2, ov2, pt2, nm2, cs2, ra, rb, rkey, rids, rtp, rtau, rov, rpt, rnm, rcs, R):
+def assemble(F, ttc_f, key_f, Pr, tau2, ov2, pt2, nm2, cs2, ra, rb, rkey, rids, rtp, rtau, rov, rpt,
+             rnm, rcs, R):
     """The reported rows: future records F (sorted, with their ttc and pair keys) and the
     past records Pr evaluated at R (hits, any order: tau2.. their results), merged by (ttc,
     id_a, id_b); with each row's ids' places in the UTF-8 blob (record_keys).
@@ -333,8 +336,8 @@ def split_and_order(prev, new, prev_past, live, rkey, rtp, rtau, R, max_moves):
 
 
 @njit(cache=True, error_model="numpy")
-def reported_rows(fut, ttc, key, past, ra, rb, rkey, rids, rtp, rtau, rov, rpt, rnm, rcs, rsP, rsV, rsA, rsR, rsT,
-                  R, H):
+def reported_rows(fut, ttc, key, past, ra, rb, rkey, rids, rtp, rtau, rov, rpt, rnm, rcs, rsP, rsV,
+                  rsA, rsR, rsT, R, H):
     """Scene._ordered_rows' second half: the future rows with ttc <= H (fut, ttc, key sorted by
     (ttc, key)), and the past pairs evaluated at R with horizon H (their hits), merged (see
     evaluate_rows, assemble).
@@ -358,8 +361,9 @@ def reported_rows(fut, ttc, key, past, ra, rb, rkey, rids, rtp, rtau, rov, rpt, 
     # _compact, are read in sequence instead of two bodies' rows of five arrays at random
     # (measured faster: bench/bench_scene_updates.py).
     m = rsP.shape[0] * 2
-    evaluated = evaluate_rows(rsP.reshape(m, D), rsV.reshape(m, D), rsA.reshape(m, D), rsR.reshape(m),
-                              rsT.reshape(m), Ia, Ib, t_eval, H, tau, pt, nm, cs, ov)
+    evaluated = evaluate_rows(rsP.reshape(m, D), rsV.reshape(m, D), rsA.reshape(m, D),
+                              rsR.reshape(m), rsT.reshape(m), Ia, Ib, t_eval, H, tau, pt, nm, cs,
+                              ov)
     Pr = np.empty(n, dtype=np.int64)
     h = 0
     for x in range(n):  # keep the hits, in order
@@ -372,8 +376,8 @@ def reported_rows(fut, ttc, key, past, ra, rb, rkey, rids, rtp, rtau, rov, rpt, 
             cs[h] = cs[x]
             ov[h] = ov[x]
             h += 1
-    rows, ids = assemble(fut[:kf], ttc[:kf], key[:kf], Pr[:h], tau[:h], ov[:h], pt[:h], nm[:h], cs[:h],
-                         ra, rb, rkey, rids, rtp, rtau, rov, rpt, rnm, rcs, R)
+    rows, ids = assemble(fut[:kf], ttc[:kf], key[:kf], Pr[:h], tau[:h], ov[:h], pt[:h], nm[:h],
+                         cs[:h], ra, rb, rkey, rids, rtp, rtau, rov, rpt, rnm, rcs, R)
     return rows, ids, evaluated
 
 
@@ -395,8 +399,8 @@ def _push_pair(keys, m, s, x, lo, hi, cap):
 
 
 @njit(cache=True, error_model="numpy")
-def incremental_pairs(dirty, alive, P, V, A, Rad, T, Tf, lo, hi, E, slack_ns, H, t_end, cell, max_cells,
-                      gkeys, gslot, gstale, gbig, moved, n_moved, inmoved, rank, cap):
+def incremental_pairs(dirty, alive, P, V, A, Rad, T, Tf, lo, hi, E, slack_ns, H, t_end, cell,
+                      max_cells, gkeys, gslot, gstale, gbig, moved, n_moved, inmoved, rank, cap):
     """Scene._update_incremental's search for the pairs of the changed slots `dirty`, in one pass.
 
     Marks each dirty slot stale in the static grid and lists it once in `moved` (the
@@ -431,7 +435,7 @@ def incremental_pairs(dirty, alive, P, V, A, Rad, T, Tf, lo, hi, E, slack_ns, H,
         s = dirty[x]
         if not alive[s]:
             continue
-        ck, _, big = cell_keys(lo[s:s + 1], hi[s:s + 1], cell, max_cells)
+        ck, _, big = cell_keys(lo[s : s + 1], hi[s : s + 1], cell, max_cells)
         if big[0]:
             for y in range(alive.shape[0]):
                 if alive[y]:
@@ -475,8 +479,8 @@ def incremental_pairs(dirty, alive, P, V, A, Rad, T, Tf, lo, hi, E, slack_ns, H,
 
 
 @njit(cache=True, error_model="numpy")
-def evaluate_and_store(ia, ib, E, P, V, A, Rad, T, horizon, ra, rb, rtp, rtau, rpt, rnm, rcs, rov, rlive,
-                       rnext, rhead, rsP, rsV, rsA, rsR, rsT, n):
+def evaluate_and_store(ia, ib, E, P, V, A, Rad, T, horizon, ra, rb, rtp, rtau, rpt, rnm, rcs, rov,
+                       rlive, rnext, rhead, rsP, rsV, rsA, rsR, rsT, n):
     """Scene._evaluate_at_tp + Scene._store for a few pairs: each pair evaluated at its pair
     time max(E, T_a, T_b) (evaluate_rows), the hits (tau <= horizon) written as records from
     row n, in order, with their two bodies' stored states (rsP.., see Scene._REC), and linked
@@ -519,8 +523,9 @@ def evaluate_and_store(ia, ib, E, P, V, A, Rad, T, horizon, ra, rb, rtp, rtau, r
 
 
 @njit(cache=True, error_model="numpy")
-def ordered_query(prev, new, prev_past, live, ra, rb, rkey, rids, key_from, key_end, rtp, rtau, rov, rpt, rnm,
-                  rcs, rsP, rsV, rsA, rsR, rsT, R, H, rank, cap, max_moves, id_start, id_len):
+def ordered_query(prev, new, prev_past, live, ra, rb, rkey, rids, key_from, key_end, rtp, rtau, rov,
+                  rpt, rnm, rcs, rsP, rsV, rsA, rsR, rsT, R, H, rank, cap, max_moves, id_start,
+                  id_len):
     """Scene._ordered_rows in one pass: the keys and id places of records key_from..key_end-1
     (record_keys; the other records' are current), split_and_order (sorting afresh, by (ttc,
     pair key), when the kept order needed more than the budget of moves), then reported_rows.
@@ -530,15 +535,18 @@ def ordered_query(prev, new, prev_past, live, ra, rb, rkey, rids, key_from, key_
     ``(start_a, len_a, start_b, len_b)`` (SceneContacts.id_utf8).
     """
     record_keys(key_from, key_end, ra, rb, rank, cap, id_start, id_len, rkey, rids)
-    fut, ttc, key, past, ordered = split_and_order(prev, new, prev_past, live, rkey, rtp, rtau, R, max_moves)
+    fut, ttc, key, past, ordered = split_and_order(
+        prev, new, prev_past, live, rkey, rtp, rtau, R, max_moves
+    )
     if not ordered:
-        # keys are unique and ttc is never NaN (records are hits): the order of np.lexsort((key, ttc))
+        # keys are unique and ttc is never NaN (records are hits): the order of np.lexsort((key,
+        # ttc))
         for x in range(fut.shape[0]):
             key[x] = rkey[fut[x]]
         o = _time_then_key(ttc, key)
         fut = fut[o]
         ttc = ttc[o]
         key = key[o]
-    rows, ids, evaluated = reported_rows(fut, ttc, key, past, ra, rb, rkey, rids, rtp, rtau, rov, rpt, rnm, rcs,
-                                         rsP, rsV, rsA, rsR, rsT, R, H)
+    rows, ids, evaluated = reported_rows(fut, ttc, key, past, ra, rb, rkey, rids, rtp, rtau, rov,
+                                         rpt, rnm, rcs, rsP, rsV, rsA, rsR, rsT, R, H)
     return fut, ttc, past, rows, evaluated, ids

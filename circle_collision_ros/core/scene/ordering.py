@@ -113,10 +113,17 @@ class OrderingMixin:
         self._ensure_rank()
         basis = (self._rank_serial, self._R.shape[0], self._utf8_serial)
         key_from = self._rkey_n if basis == self._rkey_basis else 0  # else every key is stale
-        fut, ttc, past, rows, evaluated, id_rows = _sk.ordered_query(
-            prev, new, prev_past, live, self._ra, self._rb, self._rkey, self._rids, key_from, self._rn, tp_all,
-            tau_all, self._rov, self._rpt, self._rnm, self._rcs, self._rsP, self._rsV, self._rsA, self._rsR,
-            self._rsT, R, self._h, self._rank, np.int64(basis[1]), 1024, self._id_start, self._id_len)
+        fut, ttc, past, rows, evaluated, id_rows = _sk.ordered_query(prev, new, prev_past, live,
+                                                                     self._ra, self._rb, self._rkey,
+                                                                     self._rids, key_from, self._rn,
+                                                                     tp_all, tau_all, self._rov,
+                                                                     self._rpt, self._rnm,
+                                                                     self._rcs, self._rsP,
+                                                                     self._rsV, self._rsA,
+                                                                     self._rsR, self._rsT, R,
+                                                                     self._h, self._rank,
+                                                                     np.int64(basis[1]), 1024,
+                                                                     self._id_start, self._id_len)
         self._rkey_basis, self._rkey_n = basis, self._rn
         self._fut, self._fut_ttc, self._past = fut, ttc, past
         self.evaluated_pairs += evaluated
@@ -128,8 +135,8 @@ class OrderingMixin:
         R = self.reference_ns
         if R is None or A.size == 0:
             e = np.empty(0)
-            return (EMPTY_I, EMPTY_I, e, EMPTY_I, np.empty(0, dtype=bool),
-                    np.empty((0, self._dim)), np.empty((0, self._dim)), e)
+            return (EMPTY_I, EMPTY_I, e, EMPTY_I, np.empty(0, dtype=bool), np.empty((0, self._dim)),
+                    np.empty((0, self._dim)), e)
         dtn = R - tp
         shifted = dtn > 0
         d = dtn.astype(np.float64) * 1e-9
@@ -140,7 +147,8 @@ class OrderingMixin:
             # the contact began between t_p and R: the first contact from R, evaluated at R
             Ap, Bp = A[past], B[past]
             hit, _, tau2, pt2, nm2, cs2, _ = self._evaluate(
-                Ap, Bp, np.full(past.size, R, dtype=np.int64), self._h, compiled)
+                Ap, Bp, np.full(past.size, R, dtype=np.int64), self._h, compiled
+            )
             fut = np.ones(A.size, dtype=bool)
             fut[past] = False
             A = np.concatenate([A[fut], Ap[hit]])
@@ -211,12 +219,14 @@ class OrderingMixin:
         """
         if self.reference_ns is None:
             return self._publish(self._resolve(EMPTY_I, EMPTY_I, None, None, None, None, None))
-        saved_epoch, saved_lo, saved_hi, saved_tf = self._epoch, self._lo.copy(), self._hi.copy(), self._Tf.copy()
+        saved_epoch, saved_lo, saved_hi, saved_tf = (self._epoch, self._lo.copy(), self._hi.copy(),
+                                                     self._Tf.copy())
         try:
             self._epoch = self.epoch_ns
             _, A, B = self._pairs_full()
             hit, tp, tau, pt, nm, cs, _ = self._evaluate_at_tp(A, B, compiled=False)
-            return self._publish(self._sort(self._resolve(A[hit], B[hit], tp, tau, pt, nm, cs,
-                                                          compiled=False)))
+            return self._publish(
+                self._sort(self._resolve(A[hit], B[hit], tp, tau, pt, nm, cs, compiled=False))
+            )
         finally:
             self._epoch, self._lo, self._hi, self._Tf = saved_epoch, saved_lo, saved_hi, saved_tf

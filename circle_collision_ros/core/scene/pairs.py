@@ -39,8 +39,8 @@ class PairsMixin:
             D = self._dim
             tau, pt, nm = np.empty(n), np.empty((n, D)), np.empty((n, D))
             cs, ov = np.empty(n), np.empty(n, dtype=bool)
-            self.evaluated_pairs += _sk.evaluate_rows(self._P, self._V, self._A, self._R, self._T, A, B,
-                                                      t_eval, horizon, tau, pt, nm, cs, ov)
+            self.evaluated_pairs += _sk.evaluate_rows(self._P, self._V, self._A, self._R, self._T,
+                                                      A, B, t_eval, horizon, tau, pt, nm, cs, ov)
             hit = tau <= horizon
             if hit.all():
                 return hit, t_eval, tau, pt, nm, cs, ov
@@ -73,10 +73,10 @@ class PairsMixin:
             self._set_bounds(slots)
         if slots.size < 2:
             return slots, EMPTY_I, EMPTY_I
-        I, J, _ = _broad.candidate_pairs(
-            self._lo[slots], self._hi[slots], p=self._P[slots], v=self._V[slots], a=self._A[slots],
-            r=self._R[slots], tref=self._Tf[slots], t_start=0.0,
-            t_end=self._slack_ns * 1e-9 + self._h, method=self._method)
+        I, J, _ = _broad.candidate_pairs(self._lo[slots], self._hi[slots], p=self._P[slots],
+                                         v=self._V[slots], a=self._A[slots], r=self._R[slots],
+                                         tref=self._Tf[slots], t_start=0.0,
+                                         t_end=self._slack_ns * 1e-9 + self._h, method=self._method)
         return slots, slots[I], slots[J]  # local order is id order and I < J
 
     def _store(self, A, B, res) -> None:
@@ -138,8 +138,8 @@ class PairsMixin:
         self._records_scattered = fut is None
         self._rkey_n = live.size if keys_current else 0  # renumbered: all or nothing
         for name, arr in zip(self._REC, old):
-            getattr(self, name)[:live.size] = arr
-        self._rlive[:live.size] = True
+            getattr(self, name)[: live.size] = arr
+        self._rlive[: live.size] = True
         _sk.link_records(self._ra, self._rb, self._rnext, self._rhead, 0, live.size)
         self._rn = live.size
         self._new_rows = [r[r >= 0] for r in new_rows]
@@ -153,7 +153,9 @@ class PairsMixin:
     def _kill_rows(self, slots: np.ndarray) -> None:
         """Mark the records of `slots` dead (walks their lists: O(their records))."""
         if self._rn and slots.size:
-            self._rdead += int(_sk.kill_records(slots, self._ra, self._rnext, self._rhead, self._rlive))
+            self._rdead += int(
+                _sk.kill_records(slots, self._ra, self._rnext, self._rhead, self._rlive)
+            )
 
     def _rebuild_all(self) -> None:
         self._clear_records()
@@ -174,8 +176,9 @@ class PairsMixin:
         slots = np.flatnonzero(self._alive)
         if slots.size:
             self._cell, _ = _broad.choose_cell_size(self._lo[slots], self._hi[slots])
-        keys, owner, big = _broad.cell_keys(self._lo[slots], self._hi[slots], self._cell,
-                                            _broad.MAX_CELLS_PER_BODY)
+        keys, owner, big = _broad.cell_keys(
+            self._lo[slots], self._hi[slots], self._cell, _broad.MAX_CELLS_PER_BODY
+        )
         # Any order within a cell will do: a query sorts and dedups the pairs it collects
         # (incremental_pairs), so quicksort (measured faster than a stable sort).
         o = np.argsort(keys)
@@ -194,26 +197,33 @@ class PairsMixin:
         dirty.sort()
         self._dirty.clear()
         self._kill_rows(dirty)
-        if not self._grid_built or self._n_moved + dirty.size > max(64, len(self._slot) // self._MOVED_FRACTION):
+        if not self._grid_built or self._n_moved + dirty.size > max(
+            64, len(self._slot) // self._MOVED_FRACTION
+        ):
             # (re)build the static part from the current bounds; dirty slots
             # are marked stale and searched as moved below
             self._build_grid()
         self._ensure_rank()
-        A, B, self._n_moved = _sk.incremental_pairs(
-            dirty, self._alive, self._P, self._V, self._A, self._R, self._T, self._Tf, self._lo, self._hi,
-            self._epoch, self._slack_ns, self._h, self._slack_ns * 1e-9 + self._h, self._cell,
-            _broad.MAX_CELLS_PER_BODY, self._gkeys, self._gslot, self._gstale, self._gbig, self._moved,
-            self._n_moved, self._inmoved, self._rank, np.int64(self._R.shape[0]))
+        A, B, self._n_moved = _sk.incremental_pairs(dirty, self._alive, self._P, self._V, self._A,
+                                                    self._R, self._T, self._Tf, self._lo, self._hi,
+                                                    self._epoch, self._slack_ns, self._h,
+                                                    self._slack_ns * 1e-9 + self._h, self._cell,
+                                                    _broad.MAX_CELLS_PER_BODY, self._gkeys,
+                                                    self._gslot, self._gstale, self._gbig,
+                                                    self._moved, self._n_moved, self._inmoved,
+                                                    self._rank, np.int64(self._R.shape[0]))
         if A.size == 0:
             return
         if A.size >= self._COMPILED_ROWS:
             self._store(A, B, self._evaluate_at_tp(A, B))
             return
         n = self._reserve_records(A.size)
-        end, evaluated = _sk.evaluate_and_store(
-            A, B, self._epoch, self._P, self._V, self._A, self._R, self._T, self._h_eval, self._ra,
-            self._rb, self._rtp, self._rtau, self._rpt, self._rnm, self._rcs, self._rov, self._rlive,
-            self._rnext, self._rhead, self._rsP, self._rsV, self._rsA, self._rsR, self._rsT, n)
+        end, evaluated = _sk.evaluate_and_store(A, B, self._epoch, self._P, self._V, self._A,
+                                                self._R, self._T, self._h_eval, self._ra, self._rb,
+                                                self._rtp, self._rtau, self._rpt, self._rnm,
+                                                self._rcs, self._rov, self._rlive, self._rnext,
+                                                self._rhead, self._rsP, self._rsV, self._rsA,
+                                                self._rsR, self._rsT, n)
         self.evaluated_pairs += evaluated
         if end > n:
             self._rn = end

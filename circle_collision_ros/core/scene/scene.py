@@ -192,13 +192,15 @@ class Scene(StoreMixin, StreamMixin, PairsMixin, OrderingMixin, UncertainMixin, 
         self._uncertain_cache = None
         self._uncertain_serial = 0     # uncertain_pairs evaluations so far (the budget's clock)
         self._uncertain_waiting = NO_WAITING  # the deferred pairs and since when they wait
-        self._uncertain_memo = {}      # core.uncertainty.uncertain_pairs(memo=...): last full evaluations
+        # core.uncertainty.uncertain_pairs(memo=...): last full evaluations
+        self._uncertain_memo = {}
         self._uncertain_memo_ref = None  # the reference time of those evaluations
         self._pair_answers = None      # _PairAnswers of the last uncertain_pairs call
         self.uncertain_evaluated = 0   # pairs the last uncertain_pairs call gave the core
         self._sv = np.zeros(cap, dtype=np.int64)  # each slot's state serial (bumped per change)
         self._sv_next = 1
-        self._born = np.zeros(cap, dtype=np.int64)  # each slot's body serial (set when a body takes it)
+        # each slot's body serial (set when a body takes it)
+        self._born = np.zeros(cap, dtype=np.int64)
         self._born_next = 1
 
     # Pair records: one row per pair with a contact within H + S of its t_p, in

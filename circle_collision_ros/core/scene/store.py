@@ -138,7 +138,10 @@ class StoreMixin:
         """self._lo/_hi[slots] = the swept bounds (few slots: compiled, bitwise the same)."""
         t0, t1 = self._bounds(slots)
         if slots.size <= 64:
-            _sk.swept_bound_rows(self._P, self._V, self._A, self._R, slots, t0, t1, self._lo, self._hi)
+            _sk.swept_bound_rows(
+                self._P, self._V, self._A, self._R, slots, t0, t1, self._lo, self._hi
+            )
         else:
             self._lo[slots], self._hi[slots] = _broad.swept_bounds(
-                self._P[slots], self._V[slots], self._A[slots], self._R[slots], t0, t1)
+                self._P[slots], self._V[slots], self._A[slots], self._R[slots], t0, t1
+            )

@@ -52,8 +52,8 @@ class StreamMixin:
         (position, velocity), symmetric PSD (all zero = exact); see uncertain_pairs.
         """
         if len(ids) == 1 and covariances is None and not remove[0]:
-            return self._merge_state(ids[0], int(stamps_ns[0]), positions, velocities, accelerations,
-                                     radii, int(received_ns))
+            return self._merge_state(ids[0], int(stamps_ns[0]), positions, velocities,
+                                     accelerations, radii, int(received_ns))
         stamps = np.asarray(stamps_ns, dtype=np.int64)
         remove = np.asarray(remove, dtype=bool)
         received_ns = int(received_ns)
@@ -76,7 +76,9 @@ class StreamMixin:
         rows = np.flatnonzero(~remove)
         D = self._dim
         get = self._slot.get
-        slots = np.fromiter((get(ids[k], -1) for k in rows.tolist()), dtype=np.int64, count=rows.size)
+        slots = np.fromiter(
+            (get(ids[k], -1) for k in rows.tolist()), dtype=np.int64, count=rows.size
+        )
         st = stamps[rows]
         known = slots >= 0
         newer = np.ones(rows.size, dtype=bool)
@@ -118,7 +120,9 @@ class StreamMixin:
                 self._set_uncertain(sl, False)
             else:
                 nonzero = np.empty(sl.size, dtype=np.bool_)
-                _store_covariances(self._C, sl, np.ascontiguousarray(covariances, dtype=np.float64), src, nonzero)
+                _store_covariances(
+                    self._C, sl, np.ascontiguousarray(covariances, dtype=np.float64), src, nonzero
+                )
                 self._set_uncertain(sl, nonzero)
             self._T[sl] = stamps[src]
             self._recv[sl] = received_ns
@@ -133,8 +137,9 @@ class StreamMixin:
                            removed=np.array(removed, dtype=np.int64),
                            removal_ignored=np.array(removal_ignored, dtype=np.int64))
 
-    def _merge_state(self, bid, stamp: int, positions, velocities, accelerations, radii,
-                     received_ns: int) -> MergeResult:
+    def _merge_state(
+        self, bid, stamp: int, positions, velocities, accelerations, radii, received_ns: int
+    ) -> MergeResult:
         """merge of one exact state (a per-body stream's message) on scalars: the same rules
         and stored bits as the general path, without its array set-up."""
         s = self._slot.get(bid)
@@ -142,7 +147,8 @@ class StreamMixin:
             gone = self._removals.get(bid) if self._removals else None
             if gone is not None:
                 if stamp <= gone[0]:
-                    return MergeResult(EMPTY_I, _FIRST_ROW, EMPTY_I, EMPTY_I, EMPTY_I)  # a late state of a removed body
+                    # a late state of a removed body
+                    return MergeResult(EMPTY_I, _FIRST_ROW, EMPTY_I, EMPTY_I, EMPTY_I)
                 del self._removals[bid]
             if self.max_bodies is not None and len(self._slot) >= self.max_bodies:
                 return MergeResult(EMPTY_I, EMPTY_I, _FIRST_ROW, EMPTY_I, EMPTY_I)
@@ -187,8 +193,9 @@ class StreamMixin:
             raise ValueError("duplicate ids in one update")
         return self.merge(ids, st, p, v, a, r, np.zeros(len(ids), dtype=bool), received_ns)
 
-    def upsert(self, body_id: Hashable, p, v, a, r: float, stamp_ns: int,
-               received_ns: int = 0) -> MergeResult:
+    def upsert(
+        self, body_id: Hashable, p, v, a, r: float, stamp_ns: int, received_ns: int = 0
+    ) -> MergeResult:
         """One body's state (see upsert_many)."""
         return self.upsert_many([body_id], np.asarray(p, dtype=np.float64)[None],
                                 np.asarray(v, dtype=np.float64)[None],
@@ -196,12 +203,15 @@ class StreamMixin:
 
     def remove(self, body_id: Hashable, stamp_ns: int, received_ns: int = 0) -> bool:
         """A removal at ``stamp_ns``; True if it deleted the body."""
-        res = self.merge([body_id], [stamp_ns], np.zeros((1, 3)), np.zeros((1, 3)), np.zeros((1, 3)),
-                         [0.0], [True], received_ns)
+        res = self.merge([body_id], [stamp_ns], np.zeros((1, 3)), np.zeros((1, 3)),
+                         np.zeros((1, 3)), [0.0], [True], received_ns)
         return bool(res.removed.size)
 
     def expire(self, now_ns: int, timeout_ns: int) -> list:
-        """Drop bodies (and remembered removals) received before ``now_ns - timeout_ns``; ids dropped, sorted."""
+        """Drop bodies (and remembered removals) received before ``now_ns - timeout_ns``.
+
+        Returns the ids dropped, sorted.
+        """
         limit = int(now_ns) - int(timeout_ns)
         if self._removals and limit > self._removal_floor:
             self._removals = {k: v for k, v in self._removals.items() if v[1] >= limit}

@@ -118,7 +118,8 @@ class UncertainMixin:
             self._uncertain_waiting = NO_WAITING  # no pair listed: none waits
             self._pair_answers = None
             return SceneUncertainty(R or 0, _NO_IDS, _NO_IDS, _NO_VALUES, _NO_VALUES, _NO_VALUES)
-        from circle_collision_ros.core import uncertainty as unc  # heavy kernels: loaded on first use
+        # heavy kernels: loaded on first use
+        from circle_collision_ros.core import uncertainty as unc
         slots = self._sorted_slots()
         I, J, at_R, contact_rows = self._uncertain_listed(slots, R, contacts, unc)
         if I.size == 0:
@@ -146,36 +147,49 @@ class UncertainMixin:
             same = ((old.key[at] == key) & (old.state_a[at] == sv_a)
                     & (old.state_b[at] == sv_b) & (old.pair_ns[at] == tp))
             hit = same & old.answered[at]
-            prob[hit], bound[hit], tau[hit] = old.probability[at[hit]], old.bound[at[hit]], old.tau[at[hit]]
+            prob[hit], bound[hit], tau[hit] = (
+                old.probability[at[hit]], old.bound[at[hit]], old.tau[at[hit]]
+            )
             waited = same & ~old.answered[at]
             screened_first[waited] = old.tau[at[waited]]
         todo = np.flatnonzero(~hit)
         answered = hit.copy()
         if todo.size:
-            deferred = self._evaluate_uncertain(unc, sa[todo], sb[todo], I[todo], J[todo], at_R, tp[todo],
-                                                key[todo], threshold, max_evaluated, screened_first[todo])
+            deferred = self._evaluate_uncertain(unc, sa[todo], sb[todo], I[todo], J[todo], at_R,
+                                                tp[todo], key[todo], threshold, max_evaluated,
+                                                screened_first[todo])
             prob[todo], bound[todo], tau[todo] = deferred.probability, deferred.bound, deferred.tau
             answered[todo[~deferred.deferred]] = True
         else:
             self._uncertain_waiting = NO_WAITING
             self._uncertain_serial += 1
-        self._pair_answers = _PairAnswers(self._h, threshold, self._sv_next, key, answered, sv_a, sv_b,
-                                          tp, prob, bound, tau)
+        self._pair_answers = _PairAnswers(
+            self._h, threshold, self._sv_next, key, answered, sv_a, sv_b, tp, prob, bound, tau
+        )
         self.uncertain_evaluated = int(todo.size)
         # reported from R: the pair's plausible time counts from its t_p <= R (d = R - t_p);
         # one already reached before R is reported as 0 (plausible now)
         d = (R - tp).astype(np.float64) * 1e-9
         plausible = np.where(np.isnan(tau) | (tau > d), tau - d, 0.0)
-        return SceneUncertainty(R, ida, idb, prob, bound, plausible,
-                                int(np.count_nonzero(~answered)) if max_evaluated is not None else 0,
-                                contact_rows, contacts if contact_rows is not None else None,
-                                self._id_utf8(sa, sb))
+        return SceneUncertainty(
+            R,
+            ida,
+            idb,
+            prob,
+            bound,
+            plausible,
+            int(np.count_nonzero(~answered)) if max_evaluated is not None else 0,
+            contact_rows,
+            contacts if contact_rows is not None else None,
+            self._id_utf8(sa, sb),
+        )
 
     def _uncertain_listed(self, slots: np.ndarray, R: int, contacts: SceneContacts | None, unc):
         """``(I, J, at_R, contact_rows)``: local index pairs (I < J, into `slots`, id order) with
         an uncertain body that the broad phase at R over [0, H], radii inflated by
         ``unc.inflation_radius``, cannot rule out, plus the uncertain pairs of `contacts`;
-        at_R = (P, V, A, radius, C) of `slots`, propagated to R (C zero for exact bodies); contact_rows:
+        at_R = (P, V, A, radius, C) of `slots`, propagated to R (C zero for exact bodies);
+        contact_rows:
         each pair's row in `contacts`, -1 if none (None without contacts)."""
         P, V, C = self._states_at(slots, np.full(slots.size, R, dtype=np.int64))
         A, Rad = self._A[slots], self._R[slots]
@@ -189,8 +203,8 @@ class UncertainMixin:
         lo, hi = _broad.swept_bounds(P, V, A, Rad + grow, zero, zero + self._h)
         # the sweep whatever the scene's method: on these few inflated bodies per cell it is
         # measured faster than the grid (same pairs; bench/bench_node.py's density)
-        I, J, _ = _broad.candidate_pairs(lo, hi, p=P, v=V, a=A, r=Rad + grow, tref=zero, t_start=0.0,
-                                         t_end=self._h, method="sweep")
+        I, J, _ = _broad.candidate_pairs(lo, hi, p=P, v=V, a=A, r=Rad + grow, tref=zero,
+                                         t_start=0.0, t_end=self._h, method="sweep")
         keep = u[I] | u[J]
         I, J = I[keep], J[keep]
         if contacts is not None and len(contacts):
@@ -271,8 +285,11 @@ class UncertainMixin:
         res = unc.uncertain_pairs(*states[0], *states[1], self._h, threshold, screen=True,
                                   max_evaluated=max_evaluated, priority=waited_since,
                                   memo=self._uncertain_memo, screened_first=screened_first)
-        deferred = (res.collision_probability_bound == unc.DEFERRED_BOUND
-                    if max_evaluated is not None else np.zeros(sa.size, dtype=bool))
+        deferred = (
+            res.collision_probability_bound == unc.DEFERRED_BOUND
+            if max_evaluated is not None
+            else np.zeros(sa.size, dtype=bool)
+        )
         # the deferred of the rows that competed wait on (since as looked up); the rest stop
         rows = np.concatenate([r for r, _ in asked]) if asked else EMPTY_I
         since = np.concatenate([w for _, w in asked]) if asked else EMPTY_I
@@ -282,8 +299,9 @@ class UncertainMixin:
         rows = rows[order]
         self._uncertain_waiting = _Waiting(key[rows], born_a[rows], born_b[rows], since[order])
         self._uncertain_serial = serial + 1
-        return _Evaluated(res.collision_probability, res.collision_probability_bound,
-                          res.plausible_time, deferred)
+        return _Evaluated(
+            res.collision_probability, res.collision_probability_bound, res.plausible_time, deferred
+        )
 
 
 class _Waiting(NamedTuple):
@@ -297,8 +315,10 @@ class _Waiting(NamedTuple):
     born_b: np.ndarray
     since: np.ndarray
 
-    def since_of(self, key: np.ndarray, born_a: np.ndarray, born_b: np.ndarray, default: int) -> np.ndarray:
-        """(n,) int64: since when each pair (key, born_a, born_b) waits; `default` if it does not."""
+    def since_of(
+        self, key: np.ndarray, born_a: np.ndarray, born_b: np.ndarray, default: int
+    ) -> np.ndarray:
+        """(n,) int64: since when each pair (key, born_a, born_b) waits; `default` if not."""
         out = np.full(key.size, default, dtype=np.int64)
         if self.key.size and key.size:
             at = np.minimum(np.searchsorted(self.key, key), self.key.size - 1)

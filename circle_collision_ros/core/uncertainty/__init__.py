@@ -16,11 +16,12 @@ entry rate), ``overlap`` (instantaneous probabilities), ``line_sampling``,
 Only ``covariance`` is imported with the package; the names of ``batch`` (and
 the numba kernels behind them) load on first use.
 """
-from circle_collision_ros.core.uncertainty.covariance import COV_PSD_RTOL, COV_SYMMETRY_RTOL, covariance_problem
+from circle_collision_ros.core.uncertainty.covariance import (COV_PSD_RTOL, COV_SYMMETRY_RTOL,
+                                                              covariance_problem)
 
-__all__ = ["UncertainPairs", "uncertain_pairs", "deferred_count", "DEFERRED_PROBABILITY", "DEFERRED_BOUND",
-           "BROAD_PHASE_SIGMAS", "TUBE_TAIL", "inflation_radius", "covariance_problem", "COV_SYMMETRY_RTOL",
-           "COV_PSD_RTOL", "load_fallback_kernels"]
+__all__ = ["UncertainPairs", "uncertain_pairs", "deferred_count", "DEFERRED_PROBABILITY",
+           "DEFERRED_BOUND", "BROAD_PHASE_SIGMAS", "TUBE_TAIL", "inflation_radius",
+           "covariance_problem", "COV_SYMMETRY_RTOL", "COV_PSD_RTOL", "load_fallback_kernels"]
 
 _FROM_BATCH = frozenset(__all__) - {"covariance_problem", "COV_SYMMETRY_RTOL", "COV_PSD_RTOL"}
 
@@ -28,6 +29,7 @@ _FROM_BATCH = frozenset(__all__) - {"covariance_problem", "COV_SYMMETRY_RTOL", "
 def __getattr__(name: str):
     if name in _FROM_BATCH:
         from circle_collision_ros.core.uncertainty import batch
+
         return getattr(batch, name)
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 

@@ -31,14 +31,18 @@ from typing import NamedTuple
 import numpy as np
 
 from circle_collision_ros.core.narrow import time_to_collision
-from circle_collision_ros.core.uncertainty.pair import OUT_SIZE, evaluate_uncertain_rows, finish_row, relative_rows
-from circle_collision_ros.core.uncertainty.qmc import (factor, line_sampled_probability, normal_table,
-                                                       overcount_replicates, qmc_probability)
-from circle_collision_ros.core.uncertainty.tube import (BROAD_PHASE_SIGMAS, TUBE_TAIL, max_sigma_rows, row_classes,
-                                                        screen_rows_at, screen_sigmas)
+from circle_collision_ros.core.uncertainty.pair import (OUT_SIZE, evaluate_uncertain_rows,
+                                                        finish_row, relative_rows)
+from circle_collision_ros.core.uncertainty.qmc import (factor, line_sampled_probability,
+                                                       normal_table, overcount_replicates,
+                                                       qmc_probability)
+from circle_collision_ros.core.uncertainty.tube import (BROAD_PHASE_SIGMAS, TUBE_TAIL,
+                                                        max_sigma_rows, row_classes, screen_rows_at,
+                                                        screen_sigmas)
 
-__all__ = ["UncertainPairs", "uncertain_pairs", "deferred_count", "DEFERRED_PROBABILITY", "DEFERRED_BOUND",
-           "BROAD_PHASE_SIGMAS", "TUBE_TAIL", "inflation_radius", "load_fallback_kernels"]
+__all__ = ["UncertainPairs", "uncertain_pairs", "deferred_count", "DEFERRED_PROBABILITY",
+           "DEFERRED_BOUND", "BROAD_PHASE_SIGMAS", "TUBE_TAIL", "inflation_radius",
+           "load_fallback_kernels"]
 
 
 class UncertainPairs(NamedTuple):
@@ -46,7 +50,8 @@ class UncertainPairs(NamedTuple):
 
     collision_probability: np.ndarray  # P(contact within [0, H])
     collision_probability_bound: np.ndarray  # stated bound on |reported - true|
-    plausible_time: np.ndarray  # s: first t in [0, H] with P(|X(t)| <= R) >= threshold; +inf if none
+    # s: first t in [0, H] with P(|X(t)| <= R) >= threshold; +inf if none
+    plausible_time: np.ndarray
 
 
 def _rows(x, n, D, name):
@@ -57,9 +62,8 @@ def _rows(x, n, D, name):
     return a
 
 
-def uncertain_pairs(pa, va, aa, ra, cov_a, pb, vb, ab, rb, cov_b,
-                    horizon: float, threshold: float, *, screen: bool = False,
-                    max_evaluated: int | None = None,
+def uncertain_pairs(pa, va, aa, ra, cov_a, pb, vb, ab, rb, cov_b, horizon: float, threshold: float,
+                    *, screen: bool = False, max_evaluated: int | None = None,
                     priority: Callable[[np.ndarray], np.ndarray] | None = None,
                     memo: dict | None = None,
                     screened_first: np.ndarray | None = None) -> UncertainPairs:
@@ -114,8 +118,10 @@ def uncertain_pairs(pa, va, aa, ra, cov_a, pb, vb, ab, rb, cov_b,
         raise ValueError(f"pa must have shape (n, 2) or (n, 3), got {pa.shape}")
     n, D = pa.shape
     pa = _rows(pa, n, D, "pa")
-    va, aa, pb, vb, ab = (_rows(x, n, D, name) for x, name in
-                          ((va, "va"), (aa, "aa"), (pb, "pb"), (vb, "vb"), (ab, "ab")))
+    va, aa, pb, vb, ab = (
+        _rows(x, n, D, name)
+        for x, name in ((va, "va"), (aa, "aa"), (pb, "pb"), (vb, "vb"), (ab, "ab"))
+    )
     ra, rb = _rows(ra, n, 0, "ra"), _rows(rb, n, 0, "rb")
     cov_a = np.asarray(cov_a, dtype=np.float64)
     cov_b = np.asarray(cov_b, dtype=np.float64)
@@ -183,7 +189,8 @@ def uncertain_pairs(pa, va, aa, ra, cov_a, pb, vb, ab, rb, cov_b,
     # relative state from relative quantities (map offsets cancel first);
     # X -> -X leaves the problem unchanged (the ball and S are symmetric): one
     # sign per pair, so swapping a and b gives bitwise the same result
-    # (one compiled pass: measured faster than per-row numpy indexing; see bench/bench_uncertainty.py)
+    # (one compiled pass: measured faster than per-row numpy indexing; see
+    # bench/bench_uncertainty.py)
     dp = np.empty((todo.size, D))
     dv = np.empty((todo.size, D))
     da = np.empty((todo.size, D))
@@ -193,7 +200,9 @@ def uncertain_pairs(pa, va, aa, ra, cov_a, pb, vb, ab, rb, cov_b,
     fresh = {}
 
     def key(j):  # everything a row's answer depends on (pair_probability's arguments)
-        return np.concatenate((dp[j], dv[j], da[j], rad[j:j + 1], sig[j].ravel(), (H, thr))).tobytes()
+        return np.concatenate(
+            (dp[j], dv[j], da[j], rad[j : j + 1], sig[j].ravel(), (H, thr))
+        ).tobytes()
 
     if memo and todo.size:  # (an empty memo, e.g. after a new reference time: no look-ups)
         keys = [key(j) for j in range(todo.size)]
@@ -202,13 +211,18 @@ def uncertain_pairs(pa, va, aa, ra, cov_a, pb, vb, ab, rb, cov_b,
             prob[todo[j]], bound[todo[j]], tpl[todo[j]] = fresh[keys[j]] = memo[keys[j]]
         if hit.any():
             keep = ~hit
-            todo, dp, dv, da, rad, sig = todo[keep], dp[keep], dv[keep], da[keep], rad[keep], sig[keep]
+            todo, dp, dv, da, rad, sig = (todo[keep], dp[keep], dv[keep], da[keep], rad[keep],
+                                          sig[keep])
             todo_first = todo_first[keep]
     if max_evaluated is not None and todo.size > max_evaluated:
         m = max(int(max_evaluated), 0)
-        rank = (np.zeros(todo.size, dtype=np.int64) if priority is None
-                else np.asarray(priority(todo), dtype=np.int64))
-        order = np.lexsort((todo, todo_first, rank))  # waited longest, earliest possible contact, row
+        rank = (
+            np.zeros(todo.size, dtype=np.int64)
+            if priority is None
+            else np.asarray(priority(todo), dtype=np.int64)
+        )
+        # waited longest, earliest possible contact, row
+        order = np.lexsort((todo, todo_first, rank))
         later = np.sort(order[m:])
         rows = todo[later]
         prob[rows], bound[rows], tpl[rows] = DEFERRED_PROBABILITY, DEFERRED_BOUND, todo_first[later]
@@ -217,7 +231,9 @@ def uncertain_pairs(pa, va, aa, ra, cov_a, pb, vb, ab, rb, cov_b,
     out = np.empty((todo.size, OUT_SIZE))
     evaluate_uncertain_rows(dp, dv, da, rad, sig, H, thr, out)
     for j, i in enumerate(todo.tolist()):
-        prob[i], bound[i], tpl[i] = r = finish_row(dp[j], dv[j], da[j], float(rad[j]), sig[j], H, out[j])
+        prob[i], bound[i], tpl[i] = r = finish_row(
+            dp[j], dv[j], da[j], float(rad[j]), sig[j], H, out[j]
+        )
         if memo is not None:
             fresh[key(j)] = r
     if memo is not None:

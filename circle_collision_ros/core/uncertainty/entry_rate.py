@@ -41,23 +41,26 @@ import math
 import numpy as np
 from numba import njit
 
-from circle_collision_ros.core.special import cody_erf_small, cody_erfcx_mid, cody_r3, inv_sym, mat_mul
-from circle_collision_ros.core.uncertainty.quadrature import (G7_WEIGHTS, K15_NODES, K15_WEIGHTS, P31_K15_WEIGHTS, P31_NEW_NODES,
-                                                  P31_NEW_WEIGHTS, make_adaptive, make_adaptive_angle,
-                                                  make_adaptive_nested)
+from circle_collision_ros.core.special import (cody_erf_small, cody_erfcx_mid, cody_r3, inv_sym,
+                                               mat_mul)
+from circle_collision_ros.core.uncertainty.quadrature import (G7_WEIGHTS, K15_NODES, K15_WEIGHTS,
+                                                              P31_K15_WEIGHTS, P31_NEW_NODES,
+                                                              P31_NEW_WEIGHTS, make_adaptive,
+                                                              make_adaptive_angle,
+                                                              make_adaptive_nested)
 
-__all__ = ["entry_rate_integral", "entry_rate_k15", "entry_rate_p31", "entry_rate_gauss3", "rate_factor", "DEGENERATE_RATIO"]
+__all__ = ["entry_rate_integral", "entry_rate_k15", "entry_rate_p31", "entry_rate_gauss3",
+           "rate_factor", "DEGENERATE_RATIO"]
 
 DEGENERATE_RATIO = 1e-12
 _RS2 = 1.0 / math.sqrt(2.0)
 _RS2PI = 1.0 / math.sqrt(2.0 * math.pi)
 BROAD_K = 7.5  # BROAD_PHASE_SIGMAS (core.uncertainty.tube asserts they agree)
-BROAD_K2 = BROAD_K ** 2
+BROAD_K2 = BROAD_K**2
 _SCAN = 16  # arc scan steps for the density's local maxima (panel ends), at least
 _SCAN_MAX = 4096  # at most (a step >= 2 alpha R / 4096 > sigma_min: S(t) degenerate)
 _SCAN_ANCHOR = 64  # scan directions re-anchored by cos/sin every this many steps
 _RING_ISOTROPIC = 4.0  # 3-D rings keep two fixed halves while sigma_min >= sqrt(tr S) / this
-
 
 
 _RATE_TAIL_NEGLIGIBLE = 8.5
@@ -90,7 +93,9 @@ def rate_factor(q, m, s):
     x = r * _RS2
     ax = abs(x)
     if ax < 0.46875:
-        return math.exp(-0.5 * q) * (s * _RS2PI * math.exp(-0.5 * r * r) - 0.5 * m * (1.0 - cody_erf_small(x)))
+        return math.exp(-0.5 * q) * (
+            s * _RS2PI * math.exp(-0.5 * r * r) - 0.5 * m * (1.0 - cody_erf_small(x))
+        )
     if ax <= 4.0:
         bracket = s * _RS2PI - 0.5 * abs(m) * cody_erfcx_mid(ax)
     else:
@@ -99,7 +104,6 @@ def rate_factor(q, m, s):
     if m > 0.0:
         return tail
     return math.exp(-0.5 * q) * (-m) + tail
-
 
 
 @njit(cache=True, error_model="numpy")
@@ -116,7 +120,9 @@ def _state(dp, dv, da, Sigma, t):
         g[i] = dp[i] + t * (dv[i] + 0.5 * t * da[i])
         gd[i] = dv[i] + t * da[i]
         for j in range(D):
-            S[i, j] = Sigma[i, j] + t * (Sigma[i, D + j] + Sigma[D + i, j]) + t * t * Sigma[D + i, D + j]
+            S[i, j] = (
+                Sigma[i, j] + t * (Sigma[i, D + j] + Sigma[D + i, j]) + t * t * Sigma[D + i, D + j]
+            )
             C[i, j] = Sigma[i, D + j] + t * Sigma[D + i, D + j]
             Svv[i, j] = Sigma[D + i, D + j]
         tr += S[i, i]
@@ -158,7 +164,8 @@ def _surface_integrand(n0, n1, n2, R, g, gd, A, norm, K, Vc):
 # ---- 2-D: the arc integral at one t ---------------------------------------------
 # prm: a flat tuple of floats (no arrays: the 2-D path allocates nothing per
 # evaluation, see _state2):
-_P_R, _P_CG, _P_G0, _P_G1, _P_GD0, _P_GD1 = 0, 1, 2, 3, 4, 5  # _P_CG, _P_SG: cos, sin of g's direction
+# _P_CG, _P_SG: cos, sin of g's direction
+_P_R, _P_CG, _P_G0, _P_G1, _P_GD0, _P_GD1 = 0, 1, 2, 3, 4, 5
 _P_A00, _P_A01, _P_A11, _P_NORM = 6, 7, 8, 9  # _P_A01: A[0, 1] + A[1, 0]
 _P_K00, _P_K01, _P_K10, _P_K11 = 10, 11, 12, 13
 _P_V00, _P_V01, _P_V11 = 14, 15, 16  # _P_V01: Vc[0, 1] + Vc[1, 0]
@@ -178,8 +185,9 @@ def _arc_integrand(cp, sp, prm):
     q = prm[_P_A00] * d0 * d0 + prm[_P_A01] * d0 * d1 + prm[_P_A11] * d1 * d1
     if not (q < 1400.0):
         return 0.0
-    m = (n0 * (prm[_P_GD0] + prm[_P_K00] * d0 + prm[_P_K01] * d1)
-         + n1 * (prm[_P_GD1] + prm[_P_K10] * d0 + prm[_P_K11] * d1))
+    m = n0 * (prm[_P_GD0] + prm[_P_K00] * d0 + prm[_P_K01] * d1) + n1 * (
+        prm[_P_GD1] + prm[_P_K10] * d0 + prm[_P_K11] * d1
+    )
     s2 = prm[_P_V00] * n0 * n0 + prm[_P_V01] * n0 * n1 + prm[_P_V11] * n1 * n1
     return R * prm[_P_NORM] * rate_factor(q, m, math.sqrt(max(s2, 0.0)))
 
@@ -359,8 +367,8 @@ def nu_plus_2d(dp, dv, da, R, Sigma, t, tol, acc):
     ia = np.empty(nscan, dtype=np.int64)
     ib = np.empty(nscan, dtype=np.int64)
     npieces = _scan_pieces(qs, nscan, reach * reach, jmin, ia, ib)
-    prm = (R, math.cos(phig), g0, g1, gd0, gd1, a00, a01s, a11, norm, k00, k01, k10, k11,
-           v00, v01 + v10, v11, math.sin(phig))
+    prm = (R, math.cos(phig), g0, g1, gd0, gd1, a00, a01s, a11, norm, k00, k01, k10, k11, v00,
+           v01 + v10, v11, math.sin(phig))
     ptol = tol / npieces
     total = 0.0
     err = 0.0
@@ -454,7 +462,11 @@ def _cap_integrand(th, prm):
     for j in range(n + 1):
         cp = math.cos(j * step)
         sp = math.sin(j * step)
-        qs[j] = c00 + 2.0 * rs * (cp * c1 + sp * c2) + rs * rs * (cp * cp * d11 + 2.0 * cp * sp * d12 + sp * sp * d22)
+        qs[j] = (
+            c00
+            + 2.0 * rs * (cp * c1 + sp * c2)
+            + rs * rs * (cp * cp * d11 + 2.0 * cp * sp * d12 + sp * sp * d22)
+        )
         if qs[j] < qs[jmin]:
             jmin = j
     ia = np.empty(n, dtype=np.int64)

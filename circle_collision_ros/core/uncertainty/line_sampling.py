@@ -59,7 +59,8 @@ from numba import njit
 from circle_collision_ros.core.special import eig_sym, mat_mul, unit_across
 from circle_collision_ros.core.uncertainty.overlap import overlap_probability_2d
 
-__all__ = ["line_factor", "line_replicates", "capsule_interval", "cylinder_control", "disc_given_tau", "PHI_ERR"]
+__all__ = ["line_factor", "line_replicates", "capsule_interval", "cylinder_control",
+           "disc_given_tau", "PHI_ERR"]
 
 # semi-definite Cholesky: a pivot <= _PIVOT_RTOL x the largest diagonal entry is a
 # variable that is (to rounding) a function of the previous ones: its column is 0
@@ -68,15 +69,23 @@ _PIVOT_RTOL = 1e-14
 # h = 1/64 and cubic Hermite interpolation between nodes, whose error is at most
 # h^4 / 384 max|Phi^(4)| = h^4 / 384 max|(x^3 - 3x) phi(x)| = 8.54e-11 (the
 # table's rounding adds ~1e-16).  Measured faster than two erfc with their range
-# branches (see bench/bench_uncertainty.py); the estimate's stated bound adds the resulting bias (PHI_ERR per
+# branches (see bench/bench_uncertainty.py); the estimate's stated bound adds the resulting bias
+# (PHI_ERR per
 # Phi: two per chord).  tests/core/uncertainty/test_uncertainty_line_sampling.py checks
 # PHI_ERR against mpmath.
 _PHI_INV_H = 64.0
 _PHI_X0 = -9.0
 _PHI_LAST = 18.0 * _PHI_INV_H - 1e-9  # u below the last node: i + 1 stays in the table
 _PHI_NODES = _PHI_X0 + np.arange(int(18.0 * _PHI_INV_H) + 1) / _PHI_INV_H
-_PHI_TABLE = np.array([[0.5 * math.erfc(-x / math.sqrt(2.0)),
-                        math.exp(-0.5 * x * x) / math.sqrt(2.0 * math.pi) / _PHI_INV_H] for x in _PHI_NODES])
+_PHI_TABLE = np.array(
+    [
+        [
+            0.5 * math.erfc(-x / math.sqrt(2.0)),
+            math.exp(-0.5 * x * x) / math.sqrt(2.0 * math.pi) / _PHI_INV_H,
+        ]
+        for x in _PHI_NODES
+    ]
+)
 PHI_ERR = 1e-10
 
 
@@ -335,7 +344,8 @@ def cylinder_control(dp, dv, Sigma, e, R, H):
     if vv > 0.0:
         tbar = -pv / vv
         if 0.0 < tbar < H:
-            # t* = -dp.dv / |dv|^2: d/ddp = -dv / |dv|^2, d/ddv = -dp / |dv|^2 + 2 (dp.dv) dv / |dv|^4
+            # t* = -dp.dv / |dv|^2: d/ddp = -dv / |dv|^2, d/ddv = -dp / |dv|^2 + 2 (dp.dv) dv /
+            # |dv|^4
             for k in range(3):
                 a[k] = -dv[k] / vv
                 a[3 + k] = -dp[k] / vv + 2.0 * pv * dv[k] / (vv * vv)
@@ -446,8 +456,14 @@ def line_replicates(G, mu, e, s, f, tbar, a, R, H, Z, m0, m1, tot, ctot):
             d0 = v0 - mu[3]
             d1 = v1 - mu[4]
             d2 = v2 - mu[5]
-            tt = tbar + (a[0] * (c0 - mu[0]) + a[1] * (c1 - mu[1]) + a[2] * (c2 - mu[2])
-                         + a[3] * d0 + a[4] * d1 + a[5] * d2)
+            tt = tbar + (
+                a[0] * (c0 - mu[0])
+                + a[1] * (c1 - mu[1])
+                + a[2] * (c2 - mu[2])
+                + a[3] * d0
+                + a[4] * d1
+                + a[5] * d2
+            )
             w0 = c0 + tt * d0
             w1 = c1 + tt * d1
             w2 = c2 + tt * d2

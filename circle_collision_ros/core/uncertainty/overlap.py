@@ -44,10 +44,11 @@ from numba import njit
 from circle_collision_ros.core.special import eig_sym, unit_across
 from circle_collision_ros.core.uncertainty.quadrature import make_adaptive
 
-__all__ = ["overlap_probability", "overlap_probability_2d", "overlap_probability_tol", "interval_mass",
-           "disc_probability", "disc_probability_tol", "ball_probability", "ball_probability_tol", "WINDOW_SIGMAS",
-           "BALL_ERR_PER_TOL", "DISC_ERR_PER_TOL", "overlap_probability_2d_tol", "ruben_probability",
-           "RUBEN_MAX_TERMS_2D", "RUBEN_MAX_TERMS_3D", "RUBEN_ROUNDING", "TOL", "ball_gauss_hermite", "narrow3"]
+__all__ = ["overlap_probability", "overlap_probability_2d", "overlap_probability_tol",
+           "interval_mass", "disc_probability", "disc_probability_tol", "ball_probability",
+           "ball_probability_tol", "WINDOW_SIGMAS", "BALL_ERR_PER_TOL", "DISC_ERR_PER_TOL",
+           "overlap_probability_2d_tol", "ruben_probability", "RUBEN_MAX_TERMS_2D",
+           "RUBEN_MAX_TERMS_3D", "RUBEN_ROUNDING", "TOL", "ball_gauss_hermite", "narrow3"]
 
 WINDOW_SIGMAS = 9.0  # integration window [-9, 9] sigma of each integrated component
 TOL = 1e-10  # quadrature tolerance per 1-D integral (absolute, on a probability)
@@ -167,7 +168,9 @@ def ruben_probability(R, m1, s1, m2, s2, m3, s3, tol, max_terms):
             for r in range(k):
                 acc += a[r] * h[k - 1 - r]
             a[k] = acc / k
-        h[k] = 0.5 * (gk2 * g2 + gk3 * g3) + (k + 1) * (c2 * gk2 + c3 * gk3) + (c1 if k == 0 else 0.0)
+        h[k] = (
+            0.5 * (gk2 * g2 + gk3 * g3) + (k + 1) * (c2 * gk2 + c3 * gk3) + (c1 if k == 0 else 0.0)
+        )
         gk2 *= g2
         gk3 *= g3
         used += a[k]
@@ -193,6 +196,7 @@ def ruben_probability(R, m1, s1, m2, s2, m3, s3, tol, max_terms):
                 total += a[j] * min(F, 1.0)
             return min(1.0, total), tail + RUBEN_ROUNDING
     return math.nan, -1.0
+
 
 # ---- the narrow-direction integral, shared by 2-D and 3-D -------------------
 # prm = (kind, R, ehi0, elo0, s1, uend, m2, s2, m3, s3, tol)
@@ -385,7 +389,6 @@ _GH_NARROW = 8.0
 _GH_STEEP = 2.0
 
 
-
 @njit(cache=True, error_model="numpy")
 def _chord_rule(R, mn, l11, l21, l22, b1, b2, sc, X, W):
     """E[P(|y_u| <= sqrt(R^2 - |y_perp|^2))] by the tensor Gauss-Hermite rule (X, W)
@@ -489,7 +492,6 @@ def ball_probability_tol(R, m1, s1, m2, s2, m3, s3, tol):
     return min(1.0, max(0.0, v))
 
 
-
 @njit(cache=True, error_model="numpy")
 def overlap_probability_2d(g0, g1, s00, s01, s11, R):
     """P(|X| <= R) for X ~ N((g0, g1), [[s00, s01], [s01, s11]]) (PSD): overlap_probability
@@ -535,11 +537,14 @@ def overlap_probability_tol(mean, S, R, tol):
     (stated error <= DISC_ERR_PER_TOL * tol in 2-D, BALL_ERR_PER_TOL * tol in 3-D)."""
     D = mean.shape[0]
     if D == 2:
-        return overlap_probability_2d_tol(mean[0], mean[1], S[0, 0], 0.5 * (S[0, 1] + S[1, 0]), S[1, 1], R, tol)
+        return overlap_probability_2d_tol(
+            mean[0], mean[1], S[0, 0], 0.5 * (S[0, 1] + S[1, 0]), S[1, 1], R, tol
+        )
     lam, Q = eig_sym(S)
     mu = np.zeros(D)
     for j in range(D):
         for k in range(D):
             mu[j] += Q[k, j] * mean[k]
-    return ball_probability_tol(R, mu[0], math.sqrt(lam[0]), mu[1], math.sqrt(lam[1]),
-                                mu[2], math.sqrt(lam[2]), tol)
+    return ball_probability_tol(
+        R, mu[0], math.sqrt(lam[0]), mu[1], math.sqrt(lam[1]), mu[2], math.sqrt(lam[2]), tol
+    )

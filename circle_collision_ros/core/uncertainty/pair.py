@@ -17,21 +17,27 @@ import numpy as np
 from numba import njit
 
 from circle_collision_ros.core.uncertainty.overlap import BALL_ERR_PER_TOL, DISC_ERR_PER_TOL
-from circle_collision_ros.core.uncertainty.qmc import (QMC_CV_POINTS, QMC_CV_TARGET, QMC_POINTS, QMC_REPLICATES,
-                                                       QMC_T, factor, line_sampled, line_sampled_probability,
-                                                       normal_table, overcount_replicates, qmc_probability,
+from circle_collision_ros.core.uncertainty.qmc import (QMC_CV_POINTS, QMC_CV_TARGET, QMC_POINTS,
+                                                       QMC_REPLICATES, QMC_T, factor, line_sampled,
+                                                       line_sampled_probability, normal_table,
+                                                       overcount_replicates, qmc_probability,
                                                        replicate_stats)
-from circle_collision_ros.core.uncertainty.reentry import BRACKET_HALF_WIDTH, no_reentry, overcount_tail
-from circle_collision_ros.core.uncertainty.tube import BROAD_PHASE_SIGMAS, TUBE_DEPTH, TUBE_TAIL, tube_intervals
-from circle_collision_ros.core.uncertainty.walk import (CACHE_COLUMNS, P0_ERR, P0_SKIP, PANELS, PLAUSIBLE_RTOL,
-                                                        ST_DEGENERATE, ST_PERR, ST_PMAX, ST_PTOL, ST_SIZE,
-                                                        ST_SWEEP_DV, WALK_TOL_2D, WALK_TOL_2D_REL, WALK_TOL_REL,
+from circle_collision_ros.core.uncertainty.reentry import (BRACKET_HALF_WIDTH, no_reentry,
+                                                           overcount_tail)
+from circle_collision_ros.core.uncertainty.tube import (BROAD_PHASE_SIGMAS, TUBE_DEPTH, TUBE_TAIL,
+                                                        tube_intervals)
+from circle_collision_ros.core.uncertainty.walk import (CACHE_COLUMNS, P0_ERR, P0_SKIP, PANELS,
+                                                        PLAUSIBLE_RTOL, ST_DEGENERATE, ST_PERR,
+                                                        ST_PMAX, ST_PTOL, ST_SIZE, ST_SWEEP_DV,
+                                                        WALK_TOL_2D, WALK_TOL_2D_REL, WALK_TOL_REL,
                                                         clear_prefix, first_crossing, instant_bound,
-                                                        instant_probability, plausible_time_grid, prob_at,
-                                                        rice_panel, velocity_sigma, walk_panels)
+                                                        instant_probability, plausible_time_grid,
+                                                        prob_at, rice_panel, velocity_sigma,
+                                                        walk_panels)
 
-__all__ = ["pair_kernel", "pair_probability", "relative_rows", "evaluate_uncertain_rows", "finish_row",
-           "OUT_SIZE", "OUT_P", "OUT_BOUND", "OUT_TPL", "OUT_QMC", "OUT_LO", "OUT_HI", "OUT_ERR"]
+__all__ = ["pair_kernel", "pair_probability", "relative_rows", "evaluate_uncertain_rows",
+           "finish_row", "OUT_SIZE", "OUT_P", "OUT_BOUND", "OUT_TPL", "OUT_QMC", "OUT_LO", "OUT_HI",
+           "OUT_ERR"]
 
 
 # pair_kernel's out: probability, bound, plausible time, then for the RQMC
@@ -128,8 +134,8 @@ def pair_kernel(dp, dv, da, R, Sigma, H, thr, out):
                 tpl = a0
                 found = True
                 break
-            r = first_crossing(dp, dv, da, R, Sigma, pa, pb, j, a0, p_start, thr, dt, cache, acc, st,
-                                t_inside > H and not sampled)
+            r = first_crossing(dp, dv, da, R, Sigma, pa, pb, j, a0, p_start, thr, dt, cache, acc,
+                               st, t_inside > H and not sampled)
             if st[ST_DEGENERATE] != 0.0:
                 found = True
                 break
@@ -283,8 +289,9 @@ def finish_row(dp, dv, da, R, Sigma, H, out):
         p = min(1.0, max(0.0, min(max(upper - mean, float(out[OUT_LO])), upper)))
         return p, stat + float(out[OUT_ERR]), float(out[OUT_TPL])
     if out[OUT_QMC] == 3.0:
-        mean, stat = line_sampled_probability(dp, dv, np.ascontiguousarray(Sigma), float(R), float(H),
-                                              normal_table(5))
+        mean, stat = line_sampled_probability(
+            dp, dv, np.ascontiguousarray(Sigma), float(R), float(H), normal_table(5)
+        )
         p = min(1.0, max(0.0, max(mean, float(out[OUT_LO]))))
         return p, stat, float(out[OUT_TPL])
     mean, se = qmc_probability(dp, dv, da, R, Sigma, H, normal_table(2 * D))

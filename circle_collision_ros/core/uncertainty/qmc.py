@@ -21,13 +21,14 @@ from numba import njit
 
 from circle_collision_ros.core.narrow.batch import ttc_kernel_h
 from circle_collision_ros.core.special import eig_sym
-from circle_collision_ros.core.uncertainty.line_sampling import PHI_ERR, cylinder_control, line_factor, line_replicates
+from circle_collision_ros.core.uncertainty.line_sampling import (PHI_ERR, cylinder_control,
+                                                                 line_factor, line_replicates)
 from circle_collision_ros.core.uncertainty.sobol import scrambled_directions, sobol_points
 
-__all__ = ["QMC_REPLICATES", "QMC_POINTS", "QMC_T", "QMC_CV_POINTS", "QMC_CV_TARGET", "QMC_LINE_POINTS",
-           "QMC_LINE_TARGET", "QMC_T_CONTROLLED", "normal_table", "factor", "replicate_stats", "qmc_probability",
-           "controlled_stats", "quartic_crossings", "overcount_replicates", "line_sampled",
-           "line_sampled_probability"]
+__all__ = ["QMC_REPLICATES", "QMC_POINTS", "QMC_T", "QMC_CV_POINTS", "QMC_CV_TARGET",
+           "QMC_LINE_POINTS", "QMC_LINE_TARGET", "QMC_T_CONTROLLED", "normal_table", "factor",
+           "replicate_stats", "qmc_probability", "controlled_stats", "quartic_crossings",
+           "overcount_replicates", "line_sampled", "line_sampled_probability"]
 
 
 # Randomized QMC: QMC_REPLICATES independent scrambles of QMC_POINTS Sobol
@@ -118,13 +119,13 @@ def qmc_probability(dp, dv, da, R, Sigma, H, Z):
     Zf = Z.reshape(r * m, 2 * D)
     Y = np.zeros((r * m, 2 * D))
     for j in range(2 * D):  # elementwise, not BLAS: the same bits on every machine/thread count
-        Y += Zf[:, j:j + 1] * L[:, j]
+        Y += Zf[:, j : j + 1] * L[:, j]
     n = r * m
     zeros = np.zeros((n, D))
     t = np.empty(n)
     ttc_kernel_h(np.ascontiguousarray(dp + Y[:, :D]), np.ascontiguousarray(dv + Y[:, D:]),
-                  np.ascontiguousarray(np.broadcast_to(da, (n, D))), np.full(n, R),
-                  zeros, zeros, zeros, np.zeros(n), H, t)
+                 np.ascontiguousarray(np.broadcast_to(da, (n, D))), np.full(n, R), zeros, zeros,
+                 zeros, np.zeros(n), H, t)
     est = (t <= H).reshape(r, m).mean(axis=1)
     return replicate_stats(est)
 
@@ -201,7 +202,8 @@ def _crit_in(c4, c3, c2, c1, lo, hi):
 
 @njit(cache=True, error_model="numpy", inline="always")
 def _quartic_coefficients(p, v, a):
-    """(c4, c3, c2, c1, |p|^2) of |p + v t + a t^2 / 2|^2 = c4 t^4 + c3 t^3 + c2 t^2 + c1 t + |p|^2."""
+    """(c4, c3, c2, c1, |p|^2) of |p + v t + a t^2 / 2|^2
+    = c4 t^4 + c3 t^3 + c2 t^2 + c1 t + |p|^2."""
     c4 = 0.0
     c3 = 0.0
     c2 = 0.0
@@ -365,8 +367,11 @@ def line_sampled_probability(dp, dv, Sigma, R, H, Z):
         mean, half, beta = controlled_stats(tot / m, ctot / m, ctl_mean)
         # + the deterministic part: each chord's mass within 2 PHI_ERR (the
         # Phi table), the control's mean within ctl_err (its quadrature)
-        stat = (max(half, 3.0 / (QMC_REPLICATES * m))
-                + 2.0 * PHI_ERR + abs(beta) * (2.0 * PHI_ERR + ctl_err))
+        stat = (
+            max(half, 3.0 / (QMC_REPLICATES * m))
+            + 2.0 * PHI_ERR
+            + abs(beta) * (2.0 * PHI_ERR + ctl_err)
+        )
         if stat <= QMC_LINE_TARGET:
             break
     return mean, stat

@@ -26,7 +26,8 @@ __all__ = ["no_reentry", "overcount_tail", "REENTRY_SIGMAS", "BRACKET_HALF_WIDTH
 _REENTRY_PIECES = 16  # pieces of the interval for no_reentry's bounds
 
 
-_DUAL_LAMBDAS = (1.0, 0.5, 0.25, 0.125, 0.0625)  # multiples of the linear bound's optimum sqrt(Q) / (2 k)
+# multiples of the linear bound's optimum sqrt(Q) / (2 k)
+_DUAL_LAMBDAS = (1.0, 0.5, 0.25, 0.125, 0.0625)
 
 
 @njit(cache=True, error_model="numpy")
@@ -39,7 +40,8 @@ def no_reentry(dp, dv, da, Sigma, t0, t1, k):
     f'' / 2 = |Xdot|^2 + X.da > 0.  With X = g + dX, Xdot = gd + dV (deviations
     linear in z; acceleration is exact),
 
-        f'' / 2 = P(t) + l + |dV|^2,  P(t) = |gd|^2 + g.da = |dv|^2 + dp.da + 3 (dv.da) t + 1.5 |da|^2 t^2,
+        f'' / 2 = P(t) + l + |dV|^2,  P(t) = |gd|^2 + g.da = |dv|^2 + dp.da + 3 (dv.da) t + 1.5
+        |da|^2 t^2,
 
     l = u(t).(dp_dev, dv_dev), u(t) = (da, 2 dv + 3 t da).  For every lam > 0 and
     |z| <= k: l + |dV|^2 >= l + |dV|^2 + lam (|z|^2 - k^2) >= -lam k^2 - W(t) /
@@ -80,7 +82,9 @@ def no_reentry(dp, dv, da, Sigma, t0, t1, k):
         p0 += dv[i] * dv[i] + dp[i] * da[i]
         p1 += 3.0 * dv[i] * da[i]
         p2 += 1.5 * da[i] * da[i]
-        pscale += dv[i] * dv[i] + abs(dp[i] * da[i]) + 3.0 * abs(dv[i] * da[i]) + 1.5 * da[i] * da[i]
+        pscale += (
+            dv[i] * dv[i] + abs(dp[i] * da[i]) + 3.0 * abs(dv[i] * da[i]) + 1.5 * da[i] * da[i]
+        )
     for i in range(n2):
         smax = max(smax, abs(Sig[i, i]))
     su0 = np.zeros(n2)  # Sigma u0, Sigma u1 (loops: numba's @ needs scipy's BLAS)
@@ -107,7 +111,8 @@ def no_reentry(dp, dv, da, Sigma, t0, t1, k):
     usz = 0.0
     for i in range(n2):
         usz += abs(u0[i]) + tmax * abs(u1[i])
-    # rounding: a few ulps per term of sums bounded by these scales (W <= u^T Sigma u <= 2D smax |u|^2)
+    # rounding: a few ulps per term of sums bounded by these scales (W <= u^T Sigma u <= 2D smax
+    # |u|^2)
     perr = 1e-12 * pscale * tmax * tmax
     werr = 1e-12 * n2 * smax * usz * usz
     for q in range(_REENTRY_PIECES):
@@ -158,7 +163,9 @@ REENTRY_SIGMAS = (6.0, 5.0, 4.5)
 # slack plus 3 / (QMC_REPLICATES * QMC_CV_POINTS) = 1.5e-3 (the rule of three at
 # its first stage); never a looser answer than the sampling would give
 BRACKET_HALF_WIDTH = 3.0 / (QMC_REPLICATES * QMC_CV_POINTS)
-_REENTRY_TAILS = np.array([[2.0 * chi2_tail_even(k * k, 2 * D) for k in REENTRY_SIGMAS] for D in (2, 3)])
+_REENTRY_TAILS = np.array(
+    [[2.0 * chi2_tail_even(k * k, 2 * D) for k in REENTRY_SIGMAS] for D in (2, 3)]
+)
 
 
 @njit(cache=True, error_model="numpy")

@@ -23,7 +23,8 @@ __all__ = ["sobol_directions", "scrambled_directions", "sobol_points", "BITS", "
 BITS = 32
 MAX_DIM = 6
 # (s, a, m_1..m_s) of dimensions 2..6 (Joe & Kuo, new-joe-kuo-6.21201)
-_JOE_KUO = ((1, 0, (1,)), (2, 1, (1, 3)), (3, 1, (1, 3, 1)), (3, 2, (1, 1, 1)), (4, 1, (1, 1, 3, 3)))
+_JOE_KUO = ((1, 0, (1,)), (2, 1, (1, 3)), (3, 1, (1, 3, 1)), (3, 2, (1, 1, 1)),
+            (4, 1, (1, 1, 3, 3)))
 
 
 def sobol_directions(dim: int) -> np.ndarray:

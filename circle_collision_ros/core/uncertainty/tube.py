@@ -21,9 +21,9 @@ from numba import njit
 from circle_collision_ros.core.uncertainty.entry_rate import BROAD_K
 from circle_collision_ros.core.uncertainty.quadrature import push_halves
 
-__all__ = ["BROAD_PHASE_SIGMAS", "TUBE_TAIL", "TUBE_DEPTH", "chi2_tail_even", "S_at", "lam_max_sym3",
-           "max_sigma_over", "max_sigma_rows", "mean_range", "tube_intervals", "screen_rows", "screen_rows_at",
-           "row_classes", "screen_sigmas"]
+__all__ = ["BROAD_PHASE_SIGMAS", "TUBE_TAIL", "TUBE_DEPTH", "chi2_tail_even", "S_at",
+           "lam_max_sym3", "max_sigma_over", "max_sigma_rows", "mean_range", "tube_intervals",
+           "screen_rows", "screen_rows_at", "row_classes", "screen_sigmas"]
 
 
 def chi2_tail_even(x: float, dof: int) -> float:
@@ -41,7 +41,7 @@ def chi2_tail_even(x: float, dof: int) -> float:
 # and on |z| <= k every t has |X(t) - g(t)| <= k sqrt(lambda_max(S(t)))
 # (Cauchy-Schwarz).  Two bodies: 2 * TUBE_TAIL = 5.2e-10 < 1e-9.
 BROAD_PHASE_SIGMAS = 7.5
-TUBE_TAIL = chi2_tail_even(BROAD_PHASE_SIGMAS ** 2, 6)  # 2.6e-10
+TUBE_TAIL = chi2_tail_even(BROAD_PHASE_SIGMAS**2, 6)  # 2.6e-10
 assert BROAD_K == BROAD_PHASE_SIGMAS
 
 
@@ -52,7 +52,9 @@ def S_at(Sigma, t):
     S = np.empty((D, D))
     for i in range(D):
         for j in range(D):
-            S[i, j] = Sigma[i, j] + t * (Sigma[i, D + j] + Sigma[D + i, j]) + t * t * Sigma[D + i, D + j]
+            S[i, j] = (
+                Sigma[i, j] + t * (Sigma[i, D + j] + Sigma[D + i, j]) + t * t * Sigma[D + i, D + j]
+            )
     return S
 
 
@@ -76,9 +78,11 @@ def _lam_max(Sigma, t):
 @njit(cache=True, error_model="numpy", inline="always")
 def _s_sym(Sigma, t, i, j):
     """Entry (i, j) of the symmetric part of S(t) in 3-D."""
-    return 0.5 * ((Sigma[i, j] + Sigma[j, i]) + t * ((Sigma[i, 3 + j] + Sigma[3 + i, j])
-                                                     + (Sigma[j, 3 + i] + Sigma[3 + j, i]))
-                  + t * t * (Sigma[3 + i, 3 + j] + Sigma[3 + j, 3 + i]))
+    return 0.5 * (
+        (Sigma[i, j] + Sigma[j, i])
+        + t * ((Sigma[i, 3 + j] + Sigma[3 + i, j]) + (Sigma[j, 3 + i] + Sigma[3 + j, i]))
+        + t * t * (Sigma[3 + i, 3 + j] + Sigma[3 + j, 3 + i])
+    )
 
 
 @njit(cache=True, error_model="numpy")
@@ -228,8 +232,11 @@ def _tube_walk(dp, dv, da, R, Sigma, H, out, k, first_only):
             t_inside = min(t_inside, ta)
             continue
         m = 0.5 * (ta + tb)
-        if d >= TUBE_DEPTH or not (ta < m < tb) or (not first_only and _ambiguous_through(
-                dp, dv, da, R, Sigma, ta, tb, k)):
+        if (
+            d >= TUBE_DEPTH
+            or not (ta < m < tb)
+            or (not first_only and _ambiguous_through(dp, dv, da, R, Sigma, ta, tb, k))
+        ):
             if first_only:
                 return 0, ta
             if cnt > 0 and out[cnt - 1, 1] == ta:
@@ -313,8 +320,14 @@ def row_classes(pa, va, aa, ra, pb, vb, ab, rb, sigma, exact, finite):
                 if not math.isfinite(x):
                     fin = False
         for c in range(D):
-            if not (math.isfinite(pa[i, c]) and math.isfinite(va[i, c]) and math.isfinite(aa[i, c])
-                    and math.isfinite(pb[i, c]) and math.isfinite(vb[i, c]) and math.isfinite(ab[i, c])):
+            if not (
+                math.isfinite(pa[i, c])
+                and math.isfinite(va[i, c])
+                and math.isfinite(aa[i, c])
+                and math.isfinite(pb[i, c])
+                and math.isfinite(vb[i, c])
+                and math.isfinite(ab[i, c])
+            ):
                 fin = False
         exact[i] = ex
         finite[i] = fin

@@ -19,18 +19,23 @@ import numpy as np
 from numba import njit
 
 from circle_collision_ros.core.special import eig_sym
-from circle_collision_ros.core.uncertainty.entry_rate import (entry_rate_gauss3, entry_rate_integral, entry_rate_k15,
+from circle_collision_ros.core.uncertainty.entry_rate import (entry_rate_gauss3,
+                                                              entry_rate_integral, entry_rate_k15,
                                                               entry_rate_p31)
-from circle_collision_ros.core.uncertainty.overlap import (overlap_probability, overlap_probability_2d,
-                                                           overlap_probability_2d_tol, overlap_probability_tol)
-from circle_collision_ros.core.uncertainty.quadrature import P31_K15_POS, P31_NEW_POS, push_halves, subinterval_integral
+from circle_collision_ros.core.uncertainty.overlap import (overlap_probability,
+                                                           overlap_probability_2d,
+                                                           overlap_probability_2d_tol,
+                                                           overlap_probability_tol)
+from circle_collision_ros.core.uncertainty.quadrature import (P31_K15_POS, P31_NEW_POS, push_halves,
+                                                              subinterval_integral)
 from circle_collision_ros.core.uncertainty.tube import TUBE_TAIL, S_at, max_sigma_over, mean_range
 
-__all__ = ["instant_probability", "instant_probability_tol", "instant_bound", "det_lower", "PANELS", "P0_ERR",
-           "P0_SKIP", "PLAUSIBLE_RTOL", "walk_panels", "ST_PMAX", "ST_DEGENERATE", "ST_PTOL", "ST_PERR",
-           "ST_SWEEP_DV", "ST_SIZE", "WALK_TOL_REL", "WALK_TOL_2D_REL", "WALK_TOL_2D", "prob_at", "CACHE_COLUMNS",
-           "velocity_sigma", "swept_ball_bound", "swept_ball_split", "rice_panel", "clear_prefix",
-           "first_crossing", "plausible_time_grid"]
+__all__ = ["instant_probability", "instant_probability_tol", "instant_bound", "det_lower", "PANELS",
+           "P0_ERR", "P0_SKIP", "PLAUSIBLE_RTOL", "walk_panels", "ST_PMAX", "ST_DEGENERATE",
+           "ST_PTOL", "ST_PERR", "ST_SWEEP_DV", "ST_SIZE", "WALK_TOL_REL", "WALK_TOL_2D_REL",
+           "WALK_TOL_2D", "prob_at", "CACHE_COLUMNS", "velocity_sigma", "swept_ball_bound",
+           "swept_ball_split", "rice_panel", "clear_prefix", "first_crossing",
+           "plausible_time_grid"]
 
 
 @njit(cache=True, error_model="numpy")
@@ -93,7 +98,8 @@ ST_PMAX = 0  # largest instantaneous probability computed (a lower bound of P(co
 ST_DEGENERATE = 1  # 1.0 once S(t) was degenerate at a quadrature node: the Rice values are unusable
 ST_PTOL = 2  # quadrature tolerance of the walk's instantaneous probabilities (0.0: the standard)
 ST_PERR = 3  # stated error of one of them (P0_ERR at the standard tolerance; >= P0_ERR)
-ST_SWEEP_DV = 4  # the walk's certificate: < 0 the Rice integral; >= 0 the swept ball (swept_ball_bound), k sigma_v
+# the walk's certificate: < 0 the Rice integral; >= 0 the swept ball (swept_ball_bound), k sigma_v
+ST_SWEEP_DV = 4
 ST_SIZE = 5
 # Straight 3-D pairs (line sampling) use the instantaneous probability only in the
 # plausible-time walk, where it is compared with the threshold: tolerance
@@ -142,7 +148,7 @@ def _rice_short(dp, dv, da, R, Sigma, a, b, pa, pb, j, cache, plo, thr, acc, st)
         m = pa[j] + h
         xl = min(max((a - m) / h, -1.0), 1.0)
         xr = min(max((b - m) / h, -1.0), 1.0)
-        v, e = subinterval_integral(cache[j, _C_NODES:_C_NODES + nk], xl, xr)
+        v, e = subinterval_integral(cache[j, _C_NODES : _C_NODES + nk], xl, xr)
         v = max(v * h, 0.0)  # nu+ >= 0: a negative interpolant integral is rounding or ringing
         # the nodes' own estimates as the adaptive rule of entry_rate_integral
         # counted them before it weighted them: width times the largest
@@ -225,19 +231,22 @@ def rice_panel(dp, dv, da, R, Sigma, pa, pb, j, cache, acc, st):
         acc[1] = 0.0
         f15 = np.empty(15)
         fe = np.empty(15)
-        v, e, inner, inner_max = entry_rate_k15(dp, dv, da, R, Sigma, pa[j], pb[j], _RICE_TOL, acc, f15, fe)
+        v, e, inner, inner_max = entry_rate_k15(
+            dp, dv, da, R, Sigma, pa[j], pb[j], _RICE_TOL, acc, f15, fe
+        )
         if not (e > _RICE_TOL):  # (a NaN estimate is accepted, as by the adaptive rule)
             cache[j, _C_NODES_OK] = 15.0
             cache[j, _C_INNER_MAX] = inner_max
-            cache[j, _C_NODES:_C_NODES + 15] = f15
+            cache[j, _C_NODES : _C_NODES + 15] = f15
             e += inner
         else:
             # Patterson's extension first: a K15 fails on a panel much wider than
             # nu+'s peak (one clipped at 0 or H, the peak inside), where |K15 - G7|
             # is ~100x K15's error and P31 settles it with 16 more values
             fnew = np.empty(16)
-            v, e, inner, new_max = entry_rate_p31(dp, dv, da, R, Sigma, pa[j], pb[j], _RICE_TOL, acc,
-                                                  f15, fe, fnew)
+            v, e, inner, new_max = entry_rate_p31(
+                dp, dv, da, R, Sigma, pa[j], pb[j], _RICE_TOL, acc, f15, fe, fnew
+            )
             if not (e > _RICE_TOL):
                 cache[j, _C_NODES_OK] = 31.0
                 cache[j, _C_INNER_MAX] = max(inner_max, new_max)
@@ -293,15 +302,17 @@ def det_lower(Sigma, ta, tb):
         for u in range(3):
             for v in range(3):
                 for w in range(3):
-                    coef[u + v + w] += (P[0, 0, u] * (P[1, 1, v] * P[2, 2, w] - P[1, 2, v] * P[1, 2, w])
-                                        - P[0, 1, u] * (P[0, 1, v] * P[2, 2, w] - P[1, 2, v] * P[0, 2, w])
-                                        + P[0, 2, u] * (P[0, 1, v] * P[1, 2, w] - P[1, 1, v] * P[0, 2, w]))
+                    coef[u + v + w] += (
+                        P[0, 0, u] * (P[1, 1, v] * P[2, 2, w] - P[1, 2, v] * P[1, 2, w])
+                        - P[0, 1, u] * (P[0, 1, v] * P[2, 2, w] - P[1, 2, v] * P[0, 2, w])
+                        + P[0, 2, u] * (P[0, 1, v] * P[1, 2, w] - P[1, 1, v] * P[0, 2, w])
+                    )
     low = coef[0]
     rk = 1.0
     for k in range(1, 2 * D + 1):
         rk *= r
         low -= abs(coef[k]) * rk
-    return low - 1e-12 * M ** D
+    return low - 1e-12 * M**D
 
 
 @njit(cache=True, error_model="numpy")
@@ -334,7 +345,13 @@ def instant_bound(dp, dv, da, R, Sigma, ta, tb):
         if D == 2:
             dens = R * R / (2.0 * math.sqrt(det)) * math.exp(-0.5 * q)
         else:
-            dens = (4.0 / 3.0) * math.pi * R ** 3 / ((2.0 * math.pi) ** 1.5 * math.sqrt(det)) * math.exp(-0.5 * q)
+            dens = (
+                (4.0 / 3.0)
+                * math.pi
+                * R**3
+                / ((2.0 * math.pi) ** 1.5 * math.sqrt(det))
+                * math.exp(-0.5 * q)
+            )
         bound = min(bound, dens)
     # rounding of the exp/erfc/sqrt chain (a few ulps) is far inside this factor
     return min(1.0, bound * (1.0 + 1e-9))
@@ -373,7 +390,9 @@ def clear_prefix(dp, dv, da, R, Sigma, a, b, thr):
 
 
 @njit(cache=True, error_model="numpy")
-def first_crossing(dp, dv, da, R, Sigma, pa, pb, j, a0, p_start, thr, dt, cache, acc, st, panel_free):
+def first_crossing(
+    dp, dv, da, R, Sigma, pa, pb, j, a0, p_start, thr, dt, cache, acc, st, panel_free
+):
     """First t in panel j = [a, b] with P(|X(t)| <= R) >= thr given that P < thr
     is certified on [a, a0] and P(a0) = p_start < thr, or +inf when certified
     absent (also +inf when S(t) turned out degenerate: the caller checks
@@ -466,7 +485,9 @@ def first_crossing(dp, dv, da, R, Sigma, pa, pb, j, a0, p_start, thr, dt, cache,
                     # Rice certificate's resolution below thr
                     v = swept_ball_split(dp, dv, da, R, Sigma, lo, c, st, thr - e - perr) - plo
                     if not plo + v + e + perr < thr:
-                        v, e = _rice_short(dp, dv, da, R, Sigma, lo, c, pa, pb, j, cache, plo, thr, acc, st)
+                        v, e = _rice_short(
+                            dp, dv, da, R, Sigma, lo, c, pa, pb, j, cache, plo, thr, acc, st
+                        )
             elif whole:
                 # the panel's own integral (computed once per pair; nu+ >= 0, so
                 # over [a, b] it bounds the one over [lo, b])

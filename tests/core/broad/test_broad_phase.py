@@ -122,8 +122,9 @@ def test_relative_filter_static_pairs():
     # (0,1): identical motion, 3 m apart, R = 2 -> culled; (3,4) static apart -> culled;
     # (0,2): relative motion brings them together -> kept
     assert keep.tolist() == [False, False, True]
-    keep = bp.relative_filter(np.array([[0.0, 0.0], [2.0, 0.0]]), np.zeros((2, 2)), np.zeros((2, 2)),
-                              np.ones(2), np.zeros(2), np.array([0]), np.array([1]), 0.0, 1.0)
+    keep = bp.relative_filter(np.array([[0.0, 0.0], [2.0, 0.0]]), np.zeros((2, 2)),
+                              np.zeros((2, 2)), np.ones(2), np.zeros(2), np.array([0]),
+                              np.array([1]), 0.0, 1.0)
     assert keep.tolist() == [True]  # exactly touching static pair goes to the narrow phase
 
 
@@ -206,7 +207,9 @@ def test_relative_test_threaded_is_serial():
 
 
 @pytest.mark.parametrize("dim", [2, 3])
-@pytest.mark.parametrize("layout", ["uniform", "line", "column", "points", "tall", "far", "cluster"])
+@pytest.mark.parametrize(
+    "layout", ["uniform", "line", "column", "points", "tall", "far", "cluster"]
+)
 def test_threaded_sweep_is_the_serial_sweep(dim, layout):
     """The sweep on numba's threads (from PARALLEL_MIN_BODIES bodies) returns the
     serial sweep's pairs in the serial sweep's order, whatever the layout --

@@ -20,7 +20,9 @@ from circle_collision_ros.core.narrow.contact import (contact_details, details_o
 
 
 def numpy_details(p_a, v_a, a_a, r_a, p_b, v_b, a_b, t):
-    p_a, v_a, a_a, p_b, v_b, a_b = (np.asarray(x, dtype=np.float64) for x in (p_a, v_a, a_a, p_b, v_b, a_b))
+    p_a, v_a, a_a, p_b, v_b, a_b = (
+        np.asarray(x, dtype=np.float64) for x in (p_a, v_a, a_a, p_b, v_b, a_b)
+    )
     r_a = np.asarray(r_a, dtype=np.float64)[..., None]
     t = np.asarray(t, dtype=np.float64)[..., None]
     with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
@@ -86,11 +88,14 @@ def test_broadcast_shapes_bitwise():
         ([-10.0, 0.0], [1.0, 0.0], [0.0, 0.0], 1.0, [0.0, 0.0], [0.0, 0.0], [0.0, 0.0], 8.0),
         (rng.normal(size=(4, 5, 3)), rng.normal(size=3), np.zeros(3), rng.uniform(0, 1, (4, 5)),
          np.zeros((5, 3)), np.zeros(3), rng.normal(size=(4, 1, 3)), rng.uniform(0, 2, 5)),
-        (np.zeros((3, 3)), np.zeros(3), np.zeros(3), 1.0, np.zeros(3), np.zeros(3), np.zeros(3), 0.0),
+        (np.zeros((3, 3)), np.zeros(3), np.zeros(3), 1.0, np.zeros(3), np.zeros(3), np.zeros(3),
+         0.0),
     ]
     for pa, va, aa, ra, pb, vb, ab, t in cases:
-        assert_same(contact_details(pa, va, aa, ra, pb, vb, ab, 0.5, t),
-                    numpy_details(pa, va, aa, ra, pb, vb, ab, t))
+        assert_same(
+            contact_details(pa, va, aa, ra, pb, vb, ab, 0.5, t),
+            numpy_details(pa, va, aa, ra, pb, vb, ab, t),
+        )
 
 
 @pytest.mark.parametrize("D", [2, 3])
@@ -99,7 +104,10 @@ def test_threaded_index_kernel_is_the_serial_kernel(D):
     rows: the same bits as the serial kernel, row for row (test_rows_bitwise's
     5,000 rows also go through it, against the numpy statement)."""
     from circle_collision_ros.core.narrow import contact as c
-    pa, va, aa, ra, pb, vb, ab, t = rows(np.random.default_rng([33, D]), 3 * c.PARALLEL_MIN_CONTACTS, D)
+
+    pa, va, aa, ra, pb, vb, ab, t = rows(
+        np.random.default_rng([33, D]), 3 * c.PARALLEL_MIN_CONTACTS, D
+    )
     n = pa.shape[0]
     P, V, A, R = (np.concatenate(x) for x in ((pa, pb), (va, vb), (aa, ab), (ra, ra)))
     I, J = np.arange(n), np.arange(n, 2 * n)

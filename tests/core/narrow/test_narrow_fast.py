@@ -42,11 +42,17 @@ def _robust(args, H):
     robust = npz.robust_pair2 if args[0].shape[1] == 2 else npz.robust_pair3
     Hs = np.broadcast_to(np.asarray(H, float), (args[3].shape[0],))
     pa, va, aa, ra, pb, vb, ab, rb = args
-    out = np.array([robust(*pa[i], *va[i], *aa[i], ra[i], *pb[i], *vb[i], *ab[i], rb[i], float(Hs[i]))
-                    for i in range(ra.shape[0])])
+    out = np.array(
+        [
+            robust(*pa[i], *va[i], *aa[i], ra[i], *pb[i], *vb[i], *ab[i], rb[i], float(Hs[i]))
+            for i in range(ra.shape[0])
+        ]
+    )
     # rows the robust solver cannot certify are decided exactly (as in the kernels)
     for i in np.flatnonzero(out == UNDECIDED):
-        out[i] = exact_first_contact(pa[i], va[i], aa[i], ra[i], pb[i], vb[i], ab[i], rb[i], float(Hs[i]))
+        out[i] = exact_first_contact(
+            pa[i], va[i], aa[i], ra[i], pb[i], vb[i], ab[i], rb[i], float(Hs[i])
+        )
     return out
 
 
@@ -136,13 +142,14 @@ def test_scalar_entries_run_the_batch_code():
         t = npz.time_to_collision(*args, horizon=H)
         for i in range(0, 400, 7):
             pa, va, aa, ra, pb, vb, ab, rb = (x[i] for x in args)
-            s2 = npz.ttc_scalar2(pa[0], pa[1], va[0], va[1], aa[0], aa[1], ra,
-                                  pb[0], pb[1], vb[0], vb[1], ab[0], ab[1], rb, H)
-            s3 = npz.ttc_scalar(pa[0], pa[1], 0.0, va[0], va[1], 0.0, aa[0], aa[1], 0.0, ra,
-                                 pb[0], pb[1], 0.0, vb[0], vb[1], 0.0, ab[0], ab[1], 0.0, rb, H)
+            s2 = npz.ttc_scalar2(pa[0], pa[1], va[0], va[1], aa[0], aa[1], ra, pb[0], pb[1], vb[0],
+                                 vb[1], ab[0], ab[1], rb, H)
+            s3 = npz.ttc_scalar(pa[0], pa[1], 0.0, va[0], va[1], 0.0, aa[0], aa[1], 0.0, ra, pb[0],
+                                pb[1], 0.0, vb[0], vb[1], 0.0, ab[0], ab[1], 0.0, rb, H)
             assert s2 == t[i] and s3 == t[i]
-    assert math.isnan(npz.ttc_scalar2(0.0, 0.0, 0.0, 0.0, 0.0, 0.0, -1.0,
-                                       1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0, 1.0))
+    assert math.isnan(
+        npz.ttc_scalar2(0.0, 0.0, 0.0, 0.0, 0.0, 0.0, -1.0, 1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0, 1.0)
+    )
 
 
 def test_step_counts_match_the_constants():
@@ -152,8 +159,11 @@ def test_step_counts_match_the_constants():
     assert src.count("_model_step(") == nf.K_F
 
 
-@pytest.mark.parametrize("m", [0.0, 5e-324, 1e-310, 2.0 ** -300, np.nextafter(2.0 ** -300, 0.0), 0.1,
-                               1.0, 3.999, 4.0, 1e150, 1.7976931348623157e308])
+@pytest.mark.parametrize(
+    "m",
+    [0.0, 5e-324, 1e-310, 2.0**-300, np.nextafter(2.0**-300, 0.0), 0.1, 1.0, 3.999, 4.0, 1e150,
+     1.7976931348623157e308],
+)
 def test_pow2_scales(m):
     """m * s1 * s2 lands in [2, 4) exactly (powers of two), 0 stays 0."""
     s1, s2 = pow2_scales(m)
@@ -169,12 +179,15 @@ def test_pow2_scales(m):
 def test_pow2_scales_overflowed_state_is_nan():
     assert math.isnan(pow2_scales(math.inf)[1]) and math.isnan(pow2_scales(math.nan)[1])
     # relative state overflows (out of the documented range): no made-up answer
-    t = npz.time_to_collision([1e308, 0.0], [0.0, 0.0], [0.0, 0.0], 1.0,
-                              [-1e308, 0.0], [0.0, 0.0], [0.0, 0.0], 1.0, 5.0)
+    t = npz.time_to_collision(
+        [1e308, 0.0], [0.0, 0.0], [0.0, 0.0], 1.0, [-1e308, 0.0], [0.0, 0.0], [0.0, 0.0], 1.0, 5.0
+    )
     assert math.isnan(t)
 
 
 @pytest.mark.parametrize("y", [1e-300, 1e-30, 0.3, 1.0, 7.9, 8.0, 1e30, 1e300])
 def test_cbrt_up(y):
     b = njit(lambda v: nf._cbrt_up(v))(y)  # (compiled: it uses bit-level intrinsics)
-    assert math.frexp(b)[0] == 0.5 and y ** (1 / 3) * (1 - 1e-12) < b <= 2 * y ** (1 / 3) * (1 + 1e-12)
+    assert math.frexp(b)[0] == 0.5 and y ** (1 / 3) * (1 - 1e-12) < b <= 2 * y ** (1 / 3) * (
+        1 + 1e-12
+    )

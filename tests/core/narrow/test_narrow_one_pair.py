@@ -58,12 +58,7 @@ def _forms(row, rng):
         y = np.empty(2 * len(x))
         y[::2] = x
         return y[::2]
-    kinds = [
-        lambda x: tuple(x),
-        lambda x: list(x),
-        lambda x: np.array(x, dtype=float),
-        strided,
-    ]
+    kinds = [lambda x: tuple(x), lambda x: list(x), lambda x: np.array(x, dtype=float), strided]
     yield from ([k(x) if isinstance(x, tuple) else x for x in row] for k in kinds)
     yield [kinds[int(rng.integers(4))](x) if isinstance(x, tuple) else np.float64(x) for x in row]
 
@@ -96,20 +91,23 @@ def test_one_pair_bitwise_batch_on_hard_mix(D):
     assert not bad, f"{len(bad)} mismatches, first: {bad[:3]}"
 
 
-_num = st.one_of(st.floats(-30, 30), st.integers(-20, 20), st.sampled_from([0.0, -0.0, 1e-300, 1e140]))
+_num = st.one_of(
+    st.floats(-30, 30), st.integers(-20, 20), st.sampled_from([0.0, -0.0, 1e-300, 1e140])
+)
 
 
 @settings(max_examples=300, deadline=None)
-@given(D=st.sampled_from([2, 3]), data=st.data(),
-       H=st.one_of(st.just(math.inf), st.floats(0, 50)), kind=st.sampled_from(["tuple", "list", "array"]))
+@given(D=st.sampled_from([2, 3]), data=st.data(), H=st.one_of(st.just(math.inf), st.floats(0, 50)),
+       kind=st.sampled_from(["tuple", "list", "array"]))
 def test_one_pair_bitwise_batch_hypothesis(D, data, H, kind):
     vec = st.lists(_num, min_size=D, max_size=D)
     pa, va, aa, pb, vb, ab = (data.draw(vec) for _ in range(6))
     ra, rb = data.draw(st.floats(0, 5)), data.draw(st.floats(0, 5))
     conv = {"tuple": tuple, "list": list, "array": lambda x: np.array(x, dtype=float)}[kind]
     got = time_to_collision(conv(pa), conv(va), conv(aa), ra, conv(pb), conv(vb), conv(ab), rb, H)
-    want = time_to_collision(*(np.array([x], dtype=float) for x in (pa, va, aa, ra, pb, vb, ab, rb)),
-                             horizon=H)[0]
+    want = time_to_collision(
+        *(np.array([x], dtype=float) for x in (pa, va, aa, ra, pb, vb, ab, rb)), horizon=H
+    )[0]
     assert type(got) is np.float64 and (got == want or (math.isnan(got) and math.isnan(want)))
 
 
@@ -127,13 +125,16 @@ def test_batch_shape_scalar_is_a_numpy_float64_on_every_path():
 
 def test_c_entry_serves_one_pair_calls():
     """The calls above are answered by the C path, not by the general path."""
-    from circle_collision_ros.core.narrow import one_pair_entry  # built by setup.py (bootstrap, colcon)
+    # built by setup.py (bootstrap, colcon)
+    from circle_collision_ros.core.narrow import one_pair_entry
 
     row = ([-10.0, 0.0], [1.0, 0.0], [0.0, 0.0], 1.0, [0.0, 0.0], [0.0, 0.0], [0.0, 0.0], 1.0)
     assert time_to_collision(*row) == 8.0
     assert type(time_to_collision).__name__ == "builtin_function_or_method"
     assert narrow.time_to_collision is time_to_collision
-    for form in _forms(tuple(tuple(x) if isinstance(x, list) else x for x in row), np.random.default_rng(0)):
+    for form in _forms(
+        tuple(tuple(x) if isinstance(x, list) else x for x in row), np.random.default_rng(0)
+    ):
         t = one_pair_entry.c_path(*form, math.inf)
         assert type(t) is np.float64 and t == 8.0
         assert one_pair_entry.c_path(*form) == 8.0  # horizon left out: inf
@@ -162,10 +163,16 @@ def test_batch_of_one_is_a_shape_1_array_bitwise_the_batch(D):
     want = _batch(rows, Hs)
     for row, H, w in zip(rows, Hs, want):
         full = [np.array([x], dtype=float) for x in row] + [np.array([H])]
-        mixed = [np.array([x], dtype=float) if rng.random() < 0.5 else
-                 (np.array(x) if isinstance(x, tuple) else x) for x in row] + [float(H)]
-        if not any(isinstance(x, np.ndarray) and x.ndim == (2 if isinstance(r, tuple) else 1)
-                   for x, r in zip(mixed, row)):
+        mixed = [
+            np.array([x], dtype=float)
+            if rng.random() < 0.5
+            else (np.array(x) if isinstance(x, tuple) else x)
+            for x in row
+        ] + [float(H)]
+        if not any(
+            isinstance(x, np.ndarray) and x.ndim == (2 if isinstance(r, tuple) else 1)
+            for x, r in zip(mixed, row)
+        ):
             mixed[0] = np.array([row[0]], dtype=float)
         for args in (full, full[:8] + [float(H)], mixed):
             got = time_to_collision(*args)
@@ -200,7 +207,8 @@ def test_help_and_signature_describe_the_public_function():
     import pydoc
 
     sig = inspect.signature(time_to_collision)
-    assert list(sig.parameters) == ["p_a", "v_a", "a_a", "r_a", "p_b", "v_b", "a_b", "r_b", "horizon"]
+    assert list(sig.parameters) == ["p_a", "v_a", "a_a", "r_a", "p_b", "v_b", "a_b", "r_b",
+                                    "horizon"]
     assert sig.parameters["horizon"].default == math.inf
     assert time_to_collision.__doc__ == inspect.getdoc(narrow_phase.time_to_collision)
     assert time_to_collision.__doc__.startswith("Earliest time at which two")
@@ -219,13 +227,16 @@ def test_without_the_extension_the_general_path_answers_with_a_warning():
 
     code = (
         "import sys, warnings\n"
-        "sys.modules['circle_collision_ros.core.narrow.one_pair_entry'] = None  # import fails as if not built\n"
+        "sys.modules['circle_collision_ros.core.narrow.one_pair_entry'] = None"
+        "  # import fails as if not built\n"
         "with warnings.catch_warnings(record=True) as w:\n"
         "    warnings.simplefilter('always')\n"
         "    from circle_collision_ros.core import time_to_collision as T\n"
-        "assert any('one_pair_entry is not built' in str(x.message) for x in w), [str(x.message) for x in w]\n"
+        "assert any('one_pair_entry is not built' in str(x.message) for x in w), "
+        "[str(x.message) for x in w]\n"
         "assert type(T).__name__ == 'function'\n"
-        "t = T([-10.0, 0.0], [1.0, 0.0], [0.0, 0.0], 1.0, [0.0, 0.0], [0.0, 0.0], [0.0, 0.0], 1.0)\n"
+        "t = T([-10.0, 0.0], [1.0, 0.0], [0.0, 0.0], 1.0, "
+        "[0.0, 0.0], [0.0, 0.0], [0.0, 0.0], 1.0)\n"
         "print(type(t).__name__, float(t))\n"
     )
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=240)
@@ -237,15 +248,13 @@ Z2 = (0.0, 0.0)
 GOOD = ([-10.0, 0.0], [1.0, 0.0], [0.0, 0.0], 1.0, [0.0, 0.0], [0.0, 0.0], [0.0, 0.0], 1.0)
 
 
-@pytest.mark.parametrize("k, bad, match", [
-    (0, [0.0, 0.0, 0.0, 0.0], r"last axis of size 2 or 3; got shapes p_a \(4,\)"),
-    (1, [0.0], r"v_a \(1,\)"),
-    (2, [0.0, 0.0, 0.0], r"p_a \(2,\), v_a \(2,\), a_a \(3,\)"),
-    (5, [], r"v_b \(0,\)"),
-    (6, 1.0, r"a_b \(\)"),
-    (0, ["a", 0.0], r"p_a is not numeric"),
-    (3, "x", r"r_a is not numeric"),
-])
+@pytest.mark.parametrize(
+    "k, bad, match",
+    [(0, [0.0, 0.0, 0.0, 0.0], r"last axis of size 2 or 3; got shapes p_a \(4,\)"),
+     (1, [0.0], r"v_a \(1,\)"), (2, [0.0, 0.0, 0.0], r"p_a \(2,\), v_a \(2,\), a_a \(3,\)"),
+     (5, [], r"v_b \(0,\)"), (6, 1.0, r"a_b \(\)"), (0, ["a", 0.0], r"p_a is not numeric"),
+     (3, "x", r"r_a is not numeric")],
+)
 @pytest.mark.parametrize("kind", [list, tuple, np.array])
 def test_bad_shapes_and_types_raise_naming_the_argument(k, bad, match, kind):
     row = [kind(x) if isinstance(x, list) else x for x in GOOD]
@@ -270,11 +279,12 @@ def test_none_raises_naming_the_argument(k):
 
 
 @pytest.mark.parametrize("kind", [list, tuple, np.array])
-@pytest.mark.parametrize("k, j, value", [
-    (0, 0, math.nan), (1, 1, math.inf), (2, 0, -math.inf), (4, 1, math.nan), (5, 0, math.nan),
-    (6, 1, math.inf), (3, None, -1.0), (7, None, -1e-300), (3, None, math.nan), (8, None, -1.0),
-    (8, None, math.nan),
-])
+@pytest.mark.parametrize(
+    "k, j, value",
+    [(0, 0, math.nan), (1, 1, math.inf), (2, 0, -math.inf), (4, 1, math.nan), (5, 0, math.nan),
+     (6, 1, math.inf), (3, None, -1.0), (7, None, -1e-300), (3, None, math.nan), (8, None, -1.0),
+     (8, None, math.nan)],
+)
 def test_invalid_values_give_nan_like_a_batch(kind, k, j, value):
     row = [list(x) if isinstance(x, list) else x for x in GOOD] + [math.inf]
     if j is None:

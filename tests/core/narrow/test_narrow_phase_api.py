@@ -81,23 +81,27 @@ def test_shapes_2d_3d_scalar():
     with pytest.raises(ValueError):
         time_to_collision([0.0, 0.0], [0.0, 0.0, 0.0], Z2, 1.0, Z2, Z2, Z2, 1.0)
     with pytest.raises(ValueError):
-        time_to_collision([0.0] * 4, [0.0] * 4, [0.0] * 4, 1.0, [0.0] * 4, [0.0] * 4, [0.0] * 4, 1.0)
+        time_to_collision(
+            [0.0] * 4, [0.0] * 4, [0.0] * 4, 1.0, [0.0] * 4, [0.0] * 4, [0.0] * 4, 1.0
+        )
 
 
 def test_large_batch_matches_scalar_entry():
     """The multi-threaded batch path, the serial path and ttc_scalar agree bit for bit."""
     rng = np.random.default_rng(3)
     n = 5000
-    args = [rng.normal(0, 5, (n, 2)), rng.normal(0, 2, (n, 2)), rng.normal(0, 1, (n, 2)), rng.uniform(0, 2, n),
-            rng.normal(0, 5, (n, 2)), rng.normal(0, 2, (n, 2)), rng.normal(0, 1, (n, 2)), rng.uniform(0, 2, n)]
+    args = [rng.normal(0, 5, (n, 2)), rng.normal(0, 2, (n, 2)), rng.normal(0, 1, (n, 2)),
+            rng.uniform(0, 2, n), rng.normal(0, 5, (n, 2)), rng.normal(0, 2, (n, 2)),
+            rng.normal(0, 1, (n, 2)), rng.uniform(0, 2, n)]
     big = time_to_collision(*args, horizon=10.0)
-    small = np.concatenate([time_to_collision(*(x[i:i + 100] for x in args), horizon=10.0)
-                            for i in range(0, n, 100)])
+    small = np.concatenate(
+        [time_to_collision(*(x[i : i + 100] for x in args), horizon=10.0) for i in range(0, n, 100)]
+    )
     assert np.array_equal(big, small)
     for i in range(0, n, 500):
         pa, va, aa, ra, pb, vb, ab, rb = (x[i] for x in args)
-        s = ttc_scalar(pa[0], pa[1], 0.0, va[0], va[1], 0.0, aa[0], aa[1], 0.0, ra,
-                        pb[0], pb[1], 0.0, vb[0], vb[1], 0.0, ab[0], ab[1], 0.0, rb, 10.0)
+        s = ttc_scalar(pa[0], pa[1], 0.0, va[0], va[1], 0.0, aa[0], aa[1], 0.0, ra, pb[0], pb[1],
+                       0.0, vb[0], vb[1], 0.0, ab[0], ab[1], 0.0, rb, 10.0)
         assert s == big[i]
 
 
@@ -132,18 +136,25 @@ def test_galilean_invariance_exact(s, k, sign):
     offset sum p + 2^k may round, but we only compare cases where both
     shifted coordinates are exact (checked below), as the issue asks."""
     pa, va, aa, ra, pb, vb, ab, rb = (np.array(x, dtype=float) for x in s)
-    off = sign * 2.0 ** k
+    off = sign * 2.0**k
     shifted = [pa + off, pb + off]
-    exact = all(Fraction(float(x)) == Fraction(float(y)) + Fraction(off)
-                for xs, ys in zip(shifted, (pa, pb)) for x, y in zip(xs, ys))
+    exact = all(
+        Fraction(float(x)) == Fraction(float(y)) + Fraction(off)
+        for xs, ys in zip(shifted, (pa, pb))
+        for x, y in zip(xs, ys)
+    )
     if not exact:
         return  # offset addition rounded: a different problem, not a violation
     t1 = time_to_collision(pa, va, aa, ra, pb, vb, ab, rb, 20.0)
     t2 = time_to_collision(shifted[0], va, aa, ra, shifted[1], vb, ab, rb, 20.0)
     assert t1 == t2
     dv = np.array([0.5, -0.25])  # exactly representable, few bits: v + dv exact
-    if np.array_equal((va + dv) - dv, va) and np.array_equal((vb + dv) - dv, vb) and \
-            np.array_equal((aa + dv) - dv, aa) and np.array_equal((ab + dv) - dv, ab):
+    if (
+        np.array_equal((va + dv) - dv, va)
+        and np.array_equal((vb + dv) - dv, vb)
+        and np.array_equal((aa + dv) - dv, aa)
+        and np.array_equal((ab + dv) - dv, ab)
+    ):
         t3 = time_to_collision(pa, va + dv, aa + dv, ra, pb, vb + dv, ab + dv, rb, 20.0)
         # same velocity added to both leaves dv; but the same *acceleration*
         # changes the relative position only if velocities differ -- it does
@@ -159,10 +170,12 @@ def test_power_of_two_scaling_keeps_the_time(s, k, H):
     relative state is normalised by an exact power of two and the solver is
     homogeneous in length.  (Before, states around 1e-80 m or 1e78 m were
     solved wrongly: 4th powers of lengths under- or overflowed.)"""
-    f = 2.0 ** k
+    f = 2.0**k
     vals = [np.array(x, dtype=float) for x in s]
     scaled = [x * f for x in vals]
-    if not all(np.array_equal(y / f, x) and np.all(np.abs(y) < 1e150) for x, y in zip(vals, scaled)):
+    if not all(
+        np.array_equal(y / f, x) and np.all(np.abs(y) < 1e150) for x, y in zip(vals, scaled)
+    ):
         return  # a scaled input rounded or left the range: a different problem
     t1 = time_to_collision(*vals, H)
     t2 = time_to_collision(*scaled, H)
@@ -175,7 +188,7 @@ def test_tiny_and_huge_states_against_mpmath(k):
     consistently: contact times against the mpmath reference on the exactly
     scaled inputs (<= 4 ulp, cos-scaled), misses agree."""
     args = mixed_pairs(24, 2, seed=17)
-    f = 2.0 ** k
+    f = 2.0**k
     scaled = [x * f for x in args]
     assert all(np.array_equal(y / f, x) for x, y in zip(args, scaled))
     for H in (math.inf, 6.0):
@@ -231,8 +244,8 @@ def test_contact_details_inf_and_coincident():
     assert np.allclose(n, [0.0, 1.0]) and vc == 2.0
     pt, n, vc = contact_details(Z2, Z2, Z2, 1.0, Z2, Z2, Z2, 1.0, 0.0)
     assert np.allclose(n, [1.0, 0.0]) and vc == 0.0
-    pt, n, vc = contact_details(np.zeros((3, 3)), np.zeros(3), np.zeros(3), 1.0,
-                                np.ones(3), np.zeros(3), np.zeros(3), 1.0, np.zeros(3))
+    pt, n, vc = contact_details(np.zeros((3, 3)), np.zeros(3), np.zeros(3), 1.0, np.ones(3),
+                                np.zeros(3), np.zeros(3), 1.0, np.zeros(3))
     assert pt.shape == (3, 3) and n.shape == (3, 3) and vc.shape == (3,)
 
 
@@ -254,8 +267,14 @@ def test_one_pair_from_sequences_is_the_batch_answer():
                     assert t.tobytes() == batch[i].tobytes(), (D, H, i)
     ints = ([3, 4], [-4, 3], [0, 0], 1, [0, 0], [0, 0], [0, 0], 1)
     assert float(time_to_collision(*ints, horizon=10)) == float(
-        time_to_collision(*(np.asarray(x, float) for x in ints), horizon=10.0))
-    assert math.isnan(time_to_collision([0.0, 0.0], [0.0, 0.0], [0.0, 0.0], -1.0,
-                                        [1.0, 0.0], [0.0, 0.0], [0.0, 0.0], 0.0))
+        time_to_collision(*(np.asarray(x, float) for x in ints), horizon=10.0)
+    )
+    assert math.isnan(
+        time_to_collision(
+            [0.0, 0.0], [0.0, 0.0], [0.0, 0.0], -1.0, [1.0, 0.0], [0.0, 0.0], [0.0, 0.0], 0.0
+        )
+    )
     with pytest.raises(ValueError):
-        time_to_collision(["a", 0.0], [0.0, 0.0], [0.0, 0.0], 1.0, [1.0, 0.0], [0.0, 0.0], [0.0, 0.0], 0.0)
+        time_to_collision(
+            ["a", 0.0], [0.0, 0.0], [0.0, 0.0], 1.0, [1.0, 0.0], [0.0, 0.0], [0.0, 0.0], 0.0
+        )

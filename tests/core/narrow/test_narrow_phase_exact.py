@@ -32,6 +32,7 @@ from circle_collision_ros.core import time_to_collision
 from circle_collision_ros.core.narrow.exact import exact_first_contact
 from circle_collision_ros.core.narrow.batch import ttc_scalar, ttc_scalar2
 from tests.core.reference import exact_reference
+from tests.stress import examples
 
 h = float.fromhex
 Z2 = (0.0, 0.0)
@@ -70,9 +71,13 @@ def _check(rows, H):
         t = float(batch[i])
         one = float(time_to_collision(*row, Hs[i]))
         if D == 2:
-            sc = ttc_scalar2(*row[0], *row[1], *row[2], row[3], *row[4], *row[5], *row[6], row[7], Hs[i])
+            sc = ttc_scalar2(
+                *row[0], *row[1], *row[2], row[3], *row[4], *row[5], *row[6], row[7], Hs[i]
+            )
         else:
-            sc = ttc_scalar(*row[0], *row[1], *row[2], row[3], *row[4], *row[5], *row[6], row[7], Hs[i])
+            sc = ttc_scalar(
+                *row[0], *row[1], *row[2], row[3], *row[4], *row[5], *row[6], row[7], Hs[i]
+            )
         ok = _agrees(t, ref, Hs[i]) and one == t and sc == t
         if not ok:
             bad.append((row, Hs[i], t, one, sc, ref.t))
@@ -112,7 +117,7 @@ _TRIPLES3 = [(1, 2, 2, 3), (2, 3, 6, 7), (1, 4, 8, 9), (4, 4, 7, 9), (2, 6, 9, 1
 
 def _dyadic(rng, bits=12, lo=-6, hi=6):
     """A random dyadic number m 2^e with a short mantissa (sums stay exact)."""
-    return float(rng.integers(-(2 ** bits), 2 ** bits)) * 2.0 ** int(rng.integers(lo, hi))
+    return float(rng.integers(-(2**bits), 2**bits)) * 2.0 ** int(rng.integers(lo, hi))
 
 
 def _touch_state(rng, D):
@@ -203,14 +208,23 @@ def gen_class_c(rng, n, D):
             dv = _dyadic(rng, 6, -3, 1) * perp
         else:
             dp = rng.normal(size=D) * 10.0 ** rng.uniform(-2, 2)
-            R = float(np.linalg.norm(dp)) - float(rng.integers(-8, 9)) * math.ulp(float(np.linalg.norm(dp)))
+            R = float(np.linalg.norm(dp)) - float(rng.integers(-8, 9)) * math.ulp(
+                float(np.linalg.norm(dp))
+            )
             if D == 2:
                 perp = np.array([-dp[1], dp[0]])
             else:
                 perp = np.cross(dp, rng.normal(size=3))
-            dv = perp * rng.uniform(0.1, 3.0) / max(np.linalg.norm(perp), 1e-300) * np.linalg.norm(dp)
+            dv = (
+                perp
+                * rng.uniform(0.1, 3.0)
+                / max(np.linalg.norm(perp), 1e-300)
+                * np.linalg.norm(dp)
+            )
         da = -dp * rng.uniform(0.5, 3.0) + rng.normal(size=D)
-        rows.append(((tuple(dp), tuple(dv), tuple(da), max(R, 0.0)) + (tuple(np.zeros(D)),) * 3 + (0.0,)))
+        rows.append(
+            ((tuple(dp), tuple(dv), tuple(da), max(R, 0.0)) + (tuple(np.zeros(D)),) * 3 + (0.0,))
+        )
     return rows
 
 
@@ -233,7 +247,11 @@ def gen_class_d(rng, n, D):
 
 
 GENS = {"A": gen_class_a, "B": gen_class_b, "C": gen_class_c, "D": gen_class_d}
+#: cases per class and parameter set (--stress; the default run checks the first
+#: N_DEFAULT of the same rows: class D's exact reference works with ~1e-150 numbers
+#: as rationals, ~0.4 s a case)
 N_CASES = {"A": 120, "B": 120, "C": 120, "D": 40}
+N_DEFAULT = {"A": 120, "B": 120, "C": 120, "D": 10}
 
 
 @pytest.mark.parametrize("D", [2, 3])
@@ -241,7 +259,8 @@ N_CASES = {"A": 120, "B": 120, "C": 120, "D": 40}
 @pytest.mark.parametrize("cls", sorted(GENS))
 def test_defect_class(cls, H, D):
     rng = np.random.default_rng([17, ord(cls), D, 0 if math.isinf(H) else 1])
-    _check(GENS[cls](rng, N_CASES[cls], D), H)
+    rows = GENS[cls](rng, N_CASES[cls], D)
+    _check(rows[: examples(N_DEFAULT[cls], N_CASES[cls])], H)
 
 
 def test_order_of_contact_rule():
@@ -284,10 +303,11 @@ def test_never_negative_or_beyond_horizon():
 
 
 def test_exact_fallback_rounds_to_nearest():
-    """narrow_exact rounds the exact root to nearest (independent reference)."""
+    """narrow_exact rounds the exact root to nearest (independent reference): 15 rows
+    of each class (class D's first 5 by default, its reference being slow)."""
     rng = np.random.default_rng(99)
     for cls in "ABCD":
-        for row in GENS[cls](rng, 15, 2):
+        for row in GENS[cls](rng, 15, 2)[: examples(5, 15) if cls == "D" else 15]:
             assert exact_first_contact(*row) == exact_reference(*row).t
 
 

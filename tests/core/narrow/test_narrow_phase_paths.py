@@ -82,7 +82,9 @@ def test_fast_path_validation_and_nan():
     assert np.isnan(t[1]) and np.isnan(t[2]) and not np.isnan(t[[0, 3, 4, 5, 6, 7]]).any()
     assert np.isnan(time_to_collision(pa, va, aa, ra, pb, vb, ab, rb, -1.0)).all()
     with pytest.raises(ValueError):
-        time_to_collision(pa[:, :1], va[:, :1], aa[:, :1], ra, pb[:, :1], vb[:, :1], ab[:, :1], rb, 1.0)
+        time_to_collision(
+            pa[:, :1], va[:, :1], aa[:, :1], ra, pb[:, :1], vb[:, :1], ab[:, :1], rb, 1.0
+        )
     with pytest.raises(ValueError):
         time_to_collision(pa, va[:, :1], aa, ra, pb, vb, ab, rb, 1.0)
     # float32 inputs are converted (general path), same result as float64
@@ -101,15 +103,18 @@ def test_horizon_at_the_contact_time():
     hit = np.flatnonzero(np.isfinite(t) & (t > 0))
     assert hit.size > 500
     for i in hit[:300]:
-        row = [x[i:i + 1] for x in args]
+        row = [x[i : i + 1] for x in args]
         above = float(np.nextafter(t[i], math.inf))
         below = float(np.nextafter(t[i], 0.0))
         assert time_to_collision(*row, horizon=above)[0] == t[i]
         assert math.isinf(time_to_collision(*row, horizon=below)[0])
 
 
-@pytest.mark.parametrize("n", [0, 1, npz._BLOCK - 1, npz._BLOCK, npz._BLOCK + 1, 5000,
-                               64 * npz._BLOCK, 64 * npz._BLOCK + 1, 200 * npz._BLOCK + 17])
+@pytest.mark.parametrize(
+    "n",
+    [0, 1, npz._BLOCK - 1, npz._BLOCK, npz._BLOCK + 1, 5000, 64 * npz._BLOCK, 64 * npz._BLOCK + 1,
+     200 * npz._BLOCK + 17],
+)
 def test_threaded_blocks_cover_every_row_once(n):
     """The threaded kernels' bit-reversed blocks cover each row exactly once,
     whatever n is relative to the block size and the power-of-two block

@@ -56,7 +56,9 @@ def _bodies(rng, dp, dv, da, R, eb_p, eb_v, eb_a):
     ra = R * rng.choice([1.0, 0.5, 0.25, 0.0])
     rb = R - ra
     pa, va, aa = pb + dp, vb + dv, ab + da
-    assert (pa - pb == dp).all() and (va - vb == dv).all() and (aa - ab == da).all() and ra + rb == R
+    assert (
+        (pa - pb == dp).all() and (va - vb == dv).all() and (aa - ab == da).all() and ra + rb == R
+    )
     return tuple(map(tuple, (pa, va, aa))) + (ra,) + tuple(map(tuple, (pb, vb, ab))) + (rb,)
 
 
@@ -77,8 +79,13 @@ def gen_tiny_da(rng, n, D):
         et = (ep - ea + 1) // 2
         kind = rng.integers(3)
         ev = max(ep - et - int(rng.integers(0, 4)), -1070)
-        dv = np.zeros(D) if kind == 0 else (
-            w * _p2(ev) * rng.choice([-1.0, 1.0]) if kind == 1 else _ivec(rng, D, 2) * _p2(ev))
+        dv = (
+            np.zeros(D)
+            if kind == 0
+            else (
+                w * _p2(ev) * rng.choice([-1.0, 1.0]) if kind == 1 else _ivec(rng, D, 2) * _p2(ev)
+            )
+        )
         R = _p2(ep) * rng.choice([0.0, 0.5, 0.75])
         rows.append(_bodies(rng, dp, dv, da, R, ep, ev, ea))
     return rows
@@ -159,7 +166,9 @@ def test_issue_repro_flushed_da():
     ref = exact_reference(*row)
     assert 4.47e162 < ref.t < 4.48e162
     _check([row], math.inf)
-    row3 = ((1e150, 0.0, 0.0), (0.0, 0.0, 0.0), (-1e-175, 0.0, 0.0), 1.0) + ((0.0,) * 3,) * 3 + (0.0,)
+    row3 = (
+        ((1e150, 0.0, 0.0), (0.0, 0.0, 0.0), (-1e-175, 0.0, 0.0), 1.0) + ((0.0,) * 3,) * 3 + (0.0,)
+    )
     _check([row3], math.inf)
 
 
@@ -186,7 +195,7 @@ def test_span_rows_in_ordinary_batches(D):
     and 1-D arrays: every row exact, ordinary rows unchanged."""
     rng = np.random.default_rng([2626, D])
     span = sum((GENS[g](rng, 12, D) for g in sorted(GENS)), [])
-    H = 2.0 ** 600
+    H = 2.0**600
     P = mixed_pairs(300, D, 5)
     ordinary = time_to_collision(*P, horizon=H)
     m = len(span)
@@ -201,8 +210,12 @@ def test_span_rows_in_ordinary_batches(D):
     for j, row in enumerate(span):
         ref = exact_reference(*row, H)
         got = float(t[idx[300 + j]])
-        as_lists = float(time_to_collision(*(list(x) if isinstance(x, tuple) else x for x in row), H))
-        as_arrays = float(time_to_collision(*(np.array(x) if isinstance(x, tuple) else x for x in row), H))
+        as_lists = float(
+            time_to_collision(*(list(x) if isinstance(x, tuple) else x for x in row), H)
+        )
+        as_arrays = float(
+            time_to_collision(*(np.array(x) if isinstance(x, tuple) else x for x in row), H)
+        )
         if not (_agrees(got, ref, H) and as_lists == got and as_arrays == got):
             bad.append((row, got, as_lists, as_arrays, ref.t))
     assert not bad, f"{len(bad)} of {m} wrong, first: {bad[:3]}"

@@ -38,18 +38,25 @@ from hypothesis import given, settings, strategies as st
 
 from circle_collision_ros.core import predict_all_pairs, Scene
 from tests.scene_rule import rule_contacts
+from tests.stress import examples
 
 T0 = 1_700_000_000 * 10**9
 MS = 1_000_000
 
 
 def same(x, y) -> bool:
-    return (len(x) == len(y) and x.id_a.tolist() == y.id_a.tolist() and x.id_b.tolist() == y.id_b.tolist()
-            and x.reference_ns == y.reference_ns
-            and np.array_equal(x.ttc, y.ttc) and np.array_equal(x.contact_ns, y.contact_ns)
-            and np.array_equal(x.overlapping, y.overlapping)
-            and np.array_equal(x.point, y.point) and np.array_equal(x.normal, y.normal)
-            and np.array_equal(x.closing_speed, y.closing_speed))
+    return (
+        len(x) == len(y)
+        and x.id_a.tolist() == y.id_a.tolist()
+        and x.id_b.tolist() == y.id_b.tolist()
+        and x.reference_ns == y.reference_ns
+        and np.array_equal(x.ttc, y.ttc)
+        and np.array_equal(x.contact_ns, y.contact_ns)
+        and np.array_equal(x.overlapping, y.overlapping)
+        and np.array_equal(x.point, y.point)
+        and np.array_equal(x.normal, y.normal)
+        and np.array_equal(x.closing_speed, y.closing_speed)
+    )
 
 
 def assert_rule(sc: Scene) -> None:
@@ -82,18 +89,22 @@ def test_incremental_equals_full_long_sequence(dim, seed, method) -> None:
         if op == 0 or len(ids) < 6:
             for _ in range(rng.integers(1, 4)):
                 stamp = now - int(rng.choice([0, 200, 2500])) * MS  # also before the epoch
-                sc.upsert(f"b{nid:04d}", *rand_body(rng, dim, side), stamp_ns=stamp, received_ns=now)
+                sc.upsert(
+                    f"b{nid:04d}", *rand_body(rng, dim, side), stamp_ns=stamp, received_ns=now
+                )
                 nid += 1
         elif op == 1:
             b = ids[rng.integers(len(ids))]
             sc.remove(b, sc.stored_states()[5][ids.index(b)], now)
         elif op == 2:  # one body, same or newer stamp
             now += int(rng.choice([0, 1, 30, 400])) * MS
-            sc.upsert(ids[rng.integers(len(ids))], *rand_body(rng, dim, side), stamp_ns=now, received_ns=now)
+            sc.upsert(ids[rng.integers(len(ids))], *rand_body(rng, dim, side), stamp_ns=now,
+                      received_ns=now)
         elif op == 3:  # one body with an older stamp than the reference (not older than its own)
             b = ids[rng.integers(len(ids))]
             own = int(sc.stored_states()[5][ids.index(b)])
-            sc.upsert(b, *rand_body(rng, dim, side), stamp_ns=max(own + 1, now - 100 * MS), received_ns=now)
+            sc.upsert(b, *rand_body(rng, dim, side), stamp_ns=max(own + 1, now - 100 * MS),
+                      received_ns=now)
         elif op == 4:  # bulk update of a subset (small: per body; all: full-scene path)
             k = int(rng.choice([3, len(ids)]))
             sel = [ids[x] for x in rng.choice(len(ids), size=k, replace=False)]
@@ -125,7 +136,8 @@ def test_common_stamp_equals_predict_all_pairs() -> None:
     """Every body stamped R: exactly predict_all_pairs on the states propagated to R."""
     rng = np.random.default_rng(4)
     n = 400
-    P, V, A = rng.uniform(-1e6 - 40, -1e6 + 40, (n, 2)), rng.normal(0, 2, (n, 2)), rng.normal(0, 0.3, (n, 2))
+    P, V, A = (rng.uniform(-1e6 - 40, -1e6 + 40, (n, 2)), rng.normal(0, 2, (n, 2)),
+               rng.normal(0, 0.3, (n, 2)))
     R = rng.uniform(0.2, 1.5, n)
     sc = Scene(5.0, 2)
     ids = [f"b{k:04d}" for k in range(n)]
@@ -133,9 +145,13 @@ def test_common_stamp_equals_predict_all_pairs() -> None:
     res = sc.predictions()
     ref = predict_all_pairs(P, V, A, R, 5.0)  # ids sort like their indices
     assert len(res) == len(ref) > 50
-    assert res.id_a.tolist() == [ids[k] for k in ref.i] and res.id_b.tolist() == [ids[k] for k in ref.j]
+    assert res.id_a.tolist() == [ids[k] for k in ref.i] and res.id_b.tolist() == [
+        ids[k] for k in ref.j
+    ]
     assert np.array_equal(res.ttc, ref.ttc) and np.array_equal(res.point, ref.point)
-    assert np.array_equal(res.normal, ref.normal) and np.array_equal(res.closing_speed, ref.closing_speed)
+    assert np.array_equal(res.normal, ref.normal) and np.array_equal(
+        res.closing_speed, ref.closing_speed
+    )
     assert np.array_equal(res.contact_ns, T0 + 123 * MS + np.round(ref.ttc * 1e9).astype(np.int64))
 
 
@@ -154,7 +170,8 @@ def test_update_cost_is_local() -> None:
     for k, dt in enumerate((1, 33, 66, 100)):  # newer stamps inside the epoch
         sc.upsert(ids[k], P[k] + 0.1, V[k], A[k], R[k], stamp_ns=T0 + (10 + dt) * MS)
         res = sc.predictions()
-        assert sc.evaluated_pairs < full // 10, (dt, sc.evaluated_pairs)  # its neighbours + overlapping pairs
+        # its neighbours + overlapping pairs
+        assert sc.evaluated_pairs < full // 10, (dt, sc.evaluated_pairs)
         assert same(res, sc.full_recomputation())
     sc.upsert_many(ids, P, V, A, R, T0 + 200 * MS)  # a tracker array: full path
     sc.predictions()
@@ -185,7 +202,8 @@ def test_removal_is_remembered_late_states_ignored() -> None:
 def test_removal_memory_is_forgotten_at_expiry() -> None:
     sc = Scene(5.0, 2)
     for k in range(50):
-        sc.remove(f"gone{k}", T0, T0)  # unknown ids: remembered too (a removal may overtake its body)
+        # unknown ids: remembered too (a removal may overtake its body)
+        sc.remove(f"gone{k}", T0, T0)
     assert sc.remembered_removals == 50
     assert _static(sc, "gone1", 0.0, 0.0, T0 - 1).not_newer.size == 1
     sc.expire(T0 + 2000 * MS, 2000 * MS)
@@ -224,7 +242,9 @@ def test_bad_inputs() -> None:
     _static(sc, "a", 0.0, 0.0, T0)
     before = sc.predictions()
     with pytest.raises(ValueError, match="row"):
-        sc.upsert_many(["x", "y"], [[0, 0], [np.nan, 0]], np.zeros((2, 2)), np.zeros((2, 2)), [1, 1], T0)
+        sc.upsert_many(
+            ["x", "y"], [[0, 0], [np.nan, 0]], np.zeros((2, 2)), np.zeros((2, 2)), [1, 1], T0
+        )
     with pytest.raises(ValueError, match="duplicate"):
         sc.upsert_many(["x", "x"], np.zeros((2, 2)), np.zeros((2, 2)), np.zeros((2, 2)), [1, 1], T0)
     with pytest.raises(ValueError, match="dimension"):
@@ -237,9 +257,15 @@ def test_bad_inputs() -> None:
 
 
 @settings(max_examples=40, deadline=None)
-@given(ops=st.lists(st.tuples(st.integers(0, 3), st.integers(0, 7), st.integers(0, 2000),
-                              st.floats(-4, 4), st.floats(-2, 2)), min_size=1, max_size=40),
-       slack=st.sampled_from([0.05, 0.4, None]))
+@given(
+    ops=st.lists(
+        st.tuples(st.integers(0, 3), st.integers(0, 7), st.integers(0, 2000), st.floats(-4, 4),
+                  st.floats(-2, 2)),
+        min_size=1,
+        max_size=40,
+    ),
+    slack=st.sampled_from([0.05, 0.4, None]),
+)
 def test_hypothesis_sequences(ops, slack) -> None:
     sc = Scene(1.5, 2, slack=slack)
     now = T0
@@ -251,7 +277,9 @@ def test_hypothesis_sequences(ops, slack) -> None:
         elif op == 1:
             own = dict(zip(*[sc.stored_states()[k] for k in (0, 5)]))
             stamp = max(own.get(bid, 0) + 1, now - dt_ms * MS)
-            sc.upsert(bid, (x, 0.3 * x), (v, -v), (0.1 * v, 0.0), 0.4, stamp_ns=stamp, received_ns=now)
+            sc.upsert(
+                bid, (x, 0.3 * x), (v, -v), (0.1 * v, 0.0), 0.4, stamp_ns=stamp, received_ns=now
+            )
         elif op == 2:
             sc.remove(bid, now, now)
         else:
@@ -278,7 +306,9 @@ def test_expiry_with_receive_times_out_of_order() -> None:
                 del recv[body]
             removals[body] = received
         else:
-            res = sc.upsert(body, rng.uniform(0, 30, 2), rng.uniform(-1, 1, 2), (0.0, 0.0), 0.5, stamp, received)
+            res = sc.upsert(
+                body, rng.uniform(0, 30, 2), rng.uniform(-1, 1, 2), (0.0, 0.0), 0.5, stamp, received
+            )
             if res.accepted.size:
                 recv[body] = received
                 removals.pop(body, None)
@@ -345,11 +375,12 @@ def test_record_lists_survive_compaction_and_growth() -> None:
         if k % 50 == 49:
             sc.remove(b, T0 + (k + 2) * MS)
         else:
-            sc.upsert(b, rng.uniform(0, 40, 2), rng.normal(0, 1, 2), (0.0, 0.0), float(rng.uniform(0.5, 1.5)),
-                      T0 + (k + 2) * MS)
+            sc.upsert(b, rng.uniform(0, 40, 2), rng.normal(0, 1, 2), (0.0, 0.0),
+                      float(rng.uniform(0.5, 1.5)), T0 + (k + 2) * MS)
         res = sc.predictions()
         compactions += sc._rdead < dead
-        if k in (600, 1200):  # a compaction after a query stores the kept order, then the past records
+        # a compaction after a query stores the kept order, then the past records
+        if k in (600, 1200):
             sc._compact()
             kept, past = sc._fut.size, sc._past.size
             assert np.array_equal(sc._fut, np.arange(kept)), k
@@ -405,9 +436,14 @@ def test_pair_keys_follow_new_ids(grow) -> None:
 
 
 def _snapshot_equal(x, y) -> bool:
-    return (x.reference_ns == y.reference_ns and x.ids == y.ids and np.array_equal(x.positions, y.positions)
-            and np.array_equal(x.velocities, y.velocities) and np.array_equal(x.accelerations, y.accelerations)
-            and np.array_equal(x.radii, y.radii))
+    return (
+        x.reference_ns == y.reference_ns
+        and x.ids == y.ids
+        and np.array_equal(x.positions, y.positions)
+        and np.array_equal(x.velocities, y.velocities)
+        and np.array_equal(x.accelerations, y.accelerations)
+        and np.array_equal(x.radii, y.radii)
+    )
 
 
 @pytest.mark.parametrize("changes", [3, 200])
@@ -420,8 +456,8 @@ def test_capture_keeps_its_states_while_the_scene_changes(changes) -> None:
     sc = Scene(3.0, 2)
     n = 60
     ids = [f"b{k:03d}" for k in range(n)]
-    sc.upsert_many(ids, rng.uniform(0, 20, (n, 2)), rng.normal(0, 1, (n, 2)), rng.normal(0, 0.2, (n, 2)),
-                   rng.uniform(0.2, 1.0, n), T0)
+    sc.upsert_many(ids, rng.uniform(0, 20, (n, 2)), rng.normal(0, 1, (n, 2)),
+                   rng.normal(0, 0.2, (n, 2)), rng.uniform(0.2, 1.0, n), T0)
     captures = [(sc.capture(), sc.capture().snapshot())]
     stamp, nid = T0, n
     for k in range(changes):
@@ -453,40 +489,52 @@ def test_capture_keeps_its_states_while_the_scene_changes(changes) -> None:
 
 def test_capture_read_on_another_thread_during_updates() -> None:
     """The marker thread snapshots a capture while the prediction path changes the scene: every
-    snapshot equals the scene's states at the capture's time (the lock orders preserve/gather)."""
+    snapshot equals the scene's states at the capture's time (the lock orders preserve/gather).
+    Default run: 600 bodies x 60 steps; --stress: 3,000 bodies x 300 steps."""
+    import queue
     import threading
+
     rng = np.random.default_rng(14)
     sc = Scene(3.0, 2)
-    n = 3000
+    n = examples(600, 3000)
+    steps = examples(60, 300)
+    side = 200.0 * (n / 3000) ** 0.5  # the stress run's density of bodies
     ids = [f"b{k:04d}" for k in range(n)]
-    sc.upsert_many(ids, rng.uniform(0, 200, (n, 2)), rng.normal(0, 1, (n, 2)), np.zeros((n, 2)),
+    sc.upsert_many(ids, rng.uniform(0, side, (n, 2)), rng.normal(0, 1, (n, 2)), np.zeros((n, 2)),
                    rng.uniform(0.2, 1.0, n), T0)
-    pending: list = []
+    pending: queue.Queue = queue.Queue()
     failures: list = []
-    done = threading.Event()
+    read = []
 
     def reader() -> None:
-        while not done.is_set() or pending:
-            if pending:
-                capture, ref = pending.pop(0)
-                if not _snapshot_equal(capture.snapshot(), ref):
-                    failures.append(ref.reference_ns)
+        # blocks on the queue (no busy polling: it would starve the writer of the GIL)
+        while (item := pending.get()) is not None:
+            capture, ref = item
+            if not _snapshot_equal(capture.snapshot(), ref):
+                failures.append(ref.reference_ns)
+            read.append(ref.reference_ns)
 
     thread = threading.Thread(target=reader)
     thread.start()
     stamp = T0
-    for k in range(300):
-        stamp += MS
-        ref_states = sc.stored_states()
-        capture = sc.capture()
-        ref = Scene(3.0, 2)
-        ref.upsert_many(ref_states[0], *ref_states[1:5], ref_states[5])
-        ref.reference_ns = sc.reference_ns
-        pending.append((capture, ref.snapshot()))
-        for b in rng.choice(n, 5, replace=False).tolist():
-            sc.upsert(ids[b], rng.uniform(0, 200, 2), rng.normal(0, 1, 2), (0.0, 0.0), 0.5, stamp)
-    done.set()
-    thread.join(60)
+    try:
+        for k in range(steps):
+            stamp += MS
+            ref_states = sc.stored_states()
+            capture = sc.capture()
+            ref = Scene(3.0, 2)
+            ref.upsert_many(ref_states[0], *ref_states[1:5], ref_states[5])
+            ref.reference_ns = sc.reference_ns
+            pending.put((capture, ref.snapshot()))
+            for b in rng.choice(n, 5, replace=False).tolist():
+                sc.upsert(
+                    ids[b], rng.uniform(0, side, 2), rng.normal(0, 1, 2), (0.0, 0.0), 0.5, stamp
+                )
+    finally:
+        pending.put(None)  # the reader ends after the last capture
+        thread.join(120)
+    assert not thread.is_alive()
+    assert len(read) == steps  # every capture was read
     assert not failures
 
 
@@ -504,7 +552,9 @@ def test_stream_after_an_empty_prediction_compiles_nothing_new():
     assert store.EMPTY_I.flags.writeable
     for k in range(12):
         p = np.array([[0.5 * (k % 6), 0.0]])
-        sc.merge([f"s{k % 6}"], [10 + k], p, np.array([[1.0, 0.0]]), np.zeros((1, 2)), [1.0], [False], 0)
+        sc.merge(
+            [f"s{k % 6}"], [10 + k], p, np.array([[1.0, 0.0]]), np.zeros((1, 2)), [1.0], [False], 0
+        )
         sc.predictions()
     for kernel in (sk.ordered_query, sk.evaluate_rows):
         assert not any("readonly" in str(t) for sig in kernel.signatures for t in sig), kernel
@@ -542,7 +592,8 @@ def test_published_ids_survive_removal_and_slot_reuse() -> None:
     n = 12
     ids = [f"body{k:02d}" for k in range(n)]
     p = np.column_stack([np.arange(n) * 1.5, np.zeros(n)])  # neighbours overlap
-    scene.merge(ids, np.full(n, 10), p, np.zeros((n, 2)), np.zeros((n, 2)), np.ones(n), np.zeros(n, bool), 10)
+    scene.merge(ids, np.full(n, 10), p, np.zeros((n, 2)), np.zeros((n, 2)), np.ones(n),
+                np.zeros(n, bool), 10)
     first = scene.predictions()
     want = list(zip(first.slot_ids[first.slot_a].tolist(), first.slot_ids[first.slot_b].tolist()))
     assert want and all(a < b for a, b in want)

@@ -1,4 +1,4 @@
-"""The compiled steps of the scene's small-update path equal the numpy code they replace, bit for bit.
+"""The scene's compiled small-update steps equal the numpy code they replace, bit for bit.
 
 Guarantees proved here (core/scene/kernels.py):
 
@@ -12,6 +12,7 @@ Guarantees proved here (core/scene/kernels.py):
 * ``order_rows`` sorts by (ttc, key) like a lexsort, from nearly sorted rows and
   new ones, and reports when its move budget is exceeded -- test_order_rows.
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -70,12 +71,15 @@ def test_evaluate_rows_bitwise(dim) -> None:
         h = np.flatnonzero(want <= horizon)
         if horizon == 5.0:
             assert np.count_nonzero(want[h] == 0.0) > 20 and np.count_nonzero(want[h] > 0.0) > 20
-        p2, n2, c2 = contact_details(pa[h], va[h], A[ia][h], R[ia][h], pb[h], vb[h], A[ib][h], R[ib][h],
-                                     want[h])
+        p2, n2, c2 = contact_details(
+            pa[h], va[h], A[ia][h], R[ia][h], pb[h], vb[h], A[ib][h], R[ib][h], want[h]
+        )
         assert np.array_equal(bits(np.nan_to_num(pt[h])), bits(np.nan_to_num(p2)))
         assert np.array_equal(bits(np.nan_to_num(nm[h])), bits(np.nan_to_num(n2)))
         assert np.array_equal(bits(np.nan_to_num(cs[h])), bits(np.nan_to_num(c2)))
-        over = (want[h] == 0.0) & (np.linalg.norm(pa[h] - pb[h], axis=1) - (R[ia][h] + R[ib][h]) < 0.0)
+        over = (want[h] == 0.0) & (
+            np.linalg.norm(pa[h] - pb[h], axis=1) - (R[ia][h] + R[ib][h]) < 0.0
+        )
         assert np.array_equal(ov[h], over)
 
 
@@ -99,14 +103,14 @@ def test_order_rows() -> None:
     rng = np.random.default_rng(3)
     # new rows: few enough moves for the insertion pass (ties, mostly 0.0 as for pairs overlapping
     # at R) and too many for its budget (2,000 distinct times: the stable-sort fallback)
-    for n_sorted, n_new, ties in ((0, 50, 10), (200, 0, 10), (200, 30, 10), (1, 1, 10), (880, 284, 0),
-                                  (0, 2000, 10**6), (50, 2000, 10)):
+    for n_sorted, n_new, ties in ((0, 50, 10), (200, 0, 10), (200, 30, 10), (1, 1, 10),
+                                  (880, 284, 0), (0, 2000, 10**6), (50, 2000, 10)):
         ttc = np.round(rng.uniform(0, 5, n_sorted + n_new), 1)  # many ties
         if ties == 0:  # the new rows at 0.0 but for a few
             ttc[n_sorted:] = np.where(rng.random(n_new) < 0.05, ttc[n_sorted:], 0.0)
         elif ties == 10**6:
             ttc = rng.uniform(0, 5, n_sorted + n_new)
-        key = rng.permutation(10 * (n_sorted + n_new))[:n_sorted + n_new].astype(np.int64)
+        key = rng.permutation(10 * (n_sorted + n_new))[: n_sorted + n_new].astype(np.int64)
         o = np.lexsort((key[:n_sorted], ttc[:n_sorted]))
         ttc[:n_sorted], key[:n_sorted] = ttc[:n_sorted][o], key[:n_sorted][o]
         # nearly sorted: a few neighbours swapped

@@ -34,7 +34,9 @@ from circle_collision_ros.pipeline.state_batch import StateBatch
 BASE = 1_700_000_000 * 1_000_000_000
 
 
-def _batch(n: int, seed: int, sigma: float, stamp_ns: int = BASE, every: int = 1, spread: float = 8.0):
+def _batch(
+    n: int, seed: int, sigma: float, stamp_ns: int = BASE, every: int = 1, spread: float = 8.0
+):
     rng = np.random.default_rng(seed)
     p = np.zeros((n, 3))
     v = np.zeros((n, 3))
@@ -43,13 +45,14 @@ def _batch(n: int, seed: int, sigma: float, stamp_ns: int = BASE, every: int = 1
     v[:, :2] = rng.uniform(-2, 2, (n, 2))
     a[:, :2] = rng.uniform(-0.3, 0.3, (n, 2))
     cov = np.zeros((n, 36))
-    block = np.diag([sigma ** 2] * 3 + [(sigma / 3) ** 2] * 3)
+    block = np.diag([sigma**2] * 3 + [(sigma / 3) ** 2] * 3)
     block[0, 3] = block[3, 0] = 0.5 * sigma * sigma / 3  # position-velocity correlation
     cov[::every] = block.ravel()
     return StateBatch(ids=[f"b{k:02d}" for k in range(n)], frames=["map"] * n,
-                      stamp_ns=np.full(n, stamp_ns, dtype=np.int64), radius=rng.uniform(0.3, 0.8, n),
-                      position=p, velocity=v, acceleration=a, remove=np.zeros(n, dtype=bool),
-                      covariance=cov, covariance_size=np.full(n, 36, dtype=np.int64))
+                      stamp_ns=np.full(n, stamp_ns, dtype=np.int64),
+                      radius=rng.uniform(0.3, 0.8, n), position=p, velocity=v, acceleration=a,
+                      remove=np.zeros(n, dtype=bool), covariance=cov,
+                      covariance_size=np.full(n, 36, dtype=np.int64))
 
 
 def _predict(batch: StateBatch, **config):
@@ -66,8 +69,11 @@ def test_exact_path_untouched_and_zero_covariance_is_exact() -> None:
     batch = _batch(20, seed=1, sigma=0.3, every=2)
     _, with_cov = _predict(batch)
     _, without = _predict(_without_covariance(batch))
-    for field in ("id_a", "id_b", "ttc", "contact_ns", "overlapping", "point", "normal", "closing_speed"):
-        assert np.array_equal(getattr(with_cov.contacts, field), getattr(without.contacts, field)), field
+    for field in ("id_a", "id_b", "ttc", "contact_ns", "overlapping", "point", "normal",
+                  "closing_speed"):
+        assert np.array_equal(
+            getattr(with_cov.contacts, field), getattr(without.contacts, field)
+        ), field
     assert len(with_cov.uncertainty) > 0
     zero = StateBatch(**{**batch.__dict__, "covariance": np.zeros_like(batch.covariance)})
     _, zeroed = _predict(zero)
@@ -83,11 +89,20 @@ def _exact_propagated_covariance(C: np.ndarray, dt_ns: int) -> np.ndarray:
     """M C M^T in exact rationals (dt = dt_ns * 1e-9 as the scene's float), rounded once."""
     D = C.shape[0] // 2
     dt = Fraction(float(np.float64(dt_ns) * 1e-9))
-    M = [[Fraction(int(i == j)) + (dt if j == i + D else 0) for j in range(2 * D)] for i in range(2 * D)]
+    M = [
+        [Fraction(int(i == j)) + (dt if j == i + D else 0) for j in range(2 * D)]
+        for i in range(2 * D)
+    ]
     c = [[Fraction(float(x)) for x in row] for row in C]
-    mc = [[sum(M[i][k] * c[k][j] for k in range(2 * D)) for j in range(2 * D)] for i in range(2 * D)]
-    return np.array([[float(sum(mc[i][k] * M[j][k] for k in range(2 * D))) for j in range(2 * D)]
-                     for i in range(2 * D)])
+    mc = [
+        [sum(M[i][k] * c[k][j] for k in range(2 * D)) for j in range(2 * D)] for i in range(2 * D)
+    ]
+    return np.array(
+        [
+            [float(sum(mc[i][k] * M[j][k] for k in range(2 * D))) for j in range(2 * D)]
+            for i in range(2 * D)
+        ]
+    )
 
 
 def test_states_and_covariances_are_propagated_to_the_reference_time() -> None:
@@ -96,7 +111,9 @@ def test_states_and_covariances_are_propagated_to_the_reference_time() -> None:
     C[0, 2] = C[2, 0] = 0.012
     old, new = BASE, BASE + 370_000_000
     scene.merge(["a"], [old], [[0.0, 0.0]], [[1.0, 0.1]], [[0.2, 0.0]], [0.5], [False], 0, C[None])
-    scene.merge(["b"], [new], [[3.5, 1.6]], [[-0.5, 0.0]], [[0.0, 0.0]], [0.5], [False], 0, C[None] * 0.5)
+    scene.merge(
+        ["b"], [new], [[3.5, 1.6]], [[-0.5, 0.0]], [[0.0, 0.0]], [0.5], [False], 0, C[None] * 0.5
+    )
     u = scene.uncertain_pairs(0.01)
     assert u.id_a.tolist() == ["a"] and u.id_b.tolist() == ["b"]
     dt = np.float64(new - old) * 1e-9
@@ -105,8 +122,8 @@ def test_states_and_covariances_are_propagated_to_the_reference_time() -> None:
     moved = _exact_propagated_covariance(C, new - old)
     scene_moved = scene._C[scene._slot["a"]]  # stored at the body's own stamp ...
     assert np.array_equal(scene_moved, C)
-    want = uncertain_pairs(pa, va, [[0.2, 0.0]], [0.5], moved[None], [[3.5, 1.6]], [[-0.5, 0.0]], [[0.0, 0.0]],
-                           [0.5], (C * 0.5)[None], 5.0, 0.01)
+    want = uncertain_pairs(pa, va, [[0.2, 0.0]], [0.5], moved[None], [[3.5, 1.6]], [[-0.5, 0.0]],
+                           [[0.0, 0.0]], [0.5], (C * 0.5)[None], 5.0, 0.01)
     # ... and moved to R: the block formula equals M C M^T up to the rounding of its few operations
     assert u.probability[0] == pytest.approx(want.collision_probability[0], abs=1e-12)
     assert u.plausible_ttc[0] == pytest.approx(want.plausible_time[0], abs=1e-9)
@@ -123,7 +140,11 @@ def test_inflated_broad_phase_keeps_every_probable_pair() -> None:
     brute = uncertain_pairs(batch.position[I, :2], batch.velocity[I, :2], batch.acceleration[I, :2],
                             batch.radius[I], C[I], batch.position[J, :2], batch.velocity[J, :2],
                             batch.acceleration[J, :2], batch.radius[J], C[J], 5.0, 0.01)
-    probable = {(batch.ids[i], batch.ids[j]) for i, j, p in zip(I, J, brute.collision_probability) if p > 1e-9}
+    probable = {
+        (batch.ids[i], batch.ids[j])
+        for i, j, p in zip(I, J, brute.collision_probability)
+        if p > 1e-9
+    }
     assert probable, "the scene must have probable pairs for this test to mean anything"
     assert probable <= listed
     assert len(listed) < len(I)  # and the broad phase did cull
@@ -141,8 +162,11 @@ def test_reporting_rule_and_threshold() -> None:
     assert np.all(np.diff(columns.plausible_ttc[extra]) >= 0)
     u = prediction.uncertainty
     contact_pairs = set(zip(prediction.contacts.id_a.tolist(), prediction.contacts.id_b.tolist()))
-    want = {pair for pair, p in zip(zip(u.id_a.tolist(), u.id_b.tolist()), u.probability.tolist())
-            if p >= 0.01 and pair not in contact_pairs}
+    want = {
+        pair
+        for pair, p in zip(zip(u.id_a.tolist(), u.id_b.tolist()), u.probability.tolist())
+        if p >= 0.01 and pair not in contact_pairs
+    }
     assert set(zip(columns.id_a[n_contacts:], columns.id_b[n_contacts:])) == want
     assert want, "some pair must be reported by probability alone"
     predictor.reconfigure(probability_threshold=1.0)
@@ -150,14 +174,20 @@ def test_reporting_rule_and_threshold() -> None:
     assert len(strict) == n_contacts  # only mean contacts remain (no miss reaches probability 1)
 
 
-_entry = st.one_of(st.floats(allow_nan=True, allow_infinity=True), st.sampled_from([0.0, 1e-300, 1e30, -1e-12]),
-                   st.floats(-1.0, 1.0))
+_entry = st.one_of(st.floats(allow_nan=True, allow_infinity=True),
+                   st.sampled_from([0.0, 1e-300, 1e30, -1e-12]), st.floats(-1.0, 1.0))
 
 
 @settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.too_slow])
-@given(st.lists(st.one_of(st.lists(_entry, min_size=36, max_size=36), st.lists(_entry, max_size=35),
-                          st.builds(lambda s: (np.diag([s] * 6)).ravel().tolist(), st.floats(0.0, 4.0))),
-                min_size=3, max_size=3), st.sampled_from([2, 3]))
+@given(
+    st.lists(
+        st.one_of(st.lists(_entry, min_size=36, max_size=36), st.lists(_entry, max_size=35),
+                  st.builds(lambda s: (np.diag([s] * 6)).ravel().tolist(), st.floats(0.0, 4.0))),
+        min_size=3,
+        max_size=3,
+    ),
+    st.sampled_from([2, 3]),
+)
 def test_any_covariance_content_is_used_or_rejected_with_a_reason(covariances, dimensions) -> None:
     """Random covariance contents through validation, the scene and the encoder: nothing raises,
     each refused state has a reason naming the covariance, nothing published is NaN."""
@@ -193,12 +223,19 @@ def test_raw_bytes_beyond_the_bound_are_decoded_then_rejected_or_refused() -> No
     good = Body("g", stamp_ns=BASE, covariance=tuple(np.eye(6).ravel() * 0.01))
     long = Body("x", stamp_ns=BASE, covariance=(0.01,) * 40)
     for big_endian in (False, True):
-        batch = decode_states(encode_array([good, long, Body("h", stamp_ns=BASE)], BASE, big_endian=big_endian),
-                              CircleStateArray)
+        batch = decode_states(
+            encode_array([good, long, Body("h", stamp_ns=BASE)], BASE, big_endian=big_endian),
+            CircleStateArray,
+        )
         assert batch.covariance_size.tolist() == [36, 40, 0]
         check = check_batch(batch, frame_id="map", now_ns=None, dimensions=2)
-        assert check.good.tolist() == [True, False, True] and check.uncertain.tolist() == [True, False, False]
-        assert check.rejections[0].reason == "covariance has 40 values (expected 0 or 36: 6x6 row-major)"
+        assert check.good.tolist() == [True, False, True] and check.uncertain.tolist() == [True,
+                                                                                           False,
+                                                                                           False]
+        assert (
+            check.rejections[0].reason
+            == "covariance has 40 values (expected 0 or 36: 6x6 row-major)"
+        )
     data = bytearray(encode_state(Body("x", stamp_ns=BASE)))
     data[-4:] = (2**32 - 1).to_bytes(4, "little")  # the covariance count
     with pytest.raises(CdrError):
@@ -216,11 +253,12 @@ def test_markers_show_probability_as_opacity() -> None:
     n = 4
     cov = np.zeros((n, 36))
     cov[2] = cov[3] = np.diag([0.09] * 3 + [0.0] * 3).ravel()
-    batch = StateBatch(ids=["a", "b", "c", "d"], frames=["map"] * n, stamp_ns=np.full(n, BASE, dtype=np.int64),
-                       radius=np.full(n, 0.5), position=np.array([[0, 0, 0], [3, 0, 0], [0, 20, 0], [2, 21.1, 0.0]]),
+    batch = StateBatch(ids=["a", "b", "c", "d"], frames=["map"] * n,
+                       stamp_ns=np.full(n, BASE, dtype=np.int64), radius=np.full(n, 0.5),
+                       position=np.array([[0, 0, 0], [3, 0, 0], [0, 20, 0], [2, 21.1, 0.0]]),
                        velocity=np.array([[1.0, 0, 0], [0, 0, 0], [1.0, 0, 0], [0, 0, 0]]),
-                       acceleration=np.zeros((n, 3)), remove=np.zeros(n, dtype=bool), covariance=cov,
-                       covariance_size=np.full(n, 36, dtype=np.int64))
+                       acceleration=np.zeros((n, 3)), remove=np.zeros(n, dtype=bool),
+                       covariance=cov, covariance_size=np.full(n, 36, dtype=np.int64))
     _, prediction = _predict(batch)
     rows = {(r.id_a, r.id_b): r for r in prediction.rows()}
     assert rows[("a", "b")].collision_probability == 1.0 and rows[("c", "d")].status == 0
@@ -229,7 +267,9 @@ def test_markers_show_probability_as_opacity() -> None:
     markers = deserialize_message(MarkerBuilder(2).build(prediction), MarkerArray).markers
     bodies = {m.id: m.color for m in markers if m.ns == "bodies"}
     colours = list(bodies.values())  # ids follow the id order a, b, c, d
-    assert colours[0].a == pytest.approx(Urgency.WARNING[3]) and colours[1].a == pytest.approx(Urgency.WARNING[3])
+    assert colours[0].a == pytest.approx(Urgency.WARNING[3]) and colours[1].a == pytest.approx(
+        Urgency.WARNING[3]
+    )
     band = Urgency.colours(np.array([rows[("c", "d")].plausible_time_to_collision]))[0]
     for c in colours[2:]:
         assert (c.r, c.g, c.b) == pytest.approx(tuple(band[:3]))
@@ -248,7 +288,9 @@ def test_uncertain_pair_budget_defers_and_counts() -> None:
     deferred = u.probability_bound == 1.0
     assert u.deferred == predictor.stats.uncertain_deferred == np.count_nonzero(deferred) > 0
     assert np.all(u.probability[deferred] == 1.0)
-    assert np.count_nonzero((u.probability_bound != full.uncertainty.probability_bound)) == u.deferred
+    assert (
+        np.count_nonzero((u.probability_bound != full.uncertainty.probability_bound)) == u.deferred
+    )
     listed = set(zip(part.columns.id_a, part.columns.id_b))
     assert {(a, b) for a, b in zip(u.id_a[deferred].tolist(), u.id_b[deferred].tolist())} <= listed
     _, again = _predict(batch, uncertain_pair_budget=2)
@@ -260,6 +302,7 @@ def _counting_core(monkeypatch) -> list:
     """Rows each call of core.uncertainty.uncertain_pairs was given (the scene calls it through
     the module), as (id of pa row set,) -> number of rows."""
     from circle_collision_ros.core import uncertainty
+
     calls = []
     real = uncertainty.uncertain_pairs
 
@@ -273,10 +316,11 @@ def _counting_core(monkeypatch) -> list:
 
 def _merge_batch(scene: Scene, batch: StateBatch, rows=None) -> None:
     from circle_collision_ros.pipeline.state_batch import covariance_block
+
     rows = np.arange(len(batch)) if rows is None else np.asarray(rows)
     scene.merge([batch.ids[k] for k in rows.tolist()], batch.stamp_ns[rows], batch.position[rows],
-                batch.velocity[rows], batch.acceleration[rows], batch.radius[rows], batch.remove[rows],
-                0, covariance_block(batch.covariance[rows], scene.dim))
+                batch.velocity[rows], batch.acceleration[rows], batch.radius[rows],
+                batch.remove[rows], 0, covariance_block(batch.covariance[rows], scene.dim))
 
 
 def _same(u, w) -> None:
@@ -301,8 +345,10 @@ def test_one_body_update_evaluates_only_that_bodys_pairs(monkeypatch, budget) ->
     calls = _counting_core(monkeypatch)
     mover = "b05"
     k = batch.ids.index(mover)
-    later = StateBatch(**{**batch.__dict__, "stamp_ns": batch.stamp_ns + 20_000_000,
-                          "position": batch.position + 0.01})
+    later = StateBatch(
+        **{**batch.__dict__, "stamp_ns": batch.stamp_ns + 20_000_000,
+           "position": batch.position + 0.01}
+    )
     for step in range(1, 4):  # again and again: a deferred pair of the first call gets its turn
         stamped = StateBatch(**{**later.__dict__, "stamp_ns": later.stamp_ns + step})
         _merge_batch(scene, stamped, [k])
@@ -331,15 +377,16 @@ def test_pair_time_is_the_newer_stamp_or_the_lag_period_start(monkeypatch) -> No
     C = np.diag([0.09, 0.04, 0.01, 0.0225])
     scene = Scene(5.0, 2)
     t0 = BASE + 7 * lag + 1234
-    scene.merge(["a", "b"], [t0, t0 + 5_000_000], [[0.0, 0.0], [4.0, 0.3]], [[1.0, 0.0], [-0.5, 0.0]],
-                [[0.0, 0.0], [0.0, 0.0]], [0.5, 0.5], [False, False], 0, np.stack([C, C]))
+    scene.merge(["a", "b"], [t0, t0 + 5_000_000], [[0.0, 0.0], [4.0, 0.3]],
+                [[1.0, 0.0], [-0.5, 0.0]], [[0.0, 0.0], [0.0, 0.0]], [0.5, 0.5], [False, False], 0,
+                np.stack([C, C]))
     far = np.array([[500.0, 0.0]])
 
     def core_at(tp):
         dt_a, dt_b = (tp - t0) * 1e-9, (tp - t0 - 5_000_000) * 1e-9
         pa, pb = np.array([[dt_a, 0.0]]), np.array([[4.0 - 0.5 * dt_b, 0.3]])
-        return uncertain_pairs(pa, [[1.0, 0.0]], [[0.0, 0.0]], [0.5], _moved(C, dt_a)[None],
-                               pb, [[-0.5, 0.0]], [[0.0, 0.0]], [0.5], _moved(C, dt_b)[None], 5.0, 0.01)
+        return uncertain_pairs(pa, [[1.0, 0.0]], [[0.0, 0.0]], [0.5], _moved(C, dt_a)[None], pb,
+                               [[-0.5, 0.0]], [[0.0, 0.0]], [0.5], _moved(C, dt_b)[None], 5.0, 0.01)
 
     def check(R, tp):
         u = scene.uncertain_pairs(0.01)
@@ -389,6 +436,7 @@ def test_vectorised_covariance_check_decides_as_the_core(m) -> None:
     non-finite, zero, and rounding-negative blocks over 20 orders of magnitude."""
     from circle_collision_ros.core.uncertainty import covariance_problem
     from circle_collision_ros.pipeline.state_validation import covariance_rejected
+
     rng = np.random.default_rng(m)
     n = 1400
     A = rng.normal(size=(n, m, m))
@@ -416,16 +464,17 @@ def test_batch_covariance_checks_decide_row_by_row_as_the_core(dimensions) -> No
     from circle_collision_ros.core.uncertainty import covariance_problem
     from circle_collision_ros.pipeline.state_batch import covariance_block
     from circle_collision_ros.pipeline.state_validation import ValueLimits, covariance_checks
+
     rng = np.random.default_rng(dimensions)
     n = 3000
     A = rng.normal(size=(n, 6, 6))
     cov = (A @ A.transpose(0, 2, 1) * 10.0 ** rng.integers(-8, 8, (n, 1, 1))).reshape(n, 36)
-    cov[1::11] *= -1.0                                   # negative definite
-    cov[2::11, 1] += 1e-3                                # asymmetric on the used axes
+    cov[1::11] *= -1.0  # negative definite
+    cov[2::11, 1] += 1e-3  # asymmetric on the used axes
     cov[3::11, 7 * 2] = np.nan if dimensions == 3 else cov[3::11, 7 * 2]  # z: used in 3-D only
     cov[4::11, 1] = np.inf
     cov[5::11] = 0.0
-    cov[6::11, 0] = 2.0 * ValueLimits.MAX_COVARIANCE    # huge
+    cov[6::11, 0] = 2.0 * ValueLimits.MAX_COVARIANCE  # huge
     cov[7::11] = np.diag([0.04, 0.04, 0.0, 0.01, 0.01, 0.0]).ravel()
     cov[8::11, 0] = np.nan
     cov[9::11] = np.where(np.eye(6).ravel() > 0, 0.0, cov[9::11])  # off-diagonal only: indefinite
@@ -435,9 +484,10 @@ def test_batch_covariance_checks_decide_row_by_row_as_the_core(dimensions) -> No
     cov[size != 36] = np.where(size[size != 36, None] == 0, 0.0, cov[size != 36])
     remove = np.zeros(n, dtype=bool)
     remove[::13] = True
-    batch = StateBatch(ids=[f"b{k}" for k in range(n)], frames=["map"] * n, stamp_ns=np.full(n, BASE),
-                       radius=np.ones(n), position=np.zeros((n, 3)), velocity=np.zeros((n, 3)),
-                       acceleration=np.zeros((n, 3)), remove=remove, covariance=cov, covariance_size=size)
+    batch = StateBatch(ids=[f"b{k}" for k in range(n)], frames=["map"] * n,
+                       stamp_ns=np.full(n, BASE), radius=np.ones(n), position=np.zeros((n, 3)),
+                       velocity=np.zeros((n, 3)), acceleration=np.zeros((n, 3)), remove=remove,
+                       covariance=cov, covariance_size=size)
     bad, uncertain, block = covariance_checks(batch, dimensions)
     want_block = covariance_block(cov, dimensions)
     assert np.array_equal(block, want_block, equal_nan=True)
@@ -451,21 +501,25 @@ def test_batch_covariance_checks_decide_row_by_row_as_the_core(dimensions) -> No
         b = want_block[k]
         if size[k] == 0 or not (b != 0.0).any():
             continue
-        refused = (np.isfinite(b).all() and np.abs(b).max() > ValueLimits.MAX_COVARIANCE) \
-            or covariance_problem(b) is not None
+        refused = (
+            np.isfinite(b).all() and np.abs(b).max() > ValueLimits.MAX_COVARIANCE
+        ) or covariance_problem(b) is not None
         want_bad[k], want_uncertain[k] = refused, not refused
     assert bad.tolist() == want_bad.tolist()
     assert uncertain.tolist() == want_uncertain.tolist()
-    assert 0 < want_bad.sum() and 0 < want_uncertain.sum() and (~want_bad & ~want_uncertain).sum() > 0
+    assert (
+        0 < want_bad.sum() and 0 < want_uncertain.sum() and (~want_bad & ~want_uncertain).sum() > 0
+    )
 
 
 def test_state_and_covariance_propagation_is_the_numpy_expression_bitwise() -> None:
-    """uncertain.states_at_rows (one compiled pass over the stored bodies) gives the bits of the numpy
-    expressions: p + dt (v + (dt/2) a), v + dt a (store.propagate_ns) and the covariance
+    """uncertain.states_at_rows (one compiled pass over the stored bodies) gives the bits of the
+    numpy expressions: p + dt (v + (dt/2) a), v + dt a (store.propagate_ns) and the covariance
     blocks Spp + dt (Spv + Svp) + dt^2 Svv, Spv + dt Svv, Svp + dt Svv, Svv, zero for exact
     bodies, signed zeros included (recorded covariance bags replay bit for bit)."""
     from circle_collision_ros.core.scene.store import propagate_ns
     from circle_collision_ros.core.scene.uncertain import states_at_rows
+
     rng = np.random.default_rng(3)
     n = 500
     for D in (2, 3):
@@ -502,6 +556,7 @@ def test_published_rows_from_the_scenes_pair_match_equal_the_id_match() -> None:
     ids, and contact_rows names exactly the pairs whose ids agree."""
     from dataclasses import replace
     from circle_collision_ros.pipeline.prediction_messages import ScenePrediction
+
     batch = _batch(40, seed=21, sigma=0.3, spread=9.0, every=2)  # exact and uncertain bodies
     predictor, prediction = _predict(batch)
     u, c = prediction.uncertainty, prediction.contacts
@@ -515,7 +570,8 @@ def test_published_rows_from_the_scenes_pair_match_equal_the_id_match() -> None:
     unpaired = np.flatnonzero(rows < 0)
     assert not contact_pairs & set(zip(u.id_a[unpaired].tolist(), u.id_b[unpaired].tolist()))
     by_ids = ScenePrediction(c, prediction.capture, prediction.horizon, prediction.frame_id, False,
-                             replace(u, contact_rows=None, matched=None), prediction.probability_threshold)
+                             replace(u, contact_rows=None, matched=None),
+                             prediction.probability_threshold)
     fast, slow = prediction.columns, by_ids.columns
     assert fast.id_a == slow.id_a and fast.id_b == slow.id_b
     for name in ("status", "ttc", "contact_ns", "point", "normal", "closing_speed", "probability",

@@ -13,14 +13,9 @@ import numpy as np
 import pytest
 
 from circle_collision_ros.core import time_to_collision
-from circle_collision_ros.core.uncertainty import (
-    BROAD_PHASE_SIGMAS,
-    TUBE_TAIL,
-    UncertainPairs,
-    covariance_problem,
-    inflation_radius,
-    uncertain_pairs,
-)
+from circle_collision_ros.core.uncertainty import (BROAD_PHASE_SIGMAS, TUBE_TAIL, UncertainPairs,
+                                                   covariance_problem, inflation_radius,
+                                                   uncertain_pairs)
 
 
 def _batch(rng, n, D, sigma_scale):
@@ -132,7 +127,8 @@ def test_k_sigma_tail_and_the_cauchy_schwarz_step():
     ref = float(mp.gammainc(3, BROAD_PHASE_SIGMAS ** 2 / 2, mp.inf, regularized=True))
     assert abs(TUBE_TAIL - ref) <= 1e-24
     assert abs(chi2_tail_even(BROAD_PHASE_SIGMAS ** 2, 4)
-               - float(mp.gammainc(2, BROAD_PHASE_SIGMAS ** 2 / 2, mp.inf, regularized=True))) <= 1e-24
+               - float(mp.gammainc(2, BROAD_PHASE_SIGMAS ** 2 / 2, mp.inf,
+                                   regularized=True))) <= 1e-24
     rng = np.random.default_rng(2)
     H = 4.0
     for D in (2, 3):
@@ -146,7 +142,9 @@ def test_k_sigma_tail_and_the_cauchy_schwarz_step():
             for t in np.linspace(0, H, 17):
                 M = np.hstack([np.eye(D), t * np.eye(D)])
                 dev = np.linalg.norm(z @ (M @ L).T, axis=1)
-                assert np.all(dev <= r[i] / BROAD_PHASE_SIGMAS * np.linalg.norm(z, axis=1) * (1 + 1e-12))
+                assert np.all(
+                    dev <= r[i] / BROAD_PHASE_SIGMAS * np.linalg.norm(z, axis=1) * (1 + 1e-12)
+                )
 
 
 def test_invalid_rows_give_nan_and_leave_the_others_alone():
@@ -165,6 +163,6 @@ def test_invalid_rows_give_nan_and_leave_the_others_alone():
 
 def test_invalid_exact_rows_give_nan():
     z = np.zeros((1, 2))
-    res = uncertain_pairs(np.array([[np.nan, 0.0]]), z, z, np.ones(1), np.zeros((1, 4, 4)),
-                          z, z, z, np.ones(1), np.zeros((1, 4, 4)), 1.0, 0.01)
+    res = uncertain_pairs(np.array([[np.nan, 0.0]]), z, z, np.ones(1), np.zeros((1, 4, 4)), z, z, z,
+                          np.ones(1), np.zeros((1, 4, 4)), 1.0, 0.01)
     assert all(np.isnan(f[0]) for f in res)

@@ -43,14 +43,19 @@ import pytest
 from circle_collision_ros.core import time_to_collision
 from circle_collision_ros.core.uncertainty import uncertain_pairs
 from circle_collision_ros.core.uncertainty.pair import OUT_QMC, OUT_SIZE, pair_kernel
-from circle_collision_ros.core.uncertainty.qmc import factor, normal_table, overcount_replicates, quartic_crossings
-from circle_collision_ros.core.uncertainty.reentry import BRACKET_HALF_WIDTH, REENTRY_SIGMAS, no_reentry
-from circle_collision_ros.core.uncertainty.tube import (BROAD_PHASE_SIGMAS, TUBE_DEPTH, TUBE_TAIL, S_at, lam_max_sym3,
-                                                        max_sigma_over, mean_range, tube_intervals)
-from circle_collision_ros.core.uncertainty.walk import (ST_PTOL, ST_SIZE, ST_SWEEP_DV, det_lower, instant_bound,
-                                                        instant_probability, swept_ball_bound, swept_ball_split,
+from circle_collision_ros.core.uncertainty.qmc import (factor, normal_table, overcount_replicates,
+                                                       quartic_crossings)
+from circle_collision_ros.core.uncertainty.reentry import (BRACKET_HALF_WIDTH, REENTRY_SIGMAS,
+                                                           no_reentry)
+from circle_collision_ros.core.uncertainty.tube import (BROAD_PHASE_SIGMAS, TUBE_DEPTH, TUBE_TAIL,
+                                                        S_at, lam_max_sym3, max_sigma_over,
+                                                        mean_range, tube_intervals)
+from circle_collision_ros.core.uncertainty.walk import (ST_PTOL, ST_SIZE, ST_SWEEP_DV, det_lower,
+                                                        instant_bound, instant_probability,
+                                                        swept_ball_bound, swept_ball_split,
                                                         velocity_sigma)
 from tests.core.uncertainty.test_uncertainty_horizon import KINDS, mc_probability, random_pair
+from tests.stress import examples
 
 
 def test_instant_bound_holds_on_every_interval():
@@ -93,7 +98,10 @@ def _contact_within(dp, dv, da, R, Sig, a, b, n, seed):
     seeded samples of (dp, dv) through the exact solver from the state at a."""
     D = dp.shape[0]
     lam, V = np.linalg.eigh(Sig)
-    y = np.random.default_rng(seed).standard_normal((n, 2 * D)) @ (V * np.sqrt(np.clip(lam, 0, None))).T
+    y = (
+        np.random.default_rng(seed).standard_normal((n, 2 * D))
+        @ (V * np.sqrt(np.clip(lam, 0, None))).T
+    )
     p0, v0 = dp + y[:, :D], dv + y[:, D:]
     z = np.zeros((n, D))
     t = time_to_collision(p0 + a * v0 + 0.5 * a * a * da, v0 + a * da, np.broadcast_to(da, (n, D)),
@@ -178,6 +186,7 @@ def test_split_swept_ball_bounds_the_end_game_step():
 
 def test_lam_max_sym3_is_a_tight_upper_bound():
     import mpmath as mp
+
     mp.mp.dps = 40
     rng = np.random.default_rng(3)
     for i in range(600):
@@ -199,6 +208,9 @@ def test_quartic_crossings_match_the_exact_solver_and_a_fine_grid():
     rng = np.random.default_rng(5)
     grid = np.linspace(0.0, 3.0, 200_001)
     repeated = 0
+    # 4000 paths (the ones that come back are rare: 6 of them, from the 1790th), the first
+    # 1500 also on the grid (--stress; the first 100 by default: the grid is what costs)
+    on_grid = examples(100, 1500)
     for it in range(4000):
         D = 2 + it % 2
         p, v, a = rng.normal(size=D) * 1.5, rng.normal(size=D) * 1.5, rng.normal(size=D) * 3.0
@@ -207,7 +219,7 @@ def test_quartic_crossings_match_the_exact_solver_and_a_fine_grid():
         z = np.zeros(D)
         contact = float(time_to_collision(p, v, a, R, z, z, z, 0.0, 3.0)) <= 3.0
         assert contact == (inside0 or entries >= 1), (p, v, a, R)
-        if it < 1500:
+        if it < on_grid:
             X = p[None] + grid[:, None] * (v[None] + 0.5 * grid[:, None] * a[None])
             f = np.einsum("ij,ij->i", X, X) - R * R
             assert entries == np.count_nonzero((f[:-1] > 0) & (f[1:] <= 0)), (p, v, a, R)
@@ -242,8 +254,8 @@ def test_accelerating_pair_that_comes_back_is_within_its_bound():
     # at ~2.3 s: about a third of the paths enter twice
     z2 = np.zeros(2)
     cov = np.diag([0.09, 0.09, 0.04, 0.04]) / 2
-    pair = (np.array([-3.0, 0.2]), np.array([5.0, 0.0]), np.array([-3.0, 0.0]), 0.25, cov,
-            z2, z2, z2, 0.25, cov)
+    pair = (np.array([-3.0, 0.2]), np.array([5.0, 0.0]), np.array([-3.0, 0.0]), 0.25, cov, z2, z2,
+            z2, 0.25, cov)
     res = uncertain_pairs(*(np.asarray(x, float)[None] for x in pair), 3.0, 0.01)
     p, b = float(res.collision_probability[0]), float(res.collision_probability_bound[0])
     q, se = mc_probability(*pair, 3.0, 1_000_000, seed=31)
@@ -306,7 +318,7 @@ def test_tube_whole_ambiguous_nodes_are_hulls_of_the_leaves():
             assert a in starts and b in ends, (a, b)
         for a, b in ref:
             assert any(ga <= a and b <= gb for ga, gb in got), (a, b)
-        wide += BROAD_PHASE_SIGMAS ** 2 * np.trace(Sigma[:D, :D]) / D >= R * R and cnt > 0
+        wide += BROAD_PHASE_SIGMAS**2 * np.trace(Sigma[:D, :D]) / D >= R * R and cnt > 0
         inside += t_inside <= H
     assert wide >= 30 and inside >= 30, (wide, inside)  # both regimes drawn
 
@@ -315,9 +327,11 @@ def test_tube_whole_ambiguous_nodes_are_hulls_of_the_leaves():
 def test_no_reentry_certificate_holds_on_the_tube(k):
     rng = np.random.default_rng(44)
     certified = 0
-    for it in range(400):
+    cases = examples(160, 400)  # the first 160 of the same cases by default
+    for it in range(cases):
         D = 2 if it % 3 else 3
-        pa, va, aa, ra, ca, pb, vb, ab, rb, cb = random_pair(rng, D, KINDS[1 + it % 2])  # accelerating kinds
+        # accelerating kinds
+        pa, va, aa, ra, ca, pb, vb, ab, rb, cb = random_pair(rng, D, KINDS[1 + it % 2])
         scale = 10 ** rng.uniform(-3.0, 0.0)
         dp, dv, da = pa - pb, va - vb, (aa - ab) * 10 ** rng.uniform(-2.0, 0.5)
         S = np.ascontiguousarray((ca + cb) * scale)
@@ -332,24 +346,31 @@ def test_no_reentry_certificate_holds_on_the_tube(k):
         z *= np.where(rng.random(400) < 0.5, k, k * rng.random(400) ** (1 / (2 * D)))[:, None]
         y = z @ L.T
         ts = np.linspace(t0, t1, 301)
-        X = (dp + y[:, None, :D] + (dv + y[:, None, D:]) * ts[None, :, None]
-             + 0.5 * da * ts[None, :, None] ** 2)
+        X = (
+            dp
+            + y[:, None, :D]
+            + (dv + y[:, None, D:]) * ts[None, :, None]
+            + 0.5 * da * ts[None, :, None] ** 2
+        )
         Xd = dv + y[:, None, D:] + da * ts[None, :, None]
         fpp = np.sum(Xd * Xd, axis=2) + X @ da
         assert fpp.min() > 0.0, (it, fpp.min())
     # the property was exercised, by each of the two bounds where the other fails
-    assert certified > 50  # the property was exercised
+    assert certified > 50 * cases // 400  # the property was exercised
 
 
 def test_no_reentry_certifies_the_benchmark_accelerating_family():
     """The benchmark's accelerating family (|da| ~1.1 m/s^2, hull ~2.3 s, |g| up to ~6 m),
     which the cruder (min |gd| - k sigma_v)^2 > (max |g| + k sigma_x) |da| certified at no
     k: each of its first four pairs is certified at some k' of REENTRY_SIGMAS, so its
-    bracket answers it without the RQMC (within its bound of 1e6-sample Monte Carlo)."""
+    bracket answers it without the RQMC (within its bound of 1e6-sample Monte Carlo: the
+    first two pairs by default, all four under --stress)."""
     import sys
     from pathlib import Path
+
     sys.path.insert(0, str(Path(__file__).resolve().parents[3] / "bench"))
     import bench_uncertainty as bench
+
     fi = [name for name, _ in bench.FAMILIES].index("accelerating")
     rng = np.random.default_rng(18 + 100 * fi)  # the benchmark's own pairs
     leaves = np.empty((1 << TUBE_DEPTH, 2))
@@ -359,13 +380,16 @@ def test_no_reentry_certifies_the_benchmark_accelerating_family():
         pa, va, aa, ra, ca, pb, vb, ab, rb, cb = pair
         dp, dv, da, R, S = pa - pb, va - vb, aa - ab, ra + rb, np.ascontiguousarray(ca + cb)
         cnt, _ = tube_intervals(dp, dv, da, R, S, bench.H, leaves, BROAD_PHASE_SIGMAS)
-        assert any(no_reentry(dp, dv, da, S, leaves[0, 0], leaves[cnt - 1, 1], kk) for kk in REENTRY_SIGMAS), k
+        assert any(
+            no_reentry(dp, dv, da, S, leaves[0, 0], leaves[cnt - 1, 1], kk) for kk in REENTRY_SIGMAS
+        ), k
         pair_kernel(dp, dv, da, R, S, bench.H, bench.THRESHOLD, out)
         assert out[OUT_QMC] == 0.0, k  # answered by the bracket
         res = uncertain_pairs(*(np.asarray(x, float)[None] for x in pair), bench.H, bench.THRESHOLD)
         p, b = float(res.collision_probability[0]), float(res.collision_probability_bound[0])
-        q, se = mc_probability(*pair, bench.H, 1_000_000, seed=90 + k)
-        assert abs(p - q) <= b + 4 * se, (k, p, b, q, se)
+        if k < examples(2, 4):
+            q, se = mc_probability(*pair, bench.H, 1_000_000, seed=90 + k)
+            assert abs(p - q) <= b + 4 * se, (k, p, b, q, se)
 
 
 def test_certified_accelerating_pair_skips_the_overcount():
@@ -374,12 +398,14 @@ def test_certified_accelerating_pair_skips_the_overcount():
     3 / 2048 (which every accelerating pair carried before the certificate)."""
     z2 = np.zeros(2)
     cov = np.diag([0.04, 0.04, 0.01, 0.01]) / 2
-    pair = (np.array([-4.0, 0.3]), np.array([3.0, 0.0]), np.array([0.2, 0.1]), 0.5, cov,
-            z2, z2, z2, 0.5, cov)
+    pair = (np.array([-4.0, 0.3]), np.array([3.0, 0.0]), np.array([0.2, 0.1]), 0.5, cov, z2, z2, z2,
+            0.5, cov)
     leaves = np.empty((1 << TUBE_DEPTH, 2))
     dp, dv, da, S = pair[0], pair[1], pair[2], cov * 2
     cnt, _ = tube_intervals(dp, dv, da, 1.0, S, 3.0, leaves, BROAD_PHASE_SIGMAS)
-    assert cnt > 0 and no_reentry(dp, dv, da, S, leaves[0, 0], leaves[cnt - 1, 1], BROAD_PHASE_SIGMAS)
+    assert cnt > 0 and no_reentry(
+        dp, dv, da, S, leaves[0, 0], leaves[cnt - 1, 1], BROAD_PHASE_SIGMAS
+    )
     res = uncertain_pairs(*(np.asarray(x, float)[None] for x in pair), 3.0, 0.01)
     p, b = float(res.collision_probability[0]), float(res.collision_probability_bound[0])
     assert b < 3.0 / 2048
@@ -398,13 +424,17 @@ def test_uncertified_accelerating_pairs_answered_by_their_bracket():
     leaves = np.empty((1 << TUBE_DEPTH, 2))
     out = np.empty(OUT_SIZE)
     checked = narrow = 0
+    want = examples(4, 8)  # pairs checked against Monte Carlo: the first 4 by default
     for it in range(400):
         pair = random_pair(rng, 2, "accelerating-wide" if it % 2 else "accelerating")
         pa, va, aa, ra, ca, pb, vb, ab, rb, cb = pair
         dp, dv, da, R, S = pa - pb, va - vb, aa - ab, float(ra + rb), ca + cb
         cnt, t_inside = tube_intervals(dp, dv, da, R, S, H, leaves, BROAD_PHASE_SIGMAS)
-        if cnt == 0 or t_inside <= H or no_reentry(dp, dv, da, S, leaves[0, 0], leaves[cnt - 1, 1],
-                                                    BROAD_PHASE_SIGMAS):
+        if (
+            cnt == 0
+            or t_inside <= H
+            or no_reentry(dp, dv, da, S, leaves[0, 0], leaves[cnt - 1, 1], BROAD_PHASE_SIGMAS)
+        ):
             continue
         pair_kernel(dp, dv, da, R, S, H, 0.01, out)
         if out[OUT_QMC] != 0.0:
@@ -414,8 +444,10 @@ def test_uncertified_accelerating_pairs_answered_by_their_bracket():
         assert b <= BRACKET_HALF_WIDTH + 0.01, b
         q, se = mc_probability(*pair, H, 1_000_000, seed=500 + it)
         assert abs(p - q) <= b + 4 * se, (it, p, b, q, se)
-        narrow += any(no_reentry(dp, dv, da, S, leaves[0, 0], leaves[cnt - 1, 1], k) for k in REENTRY_SIGMAS)
+        narrow += any(
+            no_reentry(dp, dv, da, S, leaves[0, 0], leaves[cnt - 1, 1], k) for k in REENTRY_SIGMAS
+        )
         checked += 1
-        if checked == 8:
+        if checked == want:
             break
-    assert checked == 8 and narrow >= 1, (checked, narrow)  # both sides of the bracket exercised
+    assert checked == want and narrow >= 1, (checked, narrow)  # both sides of the bracket exercised

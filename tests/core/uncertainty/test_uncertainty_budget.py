@@ -24,7 +24,8 @@ import math
 import numpy as np
 
 from circle_collision_ros.core.scene import Scene
-from circle_collision_ros.core.uncertainty import DEFERRED_BOUND, batch, deferred_count, uncertain_pairs
+from circle_collision_ros.core.uncertainty import (DEFERRED_BOUND, batch, deferred_count,
+                                                   uncertain_pairs)
 from circle_collision_ros.core.uncertainty.tube import screen_sigmas
 
 BASE = 1_700_000_000 * 1_000_000_000
@@ -49,8 +50,11 @@ def _feed(scene: Scene, ids, p, v, r, cov, stamp: int) -> None:
 
 
 def _rows(u):
-    return {(a, b): (p, e, t) for a, b, p, e, t in zip(u.id_a.tolist(), u.id_b.tolist(), u.probability.tolist(),
-                                                       u.probability_bound.tolist(), u.plausible_ttc.tolist())}
+    return {
+        (a, b): (p, e, t)
+        for a, b, p, e, t in zip(u.id_a.tolist(), u.id_b.tolist(), u.probability.tolist(),
+                                 u.probability_bound.tolist(), u.plausible_ttc.tolist())
+    }
 
 
 def test_budget_serves_the_longest_waiting_pairs_first() -> None:
@@ -68,9 +72,14 @@ def test_budget_serves_the_longest_waiting_pairs_first() -> None:
         got = budgeted.uncertain_pairs(THR, budgeted.predictions(), max_evaluated=m)
         same = twin.uncertain_pairs(THR, twin.predictions(), max_evaluated=m)
         full = unlimited.uncertain_pairs(THR, unlimited.predictions())
-        assert all(np.asarray(x).tobytes() == np.asarray(y).tobytes() for x, y in
-                   zip((got.id_a, got.id_b, got.probability, got.probability_bound, got.plausible_ttc),
-                       (same.id_a, same.id_b, same.probability, same.probability_bound, same.plausible_ttc)))
+        assert all(
+            np.asarray(x).tobytes() == np.asarray(y).tobytes()
+            for x, y in zip(
+                (got.id_a, got.id_b, got.probability, got.probability_bound, got.plausible_ttc),
+                (same.id_a, same.id_b, same.probability, same.probability_bound,
+                 same.plausible_ttc),
+            )
+        )
         want = _rows(full)
         state = {}
         for key, (prob, bound, t) in _rows(got).items():
@@ -137,8 +146,8 @@ def test_scene_reuses_pairs_a_change_elsewhere_leaves_alone() -> None:
     m = 2
     before = scene.uncertain_pairs(THR, scene.predictions(), max_evaluated=m)
     # an exact body far away, same stamp: the reference time and every listed pair's inputs stay
-    scene.merge(["zz"], np.array([BASE], dtype=np.int64), np.array([[500.0, 500.0]]), np.zeros((1, 2)),
-                np.zeros((1, 2)), np.array([0.5]), np.zeros(1, dtype=bool), BASE)
+    scene.merge(["zz"], np.array([BASE], dtype=np.int64), np.array([[500.0, 500.0]]),
+                np.zeros((1, 2)), np.zeros((1, 2)), np.array([0.5]), np.zeros(1, dtype=bool), BASE)
     after = scene.uncertain_pairs(THR, scene.predictions(), max_evaluated=m)
     rows0, rows1 = _rows(before), _rows(after)
     assert rows0.keys() == rows1.keys()
@@ -159,8 +168,10 @@ def test_a_body_removed_and_added_again_is_a_new_body_for_the_budget() -> None:
     _, U = screen_sigmas(THR, 4)
 
     def kinds(u):
-        return {k: "deferred" if e == DEFERRED_BOUND else ("screened" if e == U else "evaluated")
-                for k, (_, e, _) in _rows(u).items()}
+        return {
+            k: "deferred" if e == DEFERRED_BOUND else ("screened" if e == U else "evaluated")
+            for k, (_, e, _) in _rows(u).items()
+        }
 
     runs = {}
     for readd in (False, True):
@@ -169,7 +180,8 @@ def test_a_body_removed_and_added_again_is_a_new_body_for_the_budget() -> None:
         first = kinds(scene.uncertain_pairs(THR, scene.predictions(), max_evaluated=1))
         stamp = BASE + 50_000_000
         if readd:
-            scene.merge(["c"], [stamp], np.zeros((1, 2)), np.zeros((1, 2)), np.zeros((1, 2)), [0.0], [True], stamp)
+            scene.merge(["c"], [stamp], np.zeros((1, 2)), np.zeros((1, 2)), np.zeros((1, 2)), [0.0],
+                        [True], stamp)
             stamp += 1
         _feed(scene, ids, p + 1e-3, v, r, cov, stamp)  # everything moved: nothing reused
         runs[readd] = first, kinds(scene.uncertain_pairs(THR, scene.predictions(), max_evaluated=1))
@@ -233,10 +245,12 @@ def test_scene_does_not_screen_waiting_pairs_again(monkeypatch) -> None:
         stamp = BASE + step * 1_000_000
         results = []
         for s_i, scene in enumerate(scenes):
-            scene.merge([ids[k]], np.array([stamp], dtype=np.int64), p[k:k + 1] + 1e-3 * step, v[k:k + 1],
-                        np.zeros((1, 2)), r[k:k + 1], np.zeros(1, dtype=bool), stamp, covariances=cov[k:k + 1])
+            scene.merge([ids[k]], np.array([stamp], dtype=np.int64), p[k : k + 1] + 1e-3 * step,
+                        v[k : k + 1], np.zeros((1, 2)), r[k : k + 1], np.zeros(1, dtype=bool),
+                        stamp, covariances=cov[k : k + 1])
             old = scene._pair_answers
-            if s_i == 1 and old is not None:  # forget the waiting pairs' screening: screen them again
+            # forget the waiting pairs' screening: screen them again
+            if s_i == 1 and old is not None:
                 scene._pair_answers = old._replace(tau=np.where(old.answered, old.tau, np.nan))
             before = len(seen)
             results.append(_rows(scene.uncertain_pairs(THR, scene.predictions(), max_evaluated=2)))

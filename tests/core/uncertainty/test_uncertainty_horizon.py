@@ -34,8 +34,9 @@ def mc_probability(pa, va, aa, ra, ca, pb, vb, ab, rb, cb, H, n, seed):
     L = V * np.sqrt(np.clip(lam, 0, None))
     y = rng.standard_normal((n, 2 * D)) @ L.T
     z = np.zeros((n, D))
-    t = time_to_collision((pa - pb) + y[:, :D], (va - vb) + y[:, D:], np.broadcast_to(aa - ab, (n, D)),
-                          np.full(n, ra + rb), z, z, z, np.zeros(n), H)
+    t = time_to_collision((pa - pb) + y[:, :D], (va - vb) + y[:, D:],
+                          np.broadcast_to(aa - ab, (n, D)), np.full(n, ra + rb), z, z, z,
+                          np.zeros(n), H)
     p = np.count_nonzero(t <= H) / n
     return p, math.sqrt(max(p * (1 - p), 1 / n) / n)
 
@@ -108,9 +109,11 @@ def test_thin_density_ridge_pair_within_the_stated_bound():
     """The rank-deficient pair whose ridge the arc scan used to step over
     (tests/core/uncertainty/test_uncertainty_entry_rate.py): 0.788 +- 3e-4 reported, 0.968 true."""
     from tests.core.uncertainty.test_uncertainty_entry_rate import THIN_RIDGE_PAIR as c
+
     z = np.zeros(2)
     # as bodies: a carries the relative state and the whole covariance, b sits at 0
-    pair = (c["dp"], c["dv"], c["da"], c["R"] / 2, c["Sigma"], z, z, z, c["R"] / 2, np.zeros((4, 4)))
+    pair = (c["dp"], c["dv"], c["da"], c["R"] / 2, c["Sigma"], z, z, z, c["R"] / 2,
+            np.zeros((4, 4)))
     for H in (2.0, 3.0):
         r = uncertain_pairs(*(np.asarray(x, dtype=np.float64)[None] for x in pair), H, 0.01)
         p, b = r.collision_probability[0], r.collision_probability_bound[0]
@@ -152,13 +155,13 @@ dyadic = st.integers(-4096, 4096).map(lambda k: k / 1024)
 
 
 @settings(max_examples=25, deadline=None)
-@given(seed=st.integers(0, 2 ** 32 - 1), off=st.tuples(dyadic, dyadic).map(np.array),
+@given(seed=st.integers(0, 2**32 - 1), off=st.tuples(dyadic, dyadic).map(np.array),
        big=st.integers(0, 10))
 def test_swap_and_common_offset_change_nothing(seed, off, big):
     rng = np.random.default_rng(seed)
     pa, va, aa, ra, ca, pb, vb, ab, rb, cb = random_pair(rng, 2, KINDS[seed % len(KINDS)])
     pa, pb = np.round(pa * 1024) / 1024, np.round(pb * 1024) / 1024  # dyadic: offsets are exact
-    shift = off * 2.0 ** big
+    shift = off * 2.0**big
     r0 = _one((pa, va, aa, ra, ca, pb, vb, ab, rb, cb), 3.0)
     r1 = _one((pb, vb, ab, rb, cb, pa, va, aa, ra, ca), 3.0)
     r2 = _one((pa + shift, va, aa, ra, ca, pb + shift, vb, ab, rb, cb), 3.0)
@@ -167,7 +170,7 @@ def test_swap_and_common_offset_change_nothing(seed, off, big):
 
 
 @settings(max_examples=20, deadline=None)
-@given(seed=st.integers(0, 2 ** 32 - 1), dr=st.floats(0.01, 0.5), dh=st.floats(0.05, 2.0))
+@given(seed=st.integers(0, 2**32 - 1), dr=st.floats(0.01, 0.5), dh=st.floats(0.05, 2.0))
 def test_monotone_in_radius_and_horizon(seed, dr, dh):
     rng = np.random.default_rng(seed)
     pa, va, aa, ra, ca, pb, vb, ab, rb, cb = random_pair(rng, 2, KINDS[seed % len(KINDS)])

@@ -29,12 +29,15 @@ import math
 import numpy as np
 import pytest
 
-from circle_collision_ros.core.uncertainty.line_sampling import (PHI_ERR, disc_given_tau, capsule_interval, cylinder_control,
-                                                     line_factor, line_replicates)
+from circle_collision_ros.core.uncertainty.line_sampling import (PHI_ERR, disc_given_tau,
+                                                                 capsule_interval, cylinder_control,
+                                                                 line_factor, line_replicates)
 from circle_collision_ros.core.uncertainty import uncertain_pairs
-from circle_collision_ros.core.uncertainty.qmc import (QMC_LINE_POINTS, QMC_LINE_TARGET, QMC_REPLICATES,
-                                                     QMC_T_CONTROLLED, controlled_stats, line_sampled, normal_table)
+from circle_collision_ros.core.uncertainty.qmc import (QMC_LINE_POINTS, QMC_LINE_TARGET,
+                                                       QMC_REPLICATES, QMC_T_CONTROLLED,
+                                                       controlled_stats, line_sampled, normal_table)
 from tests.core.uncertainty.test_uncertainty_horizon import mc_probability
+from tests.stress import examples
 
 
 def _dist_to_segment(P, v, H):
@@ -65,9 +68,11 @@ def test_capsule_interval_matches_a_dense_grid():
         h = xs[1] - xs[0]
         if inside.any():
             assert lo <= hi
-            assert abs(xs[inside].min() - lo) <= h + 1e-12 and abs(xs[inside].max() - hi) <= h + 1e-12, it
+            assert (
+                abs(xs[inside].min() - lo) <= h + 1e-12 and abs(xs[inside].max() - hi) <= h + 1e-12
+            ), it
             # an interval: no gap inside
-            assert inside[np.searchsorted(xs, lo + h):np.searchsorted(xs, hi - h)].all()
+            assert inside[np.searchsorted(xs, lo + h) : np.searchsorted(xs, hi - h)].all()
             checked += 1
         else:
             assert not (hi - lo > 2 * h), (it, lo, hi)
@@ -126,7 +131,8 @@ def _one(pair, H=3.0, thr=0.01):
 def test_line_sampled_pairs_within_their_bound_of_large_mc():
     rng = np.random.default_rng(33)
     seen = []
-    for it, kind in enumerate(["correlated", "position-only", "rank-5"] * 4):
+    # 12 pairs under --stress, the first 6 of them by default (1e6 samples each)
+    for it, kind in enumerate(["correlated", "position-only", "rank-5"] * examples(2, 4)):
         pair = _pair(rng, kind, 10 ** rng.uniform(-0.7, 0.6))
         pa, va, aa, ra, ca, pb, vb, ab, rb, cb = pair
         sampled = line_sampled(pa - pb, va - vb, aa - ab, ca + cb)
@@ -161,8 +167,10 @@ def test_walk_tolerance_probability_is_within_its_stated_error():
     looser tolerance (no edge substitution at the outer level where the boundary
     layer is wide): within BALL_ERR_PER_TOL x tol of the 1e-9-proven value on random
     3-D cases (anisotropic, near-singular, mean inside and far outside)."""
-    from circle_collision_ros.core.uncertainty.overlap import (BALL_ERR_PER_TOL, overlap_probability,
+    from circle_collision_ros.core.uncertainty.overlap import (BALL_ERR_PER_TOL,
+                                                               overlap_probability,
                                                                overlap_probability_tol)
+
     rng = np.random.default_rng(35)
     for it in range(300):
         B = rng.normal(size=(3, 3)) * 10 ** rng.uniform(-2, 1)
@@ -183,6 +191,7 @@ def test_plausible_time_of_line_sampled_pairs_is_the_first_crossing():
     from circle_collision_ros.core.uncertainty.overlap import BALL_ERR_PER_TOL
     from circle_collision_ros.core.uncertainty.tube import S_at
     from circle_collision_ros.core.uncertainty.walk import PLAUSIBLE_RTOL, WALK_TOL_REL
+
     rng = np.random.default_rng(36)
     found = 0
     for k in range(8):
@@ -209,8 +218,8 @@ def test_plausible_time_of_line_sampled_pairs_is_the_first_crossing():
             # resolve less): 4.7e-6 at threshold 0.1 on one of these pairs,
             # where P rises 1.6 per second
             dt = PLAUSIBLE_RTOL * 3.0
-            v, e = entry_rate_integral(dp, dv, np.zeros(3), R, np.ascontiguousarray(Sig), t_star, t_star + dt,
-                                       1e-3, np.zeros(3))
+            v, e = entry_rate_integral(dp, dv, np.zeros(3), R, np.ascontiguousarray(Sig), t_star,
+                                       t_star + dt, 1e-3, np.zeros(3))
             resolution = v + e + 2 * BALL_ERR_PER_TOL * WALK_TOL_REL * thr + 1e-9
             assert P(t_star) >= thr - resolution, (k, thr, P(t_star) - thr, resolution)
             assert resolution < 1e-5
@@ -221,12 +230,15 @@ def test_phi_table_is_within_its_stated_error():
     import mpmath as mp
     from numba import njit
     from circle_collision_ros.core.uncertainty import line_sampling
+
     phi = njit(lambda x: line_sampling._phi(x))
     rng = np.random.default_rng(37)
     nodes = line_sampling._PHI_NODES
     # random points, the interval midpoints near the maximum of |Phi^(4)| and the ends
-    xs = np.concatenate([rng.uniform(-10.0, 10.0, 3000), 0.5 * (nodes[:-1] + nodes[1:])[500:700],
-                         [-9.0, 9.0, -9.0 + 1e-12, 9.0 - 1e-12, -np.inf, np.inf]])
+    xs = np.concatenate(
+        [rng.uniform(-10.0, 10.0, 3000), 0.5 * (nodes[:-1] + nodes[1:])[500:700],
+         [-9.0, 9.0, -9.0 + 1e-12, 9.0 - 1e-12, -np.inf, np.inf]]
+    )
     worst = max(abs(phi(float(x)) - float(mp.ncdf(mp.mpf(float(x))))) for x in xs)
     assert worst <= PHI_ERR
     assert worst > 0.5 * PHI_ERR  # the stated error is the interpolation's, not a loose cap
@@ -280,7 +292,9 @@ def test_control_variate_mean_is_exact():
         with_tau += bool(np.any(a))
         # (a) the defining event, sampled directly
         n = 1_000_000
-        y = np.random.default_rng(3800 + it).multivariate_normal(np.zeros(6), Sigma, size=n, method="eigh")
+        y = np.random.default_rng(3800 + it).multivariate_normal(
+            np.zeros(6), Sigma, size=n, method="eigh"
+        )
         tau = y @ a
         W = dp + y[:, :3] + (tbar + tau)[:, None] * y[:, 3:]
         hit = (W @ e) ** 2 + (W @ f) ** 2 <= R * R
@@ -293,13 +307,19 @@ def test_control_variate_mean_is_exact():
         line_replicates(G, mu, e, s, f, tbar, a, R, H, Z, 0, Z.shape[1], tot, ctot)
         yr = ctot / Z.shape[1]
         se_y = yr.std(ddof=1) / math.sqrt(QMC_REPLICATES)
-        assert abs(yr.mean() - mean) <= 4.5 * se_y + 3.0 / (QMC_REPLICATES * Z.shape[1]) + err, (label, yr.mean(), mean)
+        assert abs(yr.mean() - mean) <= 4.5 * se_y + 3.0 / (QMC_REPLICATES * Z.shape[1]) + err, (
+            label,
+            yr.mean(),
+            mean,
+        )
         # (c) the quadrature error estimate covers a much finer rule's difference
         Sa = 0.5 * (Sigma + Sigma.T) @ a
         sig2 = float(a @ Sa)
         if sig2 > 0.0:
-            fine = sum(w * disc_given_tau(dp, Sigma, e, f, tbar, a, Sa, sig2, math.sqrt(sig2) * x, R)
-                       for x, w in zip(gh_x, gh_w))
+            fine = sum(
+                w * disc_given_tau(dp, Sigma, e, f, tbar, a, Sa, sig2, math.sqrt(sig2) * x, R)
+                for x, w in zip(gh_x, gh_w)
+            )
             assert abs(fine - mean) <= err, (label, fine, mean, err)
     assert with_tau >= 6  # the tau term was exercised (and switched off where clipped)
 
@@ -342,8 +362,10 @@ def test_benchmark_3d_pairs_meet_the_target_at_the_first_stage():
     closest-approach time, without tau, left 2 of these 8 above the target)."""
     import sys
     from pathlib import Path
+
     sys.path.insert(0, str(Path(__file__).resolve().parents[3] / "bench"))
     import bench_uncertainty as bench
+
     Z = normal_table(5)
     m = QMC_LINE_POINTS
     for name in ("head-on 3-D", "crossing 3-D"):

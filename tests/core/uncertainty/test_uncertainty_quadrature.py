@@ -1,4 +1,4 @@
-"""core.uncertainty.quadrature: the Gauss-Kronrod 7/15 tables, the adaptive rule and the nested rule.
+"""core.uncertainty.quadrature: the Gauss-Kronrod 7/15 tables, the adaptive and the nested rule.
 
 Guarantees proved here (quadrature.py's module doc states them):
 * the abscissae and weights are QUADPACK's dqk15 to double precision (against
@@ -15,6 +15,7 @@ Guarantees proved here (quadrature.py's module doc states them):
   ``make_adaptive`` on the same integrand, and as inner error the K15 rule
   applied to the integrand's own error estimates over the accepted panels.
 """
+
 from __future__ import annotations
 
 import math
@@ -34,7 +35,7 @@ def test_gauss_nodes_and_weights_match_mpmath() -> None:
     positive = sorted((r for r in roots if r > 1e-30), reverse=True)  # ascending order of _XGK
     assert np.allclose(q._XGK[1:7:2], [float(r) for r in positive], rtol=0, atol=1e-15)
     for x, w in zip(positive + [mpmath.mpf(0)], q._WG):
-        assert abs(float(2 / ((1 - x ** 2) * mpmath.diff(p7, x) ** 2)) - w) < 1e-15
+        assert abs(float(2 / ((1 - x**2) * mpmath.diff(p7, x) ** 2)) - w) < 1e-15
 
 
 def _p31_legendre_error(degree: int) -> float:
@@ -44,7 +45,9 @@ def _p31_legendre_error(degree: int) -> float:
     nodes = [mpmath.mpf(float(x)) for x in np.concatenate((q.K15_NODES, q.P31_NEW_NODES))]
     weights = [mpmath.mpf(float(w)) for w in np.concatenate((q.P31_K15_WEIGHTS, q.P31_NEW_WEIGHTS))]
     exact = 2 if degree == 0 else 0
-    return float(abs(mpmath.fsum(w * mpmath.legendre(degree, x) for x, w in zip(nodes, weights)) - exact))
+    return float(
+        abs(mpmath.fsum(w * mpmath.legendre(degree, x) for x, w in zip(nodes, weights)) - exact)
+    )
 
 
 @pytest.mark.parametrize("degree", [0, 2, 10, 22, 24, 30, 40, 44, 46, 48])
@@ -57,7 +60,10 @@ def test_p31_polynomial_exactness(degree: int) -> None:
         assert _p31_legendre_error(degree) > 1e-6
     # K15 is not (the extension is what buys the degree)
     if degree == 24:
-        assert abs(float(np.dot(q.K15_WEIGHTS, [float(mpmath.legendre(24, x)) for x in q.K15_NODES]))) > 1e-6
+        assert (
+            abs(float(np.dot(q.K15_WEIGHTS, [float(mpmath.legendre(24, x)) for x in q.K15_NODES])))
+            > 1e-6
+        )
 
 
 def test_p31_extends_k15_with_positive_weights() -> None:
@@ -72,18 +78,20 @@ def test_p31_extends_k15_with_positive_weights() -> None:
     p16 = lambda x: mpmath.fprod(x - mpmath.mpf(float(r)) for r in new)  # noqa: E731
     scale = mpmath.quad(lambda x: abs(p16(x) * w(x)), [-1, 0, 1])
     for j in range(16):
-        moment = mpmath.quad(lambda x: p16(x) * x ** j * w(x), [-1, -0.5, 0, 0.5, 1])
+        moment = mpmath.quad(lambda x: p16(x) * x**j * w(x), [-1, -0.5, 0, 0.5, 1])
         assert abs(moment) < 1e-14 * scale, j
 
 
 def _rule(values_at, nodes, weights_pos, weight_mid):
-    return weight_mid * values_at(0.0) + sum(w * (values_at(-x) + values_at(x)) for x, w in zip(nodes, weights_pos))
+    return weight_mid * values_at(0.0) + sum(
+        w * (values_at(-x) + values_at(x)) for x, w in zip(nodes, weights_pos)
+    )
 
 
 @pytest.mark.parametrize("degree", range(0, 26))
 def test_polynomial_exactness(degree: int) -> None:
     exact = 2.0 / (degree + 1) if degree % 2 == 0 else 0.0
-    f = lambda x: x ** degree  # noqa: E731
+    f = lambda x: x**degree  # noqa: E731
     k15 = _rule(f, q._XGK[:7], q._WGK[:7], q._WGK[7])
     g7 = _rule(f, q._XGK[1:7:2], q._WG[:3], q._WG[3])
     # (odd degrees vanish by symmetry for any symmetric rule: the claims are
@@ -119,14 +127,18 @@ _adaptive = q.make_adaptive(_bump)
 _nested = q.make_adaptive_nested(_bump_with_error, _last_error)
 
 
-@pytest.mark.parametrize("centre,width,wiggle,freq", [(0.3, 0.05, 0.0, 1.0), (-1.0, 0.4, 0.1, 7.0),
-                                                      (2.5, 0.01, 0.02, 30.0), (0.7, 0.3, 0.0, 1.0),
-                                                      (-2.2, 0.15, 0.0, 1.0)])
+@pytest.mark.parametrize(
+    "centre,width,wiggle,freq",
+    [(0.3, 0.05, 0.0, 1.0), (-1.0, 0.4, 0.1, 7.0), (2.5, 0.01, 0.02, 30.0), (0.7, 0.3, 0.0, 1.0),
+     (-2.2, 0.15, 0.0, 1.0)],
+)
 def test_adaptive_meets_its_tolerance(centre, width, wiggle, freq) -> None:
     mpmath.mp.dps = 30
     a, b, tol = -3.0, 3.0, 1e-9
     prm = (centre, width, wiggle, freq)
-    f = lambda x: mpmath.exp(-((x - centre) / width) ** 2 / 2) + wiggle * mpmath.cos(freq * x)  # noqa: E731
+    def f(x):
+        return mpmath.exp(-(((x - centre) / width) ** 2) / 2) + wiggle * mpmath.cos(freq * x)
+
     exact = float(mpmath.quad(f, [a, centre - 5 * width, centre, centre + 5 * width, b]))
     v, e = _adaptive(prm, a, b, tol)
     assert abs(v - exact) <= max(e, 1e-15)
@@ -164,7 +176,7 @@ def test_nested_rule_is_the_plain_rule_plus_the_weighted_inner_errors() -> None:
     assert v == v0 and e == e0  # same panels, same values
     # the inner error is the K15 rule of 1e-7 (1 + x^2) over the same panels: a
     # polynomial of degree 2, which K15 integrates exactly on any panels
-    assert inner == pytest.approx(1e-7 * ((b - a) + (b ** 3 - a ** 3) / 3.0), rel=1e-12)
+    assert inner == pytest.approx(1e-7 * ((b - a) + (b**3 - a**3) / 3.0), rel=1e-12)
 
 
 def test_legendre_table_inverse_is_well_conditioned() -> None:
@@ -203,11 +215,15 @@ def test_subinterval_integral_is_exact_for_degree_14(seed: int) -> None:
     anti = poly.integ()
     assert v == pytest.approx(anti(xr) - anti(xl), rel=1e-12, abs=1e-13)
     whole, _ = q.subinterval_integral(poly(q.K15_NODES), -1.0, 1.0)
-    assert whole == pytest.approx(float(np.dot(q.K15_WEIGHTS, poly(q.K15_NODES))), rel=1e-13, abs=1e-14)
+    assert whole == pytest.approx(
+        float(np.dot(q.K15_WEIGHTS, poly(q.K15_NODES))), rel=1e-13, abs=1e-14
+    )
 
 
-@pytest.mark.parametrize("nodes,width", [(n, w) for n in ("K15", "P31") for w in (0.5, 0.3, 0.2, 0.1, 0.05)]
-                         + [("P31", 0.03)])  # (K15's estimate falls below the error at 0.03)
+@pytest.mark.parametrize(
+    "nodes,width",
+    [(n, w) for n in ("K15", "P31") for w in (0.5, 0.3, 0.2, 0.1, 0.05)] + [("P31", 0.03)],
+)  # (K15's estimate falls below the error at 0.03)
 def test_subinterval_estimate_covers_the_error_of_a_bump(width: float, nodes: str) -> None:
     """The walk certifies steps with value + estimate: the estimate must not fall below
     the true error on the bumps nu+ looks like, resolved or not (a narrow bump gives a
@@ -222,5 +238,5 @@ def test_subinterval_estimate_covers_the_error_of_a_bump(width: float, nodes: st
         xl, xr = np.sort(rng.uniform(-1.0, 1.0, 2))
         v, e = q.subinterval_integral(f, xl, xr)
         pts = [xl, centre, xr] if xl < centre < xr else [xl, xr]
-        exact = float(mpmath.quad(lambda x: mpmath.exp(-((x - centre) / width) ** 2 / 2), pts))
+        exact = float(mpmath.quad(lambda x: mpmath.exp(-(((x - centre) / width) ** 2) / 2), pts))
         assert abs(v - exact) <= e

@@ -65,7 +65,9 @@ def test_screened_rows_are_certified_below_the_threshold(D):
     assert np.all(scr.collision_probability[cleared] == 0.0)
     assert np.all(np.isinf(scr.plausible_time[cleared]))
     # certified: the full answer (within its own bound) never exceeds U
-    assert np.all(full.collision_probability[cleared] - full.collision_probability_bound[cleared] <= U)
+    assert np.all(
+        full.collision_probability[cleared] - full.collision_probability_bound[cleared] <= U
+    )
     assert np.all(np.isinf(full.plausible_time[cleared]))
     # and the rest are the unscreened answer, bit for bit
     for f, g in zip(full, scr):
@@ -78,8 +80,9 @@ def test_screened_rows_are_certified_below_the_threshold(D):
         lam, V = np.linalg.eigh(ca + cb)
         y = g.standard_normal((m, 2 * D)) @ (V * np.sqrt(np.clip(lam, 0, None))).T
         z = np.zeros((m, D))
-        t = time_to_collision((pa - pb) + y[:, :D], (va - vb) + y[:, D:], np.broadcast_to(aa - ab, (m, D)),
-                              np.full(m, ra + rb), z, z, z, np.zeros(m), H)
+        t = time_to_collision((pa - pb) + y[:, :D], (va - vb) + y[:, D:],
+                              np.broadcast_to(aa - ab, (m, D)), np.full(m, ra + rb), z, z, z,
+                              np.zeros(m), H)
         p = np.count_nonzero(t <= H) / m
         assert p <= U + 4 * math.sqrt(max(p * (1 - p), 1 / m) / m)
 
@@ -139,7 +142,9 @@ def test_budget_defers_the_latest_pairs_honestly():
     pa, va, aa, ra, ca, pb, vb, ab, rb, cb = args
     k, _ = screen_sigmas(thr, 4)
     clear, t_first = np.zeros(30, dtype=bool), np.empty(30)
-    screen_rows(pa - pb, va - vb, aa - ab, ra + rb, np.ascontiguousarray(ca + cb), H, k, clear, t_first)
+    screen_rows(
+        pa - pb, va - vb, aa - ab, ra + rb, np.ascontiguousarray(ca + cb), H, k, clear, t_first
+    )
     evaluated = kept & ~clear
     assert np.count_nonzero(evaluated) == m
     assert t_first[evaluated].max() <= t_first[deferred].min()

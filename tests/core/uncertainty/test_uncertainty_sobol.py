@@ -12,13 +12,14 @@ from __future__ import annotations
 
 import numpy as np
 
-from circle_collision_ros.core.uncertainty.sobol import BITS, scrambled_directions, sobol_directions, sobol_points
+from circle_collision_ros.core.uncertainty.sobol import (BITS, scrambled_directions,
+                                                         sobol_directions, sobol_points)
 
 
 def test_unscrambled_first_points():
     v = sobol_directions(6)
     pts = sobol_points(v, np.zeros(6, dtype=np.uint64), 4)
-    eps = 0.5 / 2 ** BITS  # points are cell centres
+    eps = 0.5 / 2**BITS  # points are cell centres
     assert np.allclose(pts[0], eps)
     assert np.allclose(pts[1], 0.5 + eps)
     # Gray-code order: the third point is 0.75 / 0.25 in dims 1-2 (point index 3 in natural order)
@@ -30,7 +31,7 @@ def test_unscrambled_first_points():
 
 def test_scrambled_replicates_are_nets():
     m = 9
-    n = 2 ** m
+    n = 2**m
     seen = []
     for seed in range(4):
         dirs, shift = scrambled_directions(6, seed)
@@ -41,7 +42,7 @@ def test_scrambled_replicates_are_nets():
             assert np.array_equal(np.sort(cells), np.arange(n))
         # dims (1, 2): every 2^-a x 2^-(m-a) box holds exactly one point
         for a in range(m + 1):
-            cx = np.floor(u[:, 0] * 2 ** a).astype(int)
+            cx = np.floor(u[:, 0] * 2**a).astype(int)
             cy = np.floor(u[:, 1] * 2 ** (m - a)).astype(int)
             assert len(set(zip(cx.tolist(), cy.tolist()))) == n
         seen.append(u)
