@@ -199,6 +199,8 @@ def main() -> int:
         publish(opts.bodies, opts.count, opts.rate, wait_s=10.0, topic=opts.topic)
         return 0
     if opts.role == "sub":
+        # stopped with SIGINT by its parent, also when the shell started us with it ignored
+        signal.signal(signal.SIGINT, signal.default_int_handler)
         subscribe(opts.reliable, opts.seconds)
         return 0
     if opts.quick:

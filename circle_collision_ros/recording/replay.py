@@ -19,6 +19,7 @@ from __future__ import annotations
 import argparse
 import math
 import struct
+import signal
 import sys
 import time
 
@@ -120,6 +121,9 @@ def republish(records: list[BagRecord], rate: float, wait_s: float = 10.0) -> in
 
 
 def main(args: list[str] | None = None) -> int:
+    # Ctrl-C ends a replay with its partial summary also when the shell started it with SIGINT
+    # ignored (a background job of a script): Python keeps an inherited SIG_IGN otherwise.
+    signal.signal(signal.SIGINT, signal.default_int_handler)
     parser = argparse.ArgumentParser(prog="replay", description=__doc__.splitlines()[0])
     parser.add_argument(
         "bag",
