@@ -3,8 +3,9 @@
 # and installed into it, circle_collision_ros installed (editable) with the ROS
 # layout (<venv>/lib/circle_collision_ros/<executable>, share/...).
 # Each step re-runs only when its inputs changed (content hashes in .venv/.bootstrap/).
-# Usage: scripts/bootstrap.sh [--kernels | --freeze]    (PYTHON=python3.12 to choose the interpreter)
+# Usage: scripts/bootstrap.sh [--kernels | --demo | --freeze]  (PYTHON=python3.12: the interpreter)
 #   --kernels  also compile every numba kernel into its cache (scripts/test.sh does)
+#   --demo     compile the demo's kernels in the background, beside the interface build
 set -euo pipefail
 
 ROOT=$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)
@@ -60,6 +61,15 @@ if ! is_current deps "$h"; then
   fi
   mark deps "$h"
   rm -f "$STAMPS/msgs"  # a new ROS wheel set means the interfaces must be rebuilt
+fi
+
+# 2b. (--demo) The demo's numba kernels (the 2-D exact path; core/warm_up.py needs no ROS)
+# compile in the background while the interfaces build: the node started next waits for
+# this compile (a lock per job) instead of repeating it. Output: build/kernels.log.
+if [ "${1:-}" = "--demo" ]; then
+  mkdir -p "$ROOT/build"
+  (cd "$ROOT" && PYTHONPATH="$ROOT${PYTHONPATH:+:$PYTHONPATH}" nohup "$PY" -m circle_collision_ros.core.warm_up \
+     --jobs exact --dimensions 2 > "$ROOT/build/kernels.log" 2>&1 &)
 fi
 
 # 3. The interface package circle_collision_msgs, built with CMake into the venv.
@@ -170,9 +180,9 @@ if [ "$current" != "$block" ] || ! grep -q "$HOOKED" "$ACTIVATE"; then
   printf '%s\n' "$block" >> "$ACTIVATE"
 fi
 
-# 5. (--kernels) Compile every numba kernel path, both dimensions, into numba's on-disk cache,
+# 5. (--kernels) Compile every numba kernel job, both dimensions, into numba's on-disk cache,
 # in parallel processes (one per core): what the test command needs. A node compiles only
-# the paths it needs at its first start (pipeline/kernels.py), so the demo skips this step.
+# the paths its parameters reach at its first start (pipeline/kernels.py).
 if [ "${1:-}" = "--kernels" ]; then
   (cd "$ROOT" && "$PY" -m circle_collision_ros.pipeline.kernels) || die "compiling the numba kernels failed"
 fi

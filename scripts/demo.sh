@@ -4,7 +4,7 @@
 # Options go to the demo, e.g. scripts/demo.sh --duration 30 --count 200 (see --help).
 set -euo pipefail
 ROOT=$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)
-"$ROOT/scripts/bootstrap.sh"
+"$ROOT/scripts/bootstrap.sh" --demo
 export ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST  # DDS stays on this machine
 cd "$ROOT"
 exec "$ROOT/.venv/bin/python" -m circle_collision_ros.demo.run "$@"

@@ -141,6 +141,7 @@ class Counters:
     coalesced: int = 0  # inputs answered by a prediction together with newer inputs
     errors: int = 0
     clock_jumps_back: int = 0
+    covariance_ignored: int = 0  # states whose covariance use_covariance=False dropped
 
 
 @dataclass
@@ -193,7 +194,8 @@ class CollisionNode(Node):
                             frame_id=p("frame_id"), stale_timeout=p("stale_timeout"),
                             report_all_pairs=p("report_all_pairs"), max_bodies=p("max_bodies"),
                             probability_threshold=p("probability_threshold"),
-                            uncertain_pair_budget=p("uncertain_pair_budget"))
+                            uncertain_pair_budget=p("uncertain_pair_budget"),
+                            use_covariance=p("use_covariance"))
         )
         # numba's compile (first start) or cache load, before the first message can arrive
         kernels.prepare(self.predictor, log=self.get_logger().info)
@@ -400,6 +402,11 @@ class CollisionNode(Node):
         c.ignored += report.ignored
         c.expired += len(report.expired)
         c.rejected += len(report.rejected)
+        c.covariance_ignored += report.covariance_ignored
+        if report.covariance_ignored:
+            self._warn(f"{topic} covariance", f"{topic}: covariance of "
+                       f"{report.covariance_ignored} state(s) ignored (use_covariance is false): "
+                       "predicted on the mean states, without probabilities")
         if report.rejected:
             shown = "; ".join(f"id '{r.body_id}': {r.reason}" for r in report.rejected[:3])
             more = f" (+{len(report.rejected) - 3} more)" if len(report.rejected) > 3 else ""
@@ -499,6 +506,7 @@ class CollisionNode(Node):
             "states_accepted": c.accepted,
             "states_rejected": c.rejected,
             "states_ignored_not_newer": c.ignored,
+            "covariances_ignored": c.covariance_ignored,
             "bodies_removed": c.removed,
             "bodies_expired": c.expired,
             "predictions_published": c.published,

@@ -120,6 +120,15 @@ PARAMS: tuple[ParamSpec, ...] = (
         read_only=True,
         int_range=(0, 1_000_000),
     ),
+    ParamSpec(
+        "use_covariance",
+        Parameter.Type.BOOL,
+        True,
+        "false: every body is predicted on its mean state; covariances are ignored (a warning "
+        "names each topic that sends them) and the probability kernels are never compiled, "
+        "so a first start is faster.",
+        read_only=True,
+    ),
     ParamSpec("report_all_pairs", Parameter.Type.BOOL, False,
               "Also list NO_CONTACT pairs (time +inf); only for scenes of at most 100 bodies."),
     ParamSpec("stale_timeout", Parameter.Type.DOUBLE, 2.0,

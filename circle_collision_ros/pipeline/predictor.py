@@ -24,7 +24,7 @@ import numpy as np
 from circle_collision_msgs.msg import CircleState, CircleStateArray
 from circle_collision_ros.core.parallel_policy import threads_forced
 from circle_collision_ros.core.scene import Scene, SceneSnapshot
-from circle_collision_ros.core.uncertainty import load_fallback_kernels
+from circle_collision_ros.core.warm_up import warm_scenes, warm_uncertain
 from circle_collision_ros.pipeline.state_codec import (decode_states, encode_state,
                                                        encode_state_array)
 from circle_collision_ros.pipeline.prediction_messages import ScenePrediction
@@ -44,7 +44,9 @@ class PredictorConfig:
     uncertain_pair_budget : at most this many uncertain pairs get the full probability
     evaluation per prediction (0: all); the rest are deferred, reported with probability
     1.0 and bound 1.0 (core.uncertainty.uncertain_pairs(max_evaluated=...)). A count, not
-    a time: replay reproduces it bit for bit.
+    a time: replay reproduces it bit for bit. use_covariance : False predicts every body on
+    its mean state: covariances are dropped at intake (counted in IntakeReport.covariance_ignored)
+    and the probability kernels are never needed (a first start compiles fewer).
     """
 
     horizon: float = 5.0
@@ -55,13 +57,14 @@ class PredictorConfig:
     max_bodies: int = 10_000
     probability_threshold: float = 0.01
     uncertain_pair_budget: int = 0
+    use_covariance: bool = True
 
 
 #: The PredictorConfig fields that may change while running (node parameters
 #: applied at run time, and replayed from a recording's config records).
 RUNTIME_FIELDS = ("horizon", "stale_timeout", "report_all_pairs", "probability_threshold")
 #: What CollisionPredictor.warm_up can prepare (pipeline.kernels compiles each in a process).
-WARM_UP_PATHS = ("exact", "threads", "uncertain", "messages")
+WARM_UP_PATHS = ("exact", "threads", "uncertain", "uncertain_threads", "messages")
 
 
 @dataclass
@@ -71,6 +74,7 @@ class IntakeReport:
     accepted: int = 0
     removed: int = 0
     ignored: int = 0  # not newer than the body's state or its removal; unknown-id removals
+    covariance_ignored: int = 0  # accepted states whose covariance use_covariance=False dropped
     rejected: list[Rejection] = field(default_factory=list)
     expired: list[str] = field(default_factory=list)
 
@@ -136,70 +140,35 @@ class CollisionPredictor:
         through ``pipeline.kernels.prepare``, which compiles cold paths in parallel processes).
 
         ``paths`` (any of WARM_UP_PATHS): ``exact`` the scene's serial kernels; ``threads`` the
-        same and the uncertain and message paths with threads forced, so the threaded twins the
-        policy picks for large frames are loaded too; ``uncertain`` the probability of contact;
-        ``messages`` decoding and encoding."""
+        threaded twins the policy picks for large frames, and the message path with them;
+        ``uncertain`` the probability of contact and messages with covariance;
+        ``uncertain_threads`` the same with threads; ``messages`` decoding and encoding."""
         unknown = set(paths) - set(WARM_UP_PATHS)
         if unknown:
             raise ValueError(
                 f"warm_up: unknown paths {sorted(unknown)}; expected some of {WARM_UP_PATHS}"
             )
+        d, horizon = self.config.dimensions, self.config.horizon
+        threshold = self.config.probability_threshold
         for path in paths:
-            with threads_forced(path == "threads"):
-                if path in ("exact", "threads"):
-                    self._warm_up_scenes()
-                if path in ("uncertain", "threads"):
-                    self._warm_up_uncertain()
+            threaded = path in ("threads", "uncertain_threads")
+            if path in ("exact", "threads"):
+                warm_scenes(d, horizon, threaded)
+            if path in ("uncertain", "uncertain_threads"):
+                warm_uncertain(d, horizon, threshold, threaded)
+            with threads_forced(threaded):
                 if path in ("messages", "threads"):
-                    self._warm_up_messages()
+                    self._warm_up_messages(uncertain=False)
+                if path in ("uncertain", "uncertain_threads"):
+                    self._warm_up_messages(uncertain=True)
 
-    def _warm_up_scenes(self) -> None:
-        scene = Scene(self.config.horizon, self.config.dimensions)
-        d = self.config.dimensions
-        scene.upsert_many(
-            ["a", "b"], np.eye(2, d), np.zeros((2, d)), np.zeros((2, d)), np.ones(2), 1
-        )
-        scene.predictions()
-        # ... and the large-scene path: a rebuild (a tracker array, an epoch crossing) of more than
-        # Scene._COMPILED_ROWS pairs runs the vectorised, threaded kernels: 100 overlapping bodies.
-        k = 100
-        rows = np.random.default_rng(0).uniform(0.0, 1.0, (k, d))
-        crowd = Scene(self.config.horizon, d)
-        crowd.upsert_many(
-            [f"w{i:03d}" for i in range(k)], rows, np.zeros((k, d)), np.zeros((k, d)), np.ones(k), 1
-        )
-        crowd.predictions()
-        # ... and the one-body path (a stream of single states, bodies arriving one by one): its
-        # compiled query passes, including the specialisations for the read-only arrays a
-        # published prediction leaves behind (bench/bench_node.py --targets, 300 streams)
-        stream = Scene(self.config.horizon, d)
-        for k in range(12):
-            p = np.zeros((1, d))
-            p[0, 0] = 0.5 * (k % 6)
-            stream.merge(
-                [f"s{k % 6}"], [10 + k], p, np.eye(1, d), np.zeros((1, d)), [1.0], [False], 0
-            )
-            stream.predictions()
-
-    def _warm_up_uncertain(self) -> None:
-        """The uncertain path's kernels (a first uncertain state would otherwise wait for them)."""
-        d = self.config.dimensions
-        scene = Scene(self.config.horizon, d)
-        scene.upsert_many(
-            ["a", "b"], np.eye(2, d), np.zeros((2, d)), np.zeros((2, d)), np.ones(2), 1
-        )
-        scene.predictions()
-        scene.merge(["a"], [2], np.eye(1, d), np.zeros((1, d)), np.zeros((1, d)), [1.0], [False], 0,
-                    covariances=np.eye(2 * d)[None] * 0.01)
-        scene.uncertain_pairs(self.config.probability_threshold, scene.predictions())
-        load_fallback_kernels(d)
-
-    def _warm_up_messages(self) -> None:
-        """The message path on throwaway predictors: decoding both input types, exact and with
-        covariance, and both output encoders (contact rows, and the column layout that uncertain
-        pairs and report_all_pairs take). Left to the first messages, these compiled (or loaded
-        from the cache) while a fresh install's node was already subscribed: bench/bench_node.py's
-        first scenario answered 2 of 180 inputs, 3.6 s late at the median."""
+    def _warm_up_messages(self, uncertain: bool) -> None:
+        """The message path on throwaway predictors: decoding both input types (``uncertain``:
+        with covariance) and both output encoders (contact rows, and the column layout that
+        uncertain pairs and report_all_pairs take). Left to the first messages, these compiled
+        (or loaded from the cache) while a fresh install's node was already subscribed:
+        bench/bench_node.py's first scenario answered 2 of 180 inputs, 3.6 s late at the
+        median."""
         t = 1_000_000_000
         n = 3
         position = np.zeros((n, 3))
@@ -210,27 +179,27 @@ class CollisionPredictor:
         acceleration[1, 1] = 0.2  # an accelerating uncertain pair takes its own method
         covariance = np.zeros((n, 36))
         covariance[:, ::7] = 0.01  # the 6x6 diagonal
-        for uncertain in (False, True):
-            batch = StateBatch(ids=["a", "b", "c"], frames=["map"] * n,
-                               stamp_ns=np.full(n, t, np.int64), radius=np.ones(n),
-                               position=position, velocity=velocity, acceleration=acceleration,
-                               remove=np.zeros(n, dtype=bool),
-                               covariance=covariance if uncertain else None,
-                               covariance_size=np.full(n, 36, np.int64) if uncertain else None)
-            for report_all in (False, True):
-                predictor = CollisionPredictor(
-                    replace(self.config, frame_id="map", report_all_pairs=report_all, max_bodies=n)
-                )
-                predictor.receive_batch(
-                    decode_states(encode_state_array(batch, t, "map"), CircleStateArray), t
-                )
-                prediction = predictor.predict()
-                prediction.to_cdr()
-                # replay of recordings made before the probability fields
-                prediction.to_cdr(uncertainty=False)
-                one = replace(batch.select(np.array([1])), stamp_ns=np.array([t + 1], np.int64))
-                predictor.receive_batch(decode_states(encode_state(one), CircleState), t + 1)
-                predictor.predict().to_cdr()
+        batch = StateBatch(ids=["a", "b", "c"], frames=["map"] * n,
+                           stamp_ns=np.full(n, t, np.int64), radius=np.ones(n),
+                           position=position, velocity=velocity, acceleration=acceleration,
+                           remove=np.zeros(n, dtype=bool),
+                           covariance=covariance if uncertain else None,
+                           covariance_size=np.full(n, 36, np.int64) if uncertain else None)
+        for report_all in (False, True):
+            predictor = CollisionPredictor(
+                replace(self.config, frame_id="map", report_all_pairs=report_all, max_bodies=n,
+                        use_covariance=True)
+            )
+            predictor.receive_batch(
+                decode_states(encode_state_array(batch, t, "map"), CircleStateArray), t
+            )
+            prediction = predictor.predict()
+            prediction.to_cdr()
+            # replay of recordings made before the probability fields
+            prediction.to_cdr(uncertainty=False)
+            one = replace(batch.select(np.array([1])), stamp_ns=np.array([t + 1], np.int64))
+            predictor.receive_batch(decode_states(encode_state(one), CircleState), t + 1)
+            predictor.predict().to_cdr()
 
     def reconfigure(self, **changes) -> None:
         """Apply run-time changes (RUNTIME_FIELDS)."""
@@ -267,7 +236,10 @@ class CollisionPredictor:
             self.frame_id = check.frame_id  # adopt the first frame seen
         covariances = None  # exact states: the scene's exact path alone
         if uncertain is not None and uncertain.any():
-            covariances = block
+            if self.config.use_covariance:
+                covariances = block
+            else:
+                report.covariance_ignored = int(np.count_nonzero(uncertain))
         merged = self._scene.merge(batch.ids, batch.stamp_ns, batch.position, batch.velocity,
                                    batch.acceleration, batch.radius, batch.remove,
                                    now_ns if now_ns is not None else 0, covariances)

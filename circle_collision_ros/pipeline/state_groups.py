@@ -114,6 +114,7 @@ def _share(report: IntakeReport, owners: list[int], reports: list[IntakeReport |
     target.accepted += report.accepted
     target.removed += report.removed
     target.ignored += report.ignored
+    target.covariance_ignored += report.covariance_ignored
     for rejection in report.rejected:
         owner = owners[rejection.index] if 0 <= rejection.index < len(owners) else owners[0]
         reports[owner].rejected.append(type(rejection)(0, rejection.body_id, rejection.reason))
