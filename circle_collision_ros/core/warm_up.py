@@ -37,7 +37,8 @@ import numpy as np
 
 from circle_collision_ros.core.broad.relative import PARALLEL_MIN_PAIRS
 from circle_collision_ros.core.broad.sweep import PARALLEL_MIN_BODIES
-from circle_collision_ros.core.narrow.batch import PARALLEL_MIN_ROWS, time_to_collision, ttc_scalar
+from circle_collision_ros.core.narrow.batch import (PARALLEL_MIN_ROWS, time_to_collision,
+                                                    ttc_scalar, ttc_scalar2)
 from circle_collision_ros.core.narrow.contact import PARALLEL_MIN_CONTACTS
 from circle_collision_ros.core.parallel_policy import threads_forced
 from circle_collision_ros.core.scene import Scene
@@ -66,8 +67,11 @@ def threads_reachable(max_bodies: int) -> bool:
 
 
 def _narrow(dimensions: int, horizon: float) -> None:
-    ttc_scalar(0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0,
-               5.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0, horizon)
+    if dimensions == 2:  # the scene's chain per dimension (scene.kernels._pair_ttc)
+        ttc_scalar2(0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0, 5.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0, horizon)
+    else:
+        ttc_scalar(0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0,
+                   5.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0, horizon)
 
 
 def _batch(dimensions: int, horizon: float) -> None:

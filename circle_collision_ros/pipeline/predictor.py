@@ -179,16 +179,22 @@ class CollisionPredictor:
         acceleration[1, 1] = 0.2  # an accelerating uncertain pair takes its own method
         covariance = np.zeros((n, 36))
         covariance[:, ::7] = 0.01  # the 6x6 diagonal
-        batch = StateBatch(ids=["a", "b", "c"], frames=["map"] * n,
-                           stamp_ns=np.full(n, t, np.int64), radius=np.ones(n),
-                           position=position, velocity=velocity, acceleration=acceleration,
-                           remove=np.zeros(n, dtype=bool),
-                           covariance=covariance if uncertain else None,
-                           covariance_size=np.full(n, 36, np.int64) if uncertain else None)
-        for report_all in (False, True):
+        def states(with_covariance: bool) -> StateBatch:
+            return StateBatch(ids=["a", "b", "c"], frames=["map"] * n,
+                              stamp_ns=np.full(n, t, np.int64), radius=np.ones(n),
+                              position=position, velocity=velocity, acceleration=acceleration,
+                              remove=np.zeros(n, dtype=bool),
+                              covariance=covariance if with_covariance else None,
+                              covariance_size=np.full(n, 36, np.int64) if with_covariance
+                              else None)
+
+        runs = [(states(uncertain), report_all, True) for report_all in (False, True)]
+        if not uncertain:  # states with covariance on a predictor that drops it (and validates it)
+            runs.append((states(True), False, False))
+        for batch, report_all, use in runs:
             predictor = CollisionPredictor(
                 replace(self.config, frame_id="map", report_all_pairs=report_all, max_bodies=n,
-                        use_covariance=True)
+                        use_covariance=use)
             )
             predictor.receive_batch(
                 decode_states(encode_state_array(batch, t, "map"), CircleStateArray), t
@@ -345,4 +351,6 @@ def predict_once(states: Sequence[CircleState], config: PredictorConfig,
             ),
             None,
         )
-    return True, "", predictor.predict(horizon)
+    note = (f"covariance of {report.covariance_ignored} circle(s) ignored (use_covariance is "
+            "false): predicted on the mean states" if report.covariance_ignored else "")
+    return True, note, predictor.predict(horizon)

@@ -341,3 +341,55 @@ def test_covariance_run_is_recorded_read_independently_and_replayed(
         ]
         for m in by_topic["/collision_predictions"]
     ]
+
+
+def test_use_covariance_false_predicts_mean_states_and_says_so(ros_context, ros_node) -> None:
+    """use_covariance:=false: covariances are dropped at intake, so the node publishes the bytes
+    a node fed the same states without covariance publishes (same stamps); /rosout names the
+    topic, the counters count the dropped covariances, the service says so in its message, and
+    the parameter cannot be changed at run time."""
+    nodes = [
+        CollisionNode(
+            context=ros_context,
+            namespace=ns,
+            parameter_overrides=[Parameter("horizon", value=5.0),
+                                 Parameter("frame_id", value="map"),
+                                 Parameter("marker_rate", value=0.0),
+                                 Parameter("stale_timeout", value=60.0),
+                                 Parameter("use_covariance", value=ns == "/plain"),
+                                 Parameter("max_bodies", value=40)],
+        )
+        for ns in ("/ignoring", "/plain")
+    ]
+    try:
+        ignoring, plain_node = nodes
+        assert ignoring.predictor.config.use_covariance is False
+        assert not ignoring.set_parameters([Parameter("use_covariance", value=True)])[0].successful
+        with_cov = Client(ros_node, nodes, "/ignoring/circle_states",
+                          "/ignoring/collision_predictions")
+        without = Client(ros_node, nodes, "/plain/circle_states", "/plain/collision_predictions")
+        ns = _now_ns(ros_node)
+        states = _near_miss(ns) + [state("c", (0, 0.9), stamp_ns=ns)]  # c touches a at once
+        states[2].covariance = _covariance(0.1, 0.1)
+        with_cov.send(state_array(states))
+        assert ignoring.counters.covariance_ignored == 3
+        rows = with_cov.predictions[-1].predictions
+        assert [(p.id_a, p.id_b) for p in rows] == [("a", "c")]  # the near miss is not listed
+        assert all(p.collision_probability_bound == 0.0 for p in rows)
+        plain = [state(s.id, (s.position.x, s.position.y), (s.velocity.x, 0, 0), stamp_ns=ns)
+                 for s in states]
+        without.send(state_array(plain))
+        assert with_cov.raw[-1] == without.raw[-1]
+        assert spin_until(ros_node, lambda: any(
+            "/ignoring/circle_states" in m and "covariance of 3 state(s) ignored" in m
+            for m in with_cov.logs), 10.0, with_cov.extra), with_cov.logs
+        client = ros_node.create_client(PredictCollisions, "/ignoring/predict_collisions")
+        assert spin_until(ros_node, client.service_is_ready, 15.0, with_cov.extra)
+        future = client.call_async(PredictCollisions.Request(circles=states, horizon=0.0))
+        assert spin_until(ros_node, future.done, 30.0, with_cov.extra)
+        answer = future.result()
+        assert answer.success and "covariance of 3 circle(s) ignored" in answer.message
+        assert [(p.id_a, p.id_b) for p in answer.predictions] == [("a", "c")]
+    finally:
+        for node in nodes:
+            node.destroy_node()

@@ -4,7 +4,8 @@ Each kernel repeats, row by row, the IEEE operations of the vectorised numpy
 code it replaces, in the same order, so its results are bitwise those of:
 
 * ``evaluate_rows``: ``store.propagate_ns`` to the evaluation time, the narrow
-  phase (``narrow.batch.ttc_scalar``, bitwise ``time_to_collision``),
+  phase (``narrow.batch.ttc_scalar``, or its planar twin in 2-D, bitwise
+  ``time_to_collision``),
   ``contact.contact_row`` (the one contact-details formula) at the contact
   time, and the overlap test of ``Scene._resolve`` (``norm(p_a - p_b) -
   (r_a + r_b) < 0`` at that time);
@@ -21,10 +22,11 @@ import math
 
 import numpy as np
 from numba import njit
+from numba.extending import overload
 
 from circle_collision_ros.core.broad import cell_keys, rel_keep, swept_bound_row
 from circle_collision_ros.core.narrow.contact import contact_row
-from circle_collision_ros.core.narrow.batch import ttc_scalar
+from circle_collision_ros.core.narrow.batch import ttc_scalar, ttc_scalar2
 
 #: contact_row itself (the one formula), compiled into evaluate_rows' loop instead of called:
 #: the call passes ten array structs per pair (measured faster: bench/bench_scene_updates.py).
@@ -43,13 +45,34 @@ _SAFE = 1e100
 _OVERLAP_MARGIN = 1.0 - 2.0**-30
 
 
+def _pair_ttc(pa, va, aa, ra, pb, vb, ab, rb, horizon, Z):
+    """The narrow phase of one pair of propagated states (length-3 rows, z = 0 in 2-D)."""
+    raise NotImplementedError  # numba-only (the overload below)
+
+
+@overload(_pair_ttc, inline="always")
+def _ov_pair_ttc(pa, va, aa, ra, pb, vb, ab, rb, horizon, Z):
+    # Z, a tuple of D zeros, picks the chain at compile time: a 2-D scene compiles only the
+    # planar solver (the one its batch kernel calls), which is bitwise ttc_scalar with z = 0
+    # (narrow.batch; tests/core/narrow/test_narrow_one_pair.py), instead of both.
+    if Z.count == 2:
+        return lambda pa, va, aa, ra, pb, vb, ab, rb, horizon, Z: ttc_scalar2(
+            pa[0], pa[1], va[0], va[1], aa[0], aa[1], ra,
+            pb[0], pb[1], vb[0], vb[1], ab[0], ab[1], rb, horizon)
+    return lambda pa, va, aa, ra, pb, vb, ab, rb, horizon, Z: ttc_scalar(
+        pa[0], pa[1], pa[2], va[0], va[1], va[2], aa[0], aa[1], aa[2], ra,
+        pb[0], pb[1], pb[2], vb[0], vb[1], vb[2], ab[0], ab[1], ab[2], rb, horizon)
+
+
 @njit(cache=True, error_model="numpy")
-def evaluate_rows(P, V, A, Rad, T, ia, ib, t_eval, horizon, tau, point, normal, closing, overlap):
+def evaluate_rows(P, V, A, Rad, T, ia, ib, t_eval, horizon, tau, point, normal, closing, overlap,
+                  Z):
     """Pairs (ia[k], ib[k]) propagated to t_eval[k] (ns), narrow phase with `horizon`.
 
     Writes tau[k]; for rows with tau <= horizon also point[k], normal[k],
     closing[k] (contact details at tau) and overlap[k] (tau == 0 and the
-    propagated gap is negative).  Returns the number of narrow-phase rows.
+    propagated gap is negative).  Z: a tuple of D zeros (the dimension, at
+    compile time).  Returns the number of narrow-phase rows.
     """
     D = P.shape[1]
     # the pair's states at t_eval: one-row tables (contact_row's layout) and
@@ -82,9 +105,7 @@ def evaluate_rows(P, V, A, Rad, T, ia, ib, t_eval, horizon, tau, point, normal, 
             # f(0) < 0 for certain: the narrow phase's contract answers 0.0 (overlap at 0)
             t = 0.0
         else:
-            t = ttc_scalar(pa[0], pa[1], pa[2], va[0], va[1], va[2], aa[0], aa[1], aa[2], Rad[a],
-                           pb[0], pb[1], pb[2], vb[0], vb[1], vb[2], ab[0], ab[1], ab[2], Rad[b],
-                           horizon)
+            t = _pair_ttc(pa, va, aa, Rad[a], pb, vb, ab, Rad[b], horizon, Z)
         tau[k] = t
         overlap[k] = False
         if t <= horizon:
@@ -337,7 +358,7 @@ def split_and_order(prev, new, prev_past, live, rkey, rtp, rtau, R, max_moves):
 
 @njit(cache=True, error_model="numpy")
 def reported_rows(fut, ttc, key, past, ra, rb, rkey, rids, rtp, rtau, rov, rpt, rnm, rcs, rsP, rsV,
-                  rsA, rsR, rsT, R, H):
+                  rsA, rsR, rsT, R, H, Z):
     """Scene._ordered_rows' second half: the future rows with ttc <= H (fut, ttc, key sorted by
     (ttc, key)), and the past pairs evaluated at R with horizon H (their hits), merged (see
     evaluate_rows, assemble).
@@ -363,7 +384,7 @@ def reported_rows(fut, ttc, key, past, ra, rb, rkey, rids, rtp, rtau, rov, rpt, 
     m = rsP.shape[0] * 2
     evaluated = evaluate_rows(rsP.reshape(m, D), rsV.reshape(m, D), rsA.reshape(m, D),
                               rsR.reshape(m), rsT.reshape(m), Ia, Ib, t_eval, H, tau, pt, nm, cs,
-                              ov)
+                              ov, Z)
     Pr = np.empty(n, dtype=np.int64)
     h = 0
     for x in range(n):  # keep the hits, in order
@@ -480,7 +501,7 @@ def incremental_pairs(dirty, alive, P, V, A, Rad, T, Tf, lo, hi, E, slack_ns, H,
 
 @njit(cache=True, error_model="numpy")
 def evaluate_and_store(ia, ib, E, P, V, A, Rad, T, horizon, ra, rb, rtp, rtau, rpt, rnm, rcs, rov,
-                       rlive, rnext, rhead, rsP, rsV, rsA, rsR, rsT, n):
+                       rlive, rnext, rhead, rsP, rsV, rsA, rsR, rsT, n, Z):
     """Scene._evaluate_at_tp + Scene._store for a few pairs: each pair evaluated at its pair
     time max(E, T_a, T_b) (evaluate_rows), the hits (tau <= horizon) written as records from
     row n, in order, with their two bodies' stored states (rsP.., see Scene._REC), and linked
@@ -496,7 +517,7 @@ def evaluate_and_store(ia, ib, E, P, V, A, Rad, T, horizon, ra, rb, rtp, rtau, r
     nm = np.empty((k, D))
     cs = np.empty(k)
     ov = np.empty(k, dtype=np.bool_)
-    evaluated = evaluate_rows(P, V, A, Rad, T, ia, ib, t_eval, horizon, tau, pt, nm, cs, ov)
+    evaluated = evaluate_rows(P, V, A, Rad, T, ia, ib, t_eval, horizon, tau, pt, nm, cs, ov, Z)
     r = n
     for x in range(k):
         if tau[x] <= horizon:
@@ -525,7 +546,7 @@ def evaluate_and_store(ia, ib, E, P, V, A, Rad, T, horizon, ra, rb, rtp, rtau, r
 @njit(cache=True, error_model="numpy")
 def ordered_query(prev, new, prev_past, live, ra, rb, rkey, rids, key_from, key_end, rtp, rtau, rov,
                   rpt, rnm, rcs, rsP, rsV, rsA, rsR, rsT, R, H, rank, cap, max_moves, id_start,
-                  id_len):
+                  id_len, Z):
     """Scene._ordered_rows in one pass: the keys and id places of records key_from..key_end-1
     (record_keys; the other records' are current), split_and_order (sorting afresh, by (ttc,
     pair key), when the kept order needed more than the budget of moves), then reported_rows.
@@ -548,5 +569,5 @@ def ordered_query(prev, new, prev_past, live, ra, rb, rkey, rids, key_from, key_
         ttc = ttc[o]
         key = key[o]
     rows, ids, evaluated = reported_rows(fut, ttc, key, past, ra, rb, rkey, rids, rtp, rtau, rov,
-                                         rpt, rnm, rcs, rsP, rsV, rsA, rsR, rsT, R, H)
+                                         rpt, rnm, rcs, rsP, rsV, rsA, rsR, rsT, R, H, Z)
     return fut, ttc, past, rows, evaluated, ids

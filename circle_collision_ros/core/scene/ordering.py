@@ -123,7 +123,8 @@ class OrderingMixin:
                                                                      self._rsR, self._rsT, R,
                                                                      self._h, self._rank,
                                                                      np.int64(basis[1]), 1024,
-                                                                     self._id_start, self._id_len)
+                                                                     self._id_start, self._id_len,
+                                                                     self._Z)
         self._rkey_basis, self._rkey_n = basis, self._rn
         self._fut, self._fut_ttc, self._past = fut, ttc, past
         self.evaluated_pairs += evaluated

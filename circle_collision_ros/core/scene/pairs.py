@@ -40,7 +40,8 @@ class PairsMixin:
             tau, pt, nm = np.empty(n), np.empty((n, D)), np.empty((n, D))
             cs, ov = np.empty(n), np.empty(n, dtype=bool)
             self.evaluated_pairs += _sk.evaluate_rows(self._P, self._V, self._A, self._R, self._T,
-                                                      A, B, t_eval, horizon, tau, pt, nm, cs, ov)
+                                                      A, B, t_eval, horizon, tau, pt, nm, cs, ov,
+                                                      self._Z)
             hit = tau <= horizon
             if hit.all():
                 return hit, t_eval, tau, pt, nm, cs, ov
@@ -223,7 +224,7 @@ class PairsMixin:
                                                 self._rtp, self._rtau, self._rpt, self._rnm,
                                                 self._rcs, self._rov, self._rlive, self._rnext,
                                                 self._rhead, self._rsP, self._rsV, self._rsA,
-                                                self._rsR, self._rsT, n)
+                                                self._rsR, self._rsT, n, self._Z)
         self.evaluated_pairs += evaluated
         if end > n:
             self._rn = end

@@ -111,6 +111,7 @@ class Scene(StoreMixin, StreamMixin, PairsMixin, OrderingMixin, UncertainMixin, 
         if method not in ("sweep", "grid"):
             raise ValueError(f"unknown broad-phase method {method!r}")
         self._dim = dim
+        self._Z = (0.0,) * dim  # the kernels' dimension, known when they compile
         self._method = method
         self._full_frac = float(full_rebuild_fraction)
         self.max_bodies = max_bodies

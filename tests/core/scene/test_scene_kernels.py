@@ -63,7 +63,7 @@ def test_evaluate_rows_bitwise(dim) -> None:
         k = ia.size
         tau, pt, nm = np.empty(k), np.empty((k, dim)), np.empty((k, dim))
         cs, ov = np.empty(k), np.empty(k, dtype=bool)
-        sk.evaluate_rows(P, V, A, R, T, ia, ib, t_eval, horizon, tau, pt, nm, cs, ov)
+        sk.evaluate_rows(P, V, A, R, T, ia, ib, t_eval, horizon, tau, pt, nm, cs, ov, (0.0,) * dim)
         pa, va = propagate_ns(P[ia], V[ia], A[ia], t_eval - T[ia])
         pb, vb = propagate_ns(P[ib], V[ib], A[ib], t_eval - T[ib])
         want = time_to_collision(pa, va, A[ia], R[ia], pb, vb, A[ib], R[ib], horizon)

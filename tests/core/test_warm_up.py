@@ -1,0 +1,92 @@
+"""core.warm_up's compile orchestration, with real processes (tests/core/warm_up_jobs.py).
+
+Guarantees proved here:
+- a job runs after every job it builds on has ended, and independent jobs run side by side;
+- a job already stamped for the current sources is not run again;
+- two preparers started together (a set-up step and a node, two test workers) run each job
+  once: the second waits on the job's lock and finds the stamp;
+- a failing job raises RuntimeError naming the job and carrying its output;
+- threads_reachable follows the parallel policy's smallest threshold.
+"""
+from __future__ import annotations
+
+import threading
+
+import numba
+import pytest
+
+from circle_collision_ros.core import warm_up
+from circle_collision_ros.core.warm_up import (compile_jobs, is_compiled, threads_reachable,
+                                               with_dependencies)
+from tests.core.warm_up_jobs import JOBS
+
+
+@pytest.fixture
+def job_log(tmp_path, monkeypatch):
+    """A private stamp folder (numba's cache dir is read for it) and the jobs' log file."""
+    monkeypatch.setattr(numba.config, "CACHE_DIR", str(tmp_path / "cache"))
+    log = tmp_path / "jobs.log"
+    monkeypatch.setenv("WARM_UP_TEST_LOG", str(log))
+    return log
+
+
+def _events(log):
+    rows = [line.split() for line in log.read_text().splitlines()]
+    return [(name, int(d), what, float(t)) for name, d, what, t in rows]
+
+
+def test_dependencies_first_each_once() -> None:
+    assert with_dependencies(["top"], JOBS) == ["base", "left", "right", "top"]
+    assert with_dependencies(["right", "left"], JOBS) == ["base", "right", "left"]
+
+
+def test_jobs_run_after_what_they_build_on_and_side_by_side(job_log) -> None:
+    compile_jobs(["top"], [2], JOBS, processes=2)
+    ev = _events(job_log)
+    at = {(n, w): t for n, _, w, t in ev}
+    assert sorted({n for n, *_ in ev}) == ["base", "left", "right", "top"]
+    assert at["base", "end"] <= min(at["left", "start"], at["right", "start"])
+    assert max(at["left", "end"], at["right", "end"]) <= at["top", "start"]
+    # left and right overlap: two processes at a time
+    assert max(at["left", "start"], at["right", "start"]) < min(at["left", "end"],
+                                                                at["right", "end"])
+    assert all(is_compiled(n, 2) for n in ("base", "left", "right", "top"))
+    job_log.write_text("")
+    assert compile_jobs(["top"], [2], JOBS) == 0.0  # stamped: nothing runs
+    assert job_log.read_text() == ""
+    compile_jobs(["top"], [2, 3], JOBS, processes=2)  # only the 3-D jobs run
+    assert {(n, d) for n, d, *_ in _events(job_log)} == {(n, 3) for n in JOBS if n != "broken"}
+
+
+def test_concurrent_preparers_run_each_job_once(job_log) -> None:
+    errors: list[BaseException] = []
+
+    def prepare() -> None:
+        try:
+            compile_jobs(["top"], [2], JOBS, processes=2)
+        except BaseException as exc:  # pragma: no cover - reported below
+            errors.append(exc)
+
+    threads = [threading.Thread(target=prepare) for _ in range(3)]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join(120)
+    assert not errors
+    starts = [n for n, _, what, _ in _events(job_log) if what == "start"]
+    assert sorted(starts) == ["base", "left", "right", "top"]
+
+
+def test_a_failing_job_is_named_with_its_output(job_log) -> None:
+    with pytest.raises(RuntimeError, match=r"compiling the broken kernels \(2-D\) failed "
+                                           r"\(exit 3\)"):
+        compile_jobs(["broken"], [2], JOBS)
+    assert is_compiled("base", 2) and not is_compiled("broken", 2)
+
+
+def test_threads_reachable_at_the_policy_thresholds() -> None:
+    smallest = min(warm_up.PARALLEL_MIN_ROWS, warm_up.PARALLEL_MIN_PAIRS,
+                   warm_up.PARALLEL_MIN_CONTACTS)
+    n = next(k for k in range(2, 10_000) if k * (k - 1) // 2 >= smallest)
+    assert not threads_reachable(n - 1) and threads_reachable(n)
+    assert threads_reachable(warm_up.PARALLEL_MIN_BODIES)

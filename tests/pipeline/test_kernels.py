@@ -1,0 +1,69 @@
+"""pipeline.kernels: which warm-up paths a node prepares, and that they suffice.
+
+Guarantees proved here:
+- a node prepares the exact and message paths always, the threaded twins only when
+  max_bodies lets a frame reach the parallel policy's thresholds, and the probability path
+  only when use_covariance is on;
+- every warm-up path has a compile job, and a node's paths with their dependencies compile
+  nothing the jobs left out: after prepare, a predictor of that configuration runs frames
+  of every kind it accepts without compiling a kernel (numba's dispatchers gain no
+  signature).
+"""
+from __future__ import annotations
+
+import numpy as np
+from numba.core.registry import CPUDispatcher
+
+from circle_collision_ros.pipeline import kernels
+from circle_collision_ros.pipeline.predictor import (WARM_UP_PATHS, CollisionPredictor,
+                                                     PredictorConfig)
+from circle_collision_ros.pipeline.state_batch import StateBatch
+
+
+def test_paths_follow_the_configuration() -> None:
+    assert kernels.paths_for(PredictorConfig()) == (
+        "exact", "messages", "threads", "uncertain", "uncertain_threads")
+    assert kernels.paths_for(PredictorConfig(max_bodies=40)) == ("exact", "messages", "uncertain")
+    assert kernels.paths_for(PredictorConfig(max_bodies=40, use_covariance=False)) == (
+        "exact", "messages")
+    assert kernels.paths_for(PredictorConfig(use_covariance=False)) == (
+        "exact", "messages", "threads")
+    assert set(WARM_UP_PATHS) <= set(kernels.JOBS)
+
+
+def _signatures() -> int:
+    import gc
+
+    return sum(len(o.signatures) for o in gc.get_objects() if isinstance(o, CPUDispatcher))
+
+
+def _batch(n: int, t: int, covariance: bool) -> StateBatch:
+    rng = np.random.default_rng(n)
+    p = np.zeros((n, 3))
+    p[:, :2] = rng.uniform(0.0, 8.0, (n, 2))
+    v = np.zeros((n, 3))
+    v[:, :2] = rng.normal(0.0, 1.0, (n, 2))
+    cov = np.zeros((n, 36))
+    cov[:, ::7] = 0.04
+    return StateBatch(ids=[f"b{k}" for k in range(n)], frames=["map"] * n,
+                      stamp_ns=np.full(n, t, np.int64), radius=np.full(n, 0.4), position=p,
+                      velocity=v, acceleration=np.zeros((n, 3)), remove=np.zeros(n, bool),
+                      covariance=cov if covariance else None,
+                      covariance_size=np.full(n, 36, np.int64) if covariance else None)
+
+
+def test_a_prepared_demo_node_compiles_nothing_on_its_frames() -> None:
+    """The demo's configuration (40 bodies, no covariance): after prepare, frames of every
+    size it accepts, one-body updates and states that carry covariance (dropped) compile no
+    new kernel specialisation."""
+    config = PredictorConfig(frame_id="map", max_bodies=40, use_covariance=False)
+    predictor = CollisionPredictor(config)
+    assert kernels.prepare(predictor) == ("exact", "messages")
+    before = _signatures()
+    t = 1_000_000_000
+    for n, covariance in ((2, False), (40, False), (40, True), (1, False)):
+        t += 10_000_000
+        report = predictor.receive_batch(_batch(n, t, covariance), t)
+        assert report.covariance_ignored == (n if covariance else 0)
+        predictor.predict().to_cdr()
+    assert _signatures() == before
