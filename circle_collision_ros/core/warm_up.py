@@ -80,16 +80,21 @@ def _batch(dimensions: int, horizon: float) -> None:
         time_to_collision(z + 2.0, z, z, np.ones(2), z, z, z, np.ones(2), float(horizon))
 
 
+def _two_bodies(d: int, horizon: float) -> Scene:
+    """A predicted scene of two touching bodies at rest."""
+    scene = Scene(horizon, d)
+    scene.upsert_many(["a", "b"], np.eye(2, d), np.zeros((2, d)), np.zeros((2, d)), np.ones(2), 1)
+    scene.predictions()
+    return scene
+
+
 def warm_scenes(dimensions: int, horizon: float, threaded: bool = False) -> None:
     """Run the scene's kernels once on tiny scenes: a two-body frame, a 100-body frame (the
     vectorised path of large frames) and a stream of one-body updates; ``threaded``: with
     the threaded twins forced."""
     d = dimensions
     with threads_forced(threaded):
-        scene = Scene(horizon, d)
-        scene.upsert_many(["a", "b"], np.eye(2, d), np.zeros((2, d)), np.zeros((2, d)),
-                          np.ones(2), 1)
-        scene.predictions()
+        _two_bodies(d, horizon)
         # a rebuild (a tracker array, an epoch crossing) of more than Scene._COMPILED_ROWS pairs
         # runs the vectorised kernels: 100 overlapping bodies
         k = 100
@@ -115,10 +120,7 @@ def warm_uncertain(dimensions: int, horizon: float, threshold: float = 0.01,
     reach); ``threaded``: with the threaded twins forced."""
     d = dimensions
     with threads_forced(threaded):
-        scene = Scene(horizon, d)
-        scene.upsert_many(["a", "b"], np.eye(2, d), np.zeros((2, d)), np.zeros((2, d)),
-                          np.ones(2), 1)
-        scene.predictions()
+        scene = _two_bodies(d, horizon)
         scene.merge(["a"], [2], np.eye(1, d), np.zeros((1, d)), np.zeros((1, d)), [1.0], [False],
                     0, covariances=np.eye(2 * d)[None] * 0.01)
         scene.uncertain_pairs(threshold, scene.predictions())

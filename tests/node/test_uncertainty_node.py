@@ -199,18 +199,24 @@ def test_near_miss_with_large_covariance_is_reported_with_its_probability(
     assert client.call(PredictCollisions.Request(circles=exact, horizon=0.0)).predictions == []
 
 
-def test_zero_covariance_publishes_the_bytes_of_no_covariance(ros_context, ros_node) -> None:
-    nodes = [
+def _nodes(ros_context, namespaces, **parameters) -> list[CollisionNode]:
+    """One node per namespace, markers off; ``parameters``: name -> namespace -> value."""
+    return [
         CollisionNode(
             context=ros_context,
             namespace=ns,
             parameter_overrides=[Parameter("horizon", value=5.0),
                                  Parameter("frame_id", value="map"),
                                  Parameter("marker_rate", value=0.0),
-                                 Parameter("stale_timeout", value=60.0)],
+                                 Parameter("stale_timeout", value=60.0)]
+            + [Parameter(name, value=values[ns]) for name, values in parameters.items()],
         )
-        for ns in ("/exact", "/zero")
+        for ns in namespaces
     ]
+
+
+def test_zero_covariance_publishes_the_bytes_of_no_covariance(ros_context, ros_node) -> None:
+    nodes = _nodes(ros_context, ("/exact", "/zero"))
     try:
         exact = Client(ros_node, nodes, "/exact/circle_states", "/exact/collision_predictions")
         zero = Client(ros_node, nodes, "/zero/circle_states", "/zero/collision_predictions")
@@ -348,19 +354,9 @@ def test_use_covariance_false_predicts_mean_states_and_says_so(ros_context, ros_
     a node fed the same states without covariance publishes (same stamps); /rosout names the
     topic, the counters count the dropped covariances, the service says so in its message, and
     the parameter cannot be changed at run time."""
-    nodes = [
-        CollisionNode(
-            context=ros_context,
-            namespace=ns,
-            parameter_overrides=[Parameter("horizon", value=5.0),
-                                 Parameter("frame_id", value="map"),
-                                 Parameter("marker_rate", value=0.0),
-                                 Parameter("stale_timeout", value=60.0),
-                                 Parameter("use_covariance", value=ns == "/plain"),
-                                 Parameter("max_bodies", value=40)],
-        )
-        for ns in ("/ignoring", "/plain")
-    ]
+    nodes = _nodes(ros_context, ("/ignoring", "/plain"),
+                   use_covariance={"/ignoring": False, "/plain": True},
+                   max_bodies={"/ignoring": 40, "/plain": 40})
     try:
         ignoring, plain_node = nodes
         assert ignoring.predictor.config.use_covariance is False
