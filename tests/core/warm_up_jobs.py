@@ -1,6 +1,6 @@
 """Compile jobs for tests/core/test_warm_up.py: each appends "<job> <dims> start/end" lines to
-the file named by $WARM_UP_TEST_LOG, sleeping between them so overlaps can be seen; job
-"broken" exits non-zero."""
+the file named by $WARM_UP_TEST_LOG; "left" and "right" each wait for the other to start
+(exit 4 after 60 s without it: they were not run side by side); "broken" exits 3."""
 from __future__ import annotations
 
 import os
@@ -18,10 +18,20 @@ def _job(name: str):
             log.write(f"{name} {dimensions} start {time.monotonic()}\n")
         if name == "broken":
             raise SystemExit(3)
-        time.sleep(0.3)
+        sibling = {"left": "right", "right": "left"}.get(name)
+        deadline = time.monotonic() + 60.0
+        while sibling and f"{sibling} {dimensions} start" not in _read():
+            if time.monotonic() > deadline:
+                raise SystemExit(4)
+            time.sleep(0.01)
         with open(os.environ["WARM_UP_TEST_LOG"], "a") as log:
             log.write(f"{name} {dimensions} end {time.monotonic()}\n")
     return run
+
+
+def _read() -> str:
+    with open(os.environ["WARM_UP_TEST_LOG"]) as log:
+        return log.read()
 
 
 JOBS = {
