@@ -25,6 +25,7 @@ import argparse
 import fcntl
 import hashlib
 import os
+import re
 import subprocess
 import sys
 import time
@@ -45,7 +46,7 @@ from circle_collision_ros.core.scene import Scene
 from circle_collision_ros.core.uncertainty import load_fallback_kernels
 
 __all__ = ["Job", "CORE_JOBS", "threads_reachable", "warm_scenes", "warm_uncertain",
-           "source_hash", "is_compiled", "with_dependencies", "compile_jobs", "main"]
+           "source_hash", "is_compiled", "with_dependencies", "compile_jobs", "run_job", "main"]
 
 _PACKAGE = Path(__file__).resolve().parents[1]
 
@@ -137,6 +138,12 @@ CORE_JOBS: dict[str, Job] = {
 }
 
 
+# What marks a module numba compiles from: one that defines a kernel or an overload.  The
+# orchestration (this module, pipeline/kernels.py, the predictor) calls kernels but is not
+# compiled, so editing it keeps the cache.
+_COMPILED_SOURCE = re.compile(rb"njit|register_jitable|@overload|@intrinsic|objmode|@jit\b")
+
+
 def source_hash() -> str:
     """Hash of the modules numba compiles from (core and pipeline) and of numba's version."""
     import numba
@@ -144,7 +151,7 @@ def source_hash() -> str:
     h = hashlib.sha256(f"{numba.__version__} {sys.version} {_PACKAGE}".encode())
     for path in sorted([*(_PACKAGE / "core").rglob("*.py"), *(_PACKAGE / "pipeline").glob("*.py")]):
         data = path.read_bytes()
-        if b"numba" in data:  # only the modules numba compiles from decide its cache
+        if _COMPILED_SOURCE.search(data) and path != Path(__file__).resolve():
             h.update(path.relative_to(_PACKAGE).as_posix().encode())
             h.update(data)
     return h.hexdigest()[:16]

@@ -23,8 +23,7 @@ from collections.abc import Callable
 
 from circle_collision_ros.core import warm_up as _core
 from circle_collision_ros.core.warm_up import Job, compile_jobs, threads_reachable
-from circle_collision_ros.pipeline.predictor import (WARM_UP_PATHS, CollisionPredictor,
-                                                     PredictorConfig)
+from circle_collision_ros.pipeline.predictor import CollisionPredictor, PredictorConfig
 
 __all__ = ["JOBS", "paths_for", "prepare", "main"]
 
@@ -48,7 +47,6 @@ JOBS: dict[str, Job] = {
     "uncertain_threads": Job(_predictor_path("uncertain_threads"), ("uncertain", "threads"),
                              _MODULE),
 }
-assert set(WARM_UP_PATHS) <= set(JOBS)
 
 
 def paths_for(config: PredictorConfig) -> tuple[str, ...]:

@@ -88,3 +88,23 @@ def test_threads_reachable_at_the_policy_thresholds() -> None:
     n = next(k for k in range(2, 10_000) if k * (k - 1) // 2 >= smallest)
     assert not threads_reachable(n - 1) and threads_reachable(n)
     assert threads_reachable(warm_up.PARALLEL_MIN_BODIES)
+
+
+def test_source_hash_follows_compiled_modules_only(tmp_path, monkeypatch) -> None:
+    """An edit of a module numba compiles from changes the hash (the cache is dropped); an
+    edit of the orchestration that only calls kernels does not."""
+    import shutil
+
+    package = tmp_path / "circle_collision_ros"
+    for part in ("core", "pipeline"):
+        shutil.copytree(warm_up._PACKAGE / part, package / part,
+                        ignore=shutil.ignore_patterns("__pycache__"))
+    monkeypatch.setattr(warm_up, "_PACKAGE", package)
+    base = warm_up.source_hash()
+    for orchestration in ("pipeline/kernels.py", "pipeline/predictor.py"):
+        with open(package / orchestration, "a") as f:
+            f.write("\n# an edit\n")
+        assert warm_up.source_hash() == base, orchestration
+    with open(package / "core/narrow/batch.py", "a") as f:
+        f.write("\n# an edit\n")
+    assert warm_up.source_hash() != base
