@@ -197,6 +197,11 @@ class CollisionNode(Node):
                             uncertain_pair_budget=p("uncertain_pair_budget"),
                             use_covariance=p("use_covariance"))
         )
+        # An unusable record_path refuses the start before a first start's compile, not after
+        self._recorder: BagRecorder | None = None
+        self._recording_error = ""
+        if p("record_path"):
+            self._recorder = self._open_bag(p("record_path"))
         # numba's compile (first start) or cache load, before the first message can arrive
         kernels.prepare(self.predictor, log=self.get_logger().info)
         self.counters = Counters()
@@ -252,10 +257,8 @@ class CollisionNode(Node):
             ),
             post_callback=self._on_clock_jump,
         )
-        self._recorder: BagRecorder | None = None
-        self._recording_error = ""
-        if p("record_path"):
-            self._start_recording(p("record_path"))
+        if self._recorder is not None:
+            self._start_recording()
 
         self._publish_timer = None
         self._set_publish_rate(p("publish_rate"))
@@ -598,10 +601,17 @@ class CollisionNode(Node):
         return cached[2]
 
     # -- recording ------------------------------------------------------------------------------
-    def _start_recording(self, path: str) -> None:
-        """Open the bag; an unusable record_path refuses start-up (no silent non-recording)."""
+    @staticmethod
+    def _open_bag(path: str) -> BagRecorder:
+        """The bag at ``path``; an unusable one refuses start-up (no silent non-recording)."""
         try:
-            self._recorder = BagRecorder(path)
+            return BagRecorder(path)
+        except RecordingError as exc:
+            raise ValueError(f"record_path: {exc}") from exc
+
+    def _start_recording(self) -> None:
+        """Declare the recorded topics in the opened bag and record the configuration."""
+        try:
             for source in self._inputs:
                 self._recorder.add_topic(
                     source.topic, _ros_type_name(source.msg_type), self._offered_qos(source.topic)

@@ -476,3 +476,35 @@ def test_ctrl_c_during_start_up_exits_cleanly() -> None:
     )
     assert run.returncode == 0, run.stdout + run.stderr
     assert "Traceback" not in run.stderr, run.stderr
+
+
+def test_unusable_record_path_is_refused_before_the_kernels(ros_context, tmp_path,
+                                                            monkeypatch) -> None:
+    """A record_path that cannot be recorded to stops the node before it prepares (on a first
+    start: compiles) its kernels, not minutes later; a usable one is opened before them and
+    recorded to once the node has started."""
+    from circle_collision_ros.pipeline import kernels
+
+    prepared = []
+    real_prepare = kernels.prepare
+    monkeypatch.setattr(kernels, "prepare",
+                        lambda predictor, **kw: prepared.append(1) or real_prepare(predictor, **kw))
+    full = tmp_path / "full"
+    full.mkdir()
+    (full / "something").write_text("x")
+    with pytest.raises(ValueError, match="record_path"):
+        CollisionNode(context=ros_context,
+                      parameter_overrides=[Parameter("record_path", value=str(full))])
+    assert prepared == []
+    bag = tmp_path / "bag"
+    node = CollisionNode(context=ros_context,
+                         parameter_overrides=[Parameter("record_path", value=str(bag)),
+                                              Parameter("marker_rate", value=0.0)])
+    try:
+        assert prepared == [1] and (bag / "metadata.yaml").exists()
+    finally:
+        node.destroy_node()
+    from circle_collision_ros.recording.bag_reader import open_bag
+
+    topics = open_bag(bag).topics
+    assert "/circle_states" in topics and "/collision_predictions" in topics
