@@ -587,8 +587,8 @@ class CollisionNode(Node):
 
     def _publisher_kinds(self, topic: str) -> dict[str, int]:
         """How many publishers on `topic` offer each reliability, listed again only when their
-        count changed (or every PUBLISHER_INFO_REFRESH_S): listing 300 per-body publishers'
-        QoS took ~20-50 ms, once a second on the prediction thread."""
+        count changed (or every PUBLISHER_INFO_REFRESH_S): listing the QoS of hundreds of
+        per-body publishers is slow enough to delay predictions if done every second."""
         count = self.count_publishers(topic)
         now = time.monotonic()
         cached = self._publisher_info.get(topic)

@@ -102,11 +102,9 @@ class CollisionPredictor:
     def __init__(self, config: PredictorConfig) -> None:
         self.config = config
         self.frame_id = config.frame_id
-        # The sweep broad phase (the Scene's default; the grid finds the same pairs): on the
-        # benchmark scenes (bench/bench_node.py density), same run, same output bytes, a whole
-        # tracker-array frame took 17-45 % less time from 100 to 20,000 bodies (10,000 on one
-        # core: 9.5 vs 17.2 ms), and the broad phase of an epoch move at 10,000 bodies 0.8 vs
-        # 5.7 ms serial.
+        # The sweep broad phase (the Scene's default; the grid finds the same pairs): measured
+        # faster for whole tracker-array frames and for epoch moves, with the same output bytes
+        # (bench/bench_node.py's density).
         self._scene = Scene(config.horizon, config.dimensions, max_bodies=config.max_bodies)
         self.stats = PredictionStats()
 
@@ -165,10 +163,9 @@ class CollisionPredictor:
     def _warm_up_messages(self, uncertain: bool) -> None:
         """The message path on throwaway predictors: decoding both input types (``uncertain``:
         with covariance) and both output encoders (contact rows, and the column layout that
-        uncertain pairs and report_all_pairs take). Left to the first messages, these compiled
-        (or loaded from the cache) while a fresh install's node was already subscribed:
-        bench/bench_node.py's first scenario answered 2 of 180 inputs, 3.6 s late at the
-        median."""
+        uncertain pairs and report_all_pairs take). Left to the first messages, these would
+        compile (or load from the cache) while the node is already subscribed, and its first
+        answers would come late (bench/bench_node.py's first scenario shows it)."""
         t = 1_000_000_000
         n = 3
         position = np.zeros((n, 3))
