@@ -46,7 +46,7 @@ from circle_collision_ros.core.scene import Scene
 from circle_collision_ros.core.uncertainty import load_fallback_kernels
 
 __all__ = ["Job", "CORE_JOBS", "threads_reachable", "warm_scenes", "warm_uncertain",
-           "source_hash", "is_compiled", "with_dependencies", "compile_jobs", "run_job", "main"]
+           "source_hash", "is_compiled", "with_dependencies", "compile_jobs", "main"]
 
 _PACKAGE = Path(__file__).resolve().parents[1]
 
@@ -132,9 +132,9 @@ _MODULE = "circle_collision_ros.core.warm_up"
 CORE_JOBS: dict[str, Job] = {
     "narrow": Job(_narrow, (), _MODULE),
     "batch": Job(_batch, (), _MODULE),
-    "exact": Job(lambda d, h: warm_scenes(d, h), ("narrow", "batch"), _MODULE),
+    "exact": Job(warm_scenes, ("narrow", "batch"), _MODULE),
     "threads": Job(lambda d, h: warm_scenes(d, h, threaded=True), ("exact",), _MODULE),
-    "uncertain": Job(lambda d, h: warm_uncertain(d, h), ("exact",), _MODULE),
+    "uncertain": Job(warm_uncertain, ("exact",), _MODULE),
 }
 
 
@@ -174,18 +174,18 @@ def is_compiled(job: str, dimensions: int, digest: str | None = None) -> bool:
 
 
 @contextmanager
-def _locked(path: Path) -> Iterator[bool]:
-    """Hold an exclusive lock on ``path`` (waiting for it); yields False where locks cannot
-    be had (a read-only install: then numba caches elsewhere or not at all)."""
+def _locked(path: Path) -> Iterator[None]:
+    """Hold an exclusive lock on ``path``, waiting for it; unlocked where no lock file can be
+    made (a read-only install: then numba caches elsewhere or not at all)."""
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
         fd = os.open(path, os.O_CREAT | os.O_RDWR, 0o666)
     except OSError:
-        yield False
+        yield
         return
     try:
         fcntl.flock(fd, fcntl.LOCK_EX)
-        yield True
+        yield
     finally:
         os.close(fd)  # releases the lock
 
@@ -292,11 +292,6 @@ def compile_jobs(names: Iterable[str], dimensions: Iterable[int], jobs: Mapping[
     return seconds
 
 
-def run_job(name: str, dimensions: int, jobs: Mapping[str, Job], horizon: float = 5.0) -> None:
-    """Run ``name``'s kernels once in this process (compiling them or loading them)."""
-    jobs[name].run(dimensions, horizon)
-
-
 def main(argv: list[str] | None = None, jobs: Mapping[str, Job] = CORE_JOBS,
          prog: str = f"python -m {_MODULE}") -> int:
     """Command line: compile jobs (default: all of ``jobs``, both dimensions)."""
@@ -311,9 +306,9 @@ def main(argv: list[str] | None = None, jobs: Mapping[str, Job] = CORE_JOBS,
                         help="processes at a time (default: cores)")
     parser.add_argument("--job", choices=list(jobs), help=argparse.SUPPRESS)  # one, in-process
     opts = parser.parse_args(argv)
-    if opts.job:
+    if opts.job:  # a compile process: run the job's kernels once (compiling or loading them)
         for d in opts.dimensions:
-            run_job(opts.job, d, jobs)
+            jobs[opts.job].run(d, 5.0)
         return 0
     try:
         seconds = compile_jobs(opts.jobs, opts.dimensions, jobs, opts.processes,

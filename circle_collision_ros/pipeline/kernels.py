@@ -37,10 +37,10 @@ def _predictor_path(path: str) -> Callable[[int, float], None]:
     return run
 
 
-#: Every compile job: the core's, with ``threads`` and ``uncertain`` extended by their
-#: message paths, plus ``messages`` and ``uncertain_threads``.
+#: Every compile job: the core's, with ``threads`` and ``uncertain`` replaced by their
+#: message-path versions, plus ``messages`` and ``uncertain_threads``.
 JOBS: dict[str, Job] = {
-    **{name: job for name, job in _core.CORE_JOBS.items() if name not in ("threads", "uncertain")},
+    **_core.CORE_JOBS,
     "messages": Job(_predictor_path("messages"), ("exact",), _MODULE),
     "threads": Job(_predictor_path("threads"), ("exact", "messages"), _MODULE),
     "uncertain": Job(_predictor_path("uncertain"), ("exact", "messages"), _MODULE),
