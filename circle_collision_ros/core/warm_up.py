@@ -8,8 +8,10 @@ of compiling them again, so the work is split into jobs that build on each
 other and run side by side:
 
 * ``narrow``: the scalar first-contact solver every scene evaluation calls;
+* ``parts``: the scene's kernels that never call it (broad phase, ordering), beside it;
 * ``batch``: the vectorised batch solver of large frames (independent of ``narrow``);
-* ``exact``: the scene's serial kernels (small and large frames, one-body updates);
+* ``exact``: the scene's serial kernels (frames, one-body updates);
+* ``large``: frames of more than ``Scene.COMPILED_ROWS`` pairs (the vectorised path);
 * ``threads``: the threaded twins the parallel policy picks for large frames;
 * ``uncertain``: the probability of contact (screen, per-pair kernels and fallbacks).
 
@@ -45,7 +47,8 @@ from circle_collision_ros.core.parallel_policy import threads_forced
 from circle_collision_ros.core.scene import Scene
 from circle_collision_ros.core.uncertainty import load_fallback_kernels
 
-__all__ = ["Job", "CORE_JOBS", "threads_reachable", "warm_scenes", "warm_uncertain",
+__all__ = ["Job", "CORE_JOBS", "large_frames_reachable", "threads_reachable", "warm_scene_parts",
+           "warm_scenes", "warm_large_frames", "warm_uncertain",
            "source_hash", "is_compiled", "with_dependencies", "compile_jobs", "main"]
 
 _PACKAGE = Path(__file__).resolve().parents[1]
@@ -57,6 +60,12 @@ class Job(NamedTuple):
     run: Callable[[int, float], None]
     after: tuple[str, ...]  # the jobs whose kernels it calls (compiled first, then loaded)
     module: str
+
+
+def large_frames_reachable(max_bodies: int) -> bool:
+    """Whether a scene of at most ``max_bodies`` bodies can have more than
+    ``Scene.COMPILED_ROWS`` pairs to evaluate at once (the vectorised path)."""
+    return max_bodies * (max_bodies - 1) // 2 >= Scene.COMPILED_ROWS
 
 
 def threads_reachable(max_bodies: int) -> bool:
@@ -89,30 +98,58 @@ def _two_bodies(d: int, horizon: float) -> Scene:
     return scene
 
 
-def warm_scenes(dimensions: int, horizon: float, threaded: bool = False) -> None:
-    """Run the scene's kernels once on tiny scenes: a two-body frame, a 100-body frame (the
-    vectorised path of large frames) and a stream of one-body updates; ``threaded``: with
-    the threaded twins forced."""
+def warm_scene_parts(dimensions: int, horizon: float) -> None:
+    """Run the scene's kernels that never call the solver: a rebuild and a stream of one-body
+    updates whose bodies are never a candidate pair (the broad phase, the relative filter, the
+    grid), and the ordering of records.  They compile beside ``narrow``."""
     d = dimensions
+    # two bodies 3 apart with the same velocity: their swept boxes overlap, the relative
+    # filter drops them (their distance never changes), so no pair reaches the solver
+    p = np.zeros((2, d))
+    p[1, 0] = 3.0
+    v = np.zeros((2, d))
+    v[:, :2] = 1.0
+    apart = Scene(horizon, d)
+    apart.upsert_many(["a", "b"], p, v, np.zeros((2, d)), np.ones(2), 1)
+    apart.predictions()
+    apart.compile_ordering()
+    _stream(d, horizon, spacing=1e3)
+
+
+def _stream(d: int, horizon: float, spacing: float) -> None:
+    """A stream of single states, bodies arriving one by one ``spacing`` apart: the compiled
+    query passes, including the specialisations for the read-only arrays a published
+    prediction leaves."""
+    stream = Scene(horizon, d)
+    for k in range(12):
+        p = np.zeros((1, d))
+        p[0, 0] = spacing * (k % 6)
+        stream.merge([f"s{k % 6}"], [10 + k], p, np.eye(1, d), np.zeros((1, d)), [1.0], [False],
+                     0)
+        stream.predictions()
+
+
+def warm_scenes(dimensions: int, horizon: float, threaded: bool = False,
+                large: bool = True) -> None:
+    """Run the scene's kernels once on tiny scenes: a two-body frame, a stream of one-body
+    updates and (``large``) a 100-body frame, the vectorised path of frames of more than
+    ``Scene.COMPILED_ROWS`` pairs; ``threaded``: with the threaded twins forced."""
     with threads_forced(threaded):
-        _two_bodies(d, horizon)
-        # a rebuild (a tracker array, an epoch crossing) of more than Scene._COMPILED_ROWS pairs
-        # runs the vectorised kernels: 100 overlapping bodies
-        k = 100
-        rows = np.random.default_rng(0).uniform(0.0, 1.0, (k, d))
-        crowd = Scene(horizon, d)
-        crowd.upsert_many([f"w{i:03d}" for i in range(k)], rows, np.zeros((k, d)),
-                          np.zeros((k, d)), np.ones(k), 1)
-        crowd.predictions()
-        # a stream of single states, bodies arriving one by one: the compiled query passes,
-        # including the specialisations for the read-only arrays a published prediction leaves
-        stream = Scene(horizon, d)
-        for k in range(12):
-            p = np.zeros((1, d))
-            p[0, 0] = 0.5 * (k % 6)
-            stream.merge([f"s{k % 6}"], [10 + k], p, np.eye(1, d), np.zeros((1, d)), [1.0],
-                         [False], 0)
-            stream.predictions()
+        _two_bodies(dimensions, horizon)
+        _stream(dimensions, horizon, spacing=0.5)
+        if large:
+            warm_large_frames(dimensions, horizon)
+
+
+def warm_large_frames(dimensions: int, horizon: float) -> None:
+    """A rebuild (a tracker array, an epoch crossing) of more than ``Scene.COMPILED_ROWS``
+    pairs, which runs the vectorised kernels: 100 overlapping bodies."""
+    d, k = dimensions, 100
+    rows = np.random.default_rng(0).uniform(0.0, 1.0, (k, d))
+    crowd = Scene(horizon, d)
+    crowd.upsert_many([f"w{i:03d}" for i in range(k)], rows, np.zeros((k, d)), np.zeros((k, d)),
+                      np.ones(k), 1)
+    crowd.predictions()
 
 
 def warm_uncertain(dimensions: int, horizon: float, threshold: float = 0.01,
@@ -131,9 +168,11 @@ def warm_uncertain(dimensions: int, horizon: float, threshold: float = 0.01,
 _MODULE = "circle_collision_ros.core.warm_up"
 CORE_JOBS: dict[str, Job] = {
     "narrow": Job(_narrow, (), _MODULE),
+    "parts": Job(warm_scene_parts, (), _MODULE),
     "batch": Job(_batch, (), _MODULE),
-    "exact": Job(warm_scenes, ("narrow", "batch"), _MODULE),
-    "threads": Job(lambda d, h: warm_scenes(d, h, threaded=True), ("exact",), _MODULE),
+    "exact": Job(lambda d, h: warm_scenes(d, h, large=False), ("narrow", "parts"), _MODULE),
+    "large": Job(warm_large_frames, ("exact", "batch"), _MODULE),
+    "threads": Job(lambda d, h: warm_scenes(d, h, threaded=True), ("large",), _MODULE),
     "uncertain": Job(warm_uncertain, ("exact",), _MODULE),
 }
 

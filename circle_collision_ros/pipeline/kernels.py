@@ -4,12 +4,14 @@ The node must never meet a cold compile in the middle of a stream, so it prepare
 every path its configuration lets a message reach, and only those:
 
 * ``exact`` and ``messages`` always (the scene's serial kernels, decoding and encoding);
+* ``large`` when ``max_bodies`` lets a frame have ``Scene.COMPILED_ROWS`` pairs or more;
 * ``threads`` when ``max_bodies`` lets a frame reach the parallel policy's thresholds;
 * ``uncertain`` (and ``uncertain_threads`` with threads) unless ``use_covariance`` is off.
 
-The core's jobs (``core.warm_up``: ``narrow``, ``batch``, ``exact``, ``threads``,
-``uncertain``) need no ROS, so a set-up step can compile them while the interfaces
-build; this module adds the jobs that touch the message types.  A cold start
+The core's jobs (``core.warm_up``: ``narrow``, ``parts``, ``batch``, ``exact``,
+``large``, ``threads``, ``uncertain``) need no ROS, so a set-up step can compile
+them while the interfaces build; this module adds the jobs that touch the
+message types.  A cold start
 compiles in separate processes (one per core), each writing numba's cache, then
 loads everything in the calling process; a warm start only loads.
 ``scripts/test.sh`` compiles every job first (``python -m
@@ -22,7 +24,8 @@ import sys
 from collections.abc import Callable
 
 from circle_collision_ros.core import warm_up as _core
-from circle_collision_ros.core.warm_up import Job, compile_jobs, threads_reachable
+from circle_collision_ros.core.warm_up import (Job, compile_jobs, large_frames_reachable,
+                                               threads_reachable)
 from circle_collision_ros.pipeline.predictor import CollisionPredictor, PredictorConfig
 
 __all__ = ["JOBS", "paths_for", "prepare", "main"]
@@ -42,7 +45,7 @@ def _predictor_path(path: str) -> Callable[[int, float], None]:
 JOBS: dict[str, Job] = {
     **_core.CORE_JOBS,
     "messages": Job(_predictor_path("messages"), ("exact",), _MODULE),
-    "threads": Job(_predictor_path("threads"), ("exact", "messages"), _MODULE),
+    "threads": Job(_predictor_path("threads"), ("large", "messages"), _MODULE),
     "uncertain": Job(_predictor_path("uncertain"), ("exact", "messages"), _MODULE),
     "uncertain_threads": Job(_predictor_path("uncertain_threads"), ("uncertain", "threads"),
                              _MODULE),
@@ -52,7 +55,8 @@ JOBS: dict[str, Job] = {
 def paths_for(config: PredictorConfig) -> tuple[str, ...]:
     """The warm-up paths a node with ``config`` can reach (see the module docstring)."""
     threads = threads_reachable(config.max_bodies)
-    paths = ["exact", "messages"] + (["threads"] if threads else [])
+    paths = ["exact", "messages"] + (["large"] if large_frames_reachable(config.max_bodies)
+                                     else []) + (["threads"] if threads else [])
     if config.use_covariance:
         paths += ["uncertain"] + (["uncertain_threads"] if threads else [])
     return tuple(paths)

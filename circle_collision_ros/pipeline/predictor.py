@@ -24,7 +24,7 @@ import numpy as np
 from circle_collision_msgs.msg import CircleState, CircleStateArray
 from circle_collision_ros.core.parallel_policy import threads_forced
 from circle_collision_ros.core.scene import Scene, SceneSnapshot
-from circle_collision_ros.core.warm_up import warm_scenes, warm_uncertain
+from circle_collision_ros.core.warm_up import warm_large_frames, warm_scenes, warm_uncertain
 from circle_collision_ros.pipeline.state_codec import (decode_states, encode_state,
                                                        encode_state_array)
 from circle_collision_ros.pipeline.prediction_messages import ScenePrediction
@@ -64,7 +64,7 @@ class PredictorConfig:
 #: applied at run time, and replayed from a recording's config records).
 RUNTIME_FIELDS = ("horizon", "stale_timeout", "report_all_pairs", "probability_threshold")
 #: What CollisionPredictor.warm_up can prepare (pipeline.kernels compiles each in a process).
-WARM_UP_PATHS = ("exact", "threads", "uncertain", "uncertain_threads", "messages")
+WARM_UP_PATHS = ("exact", "large", "threads", "uncertain", "uncertain_threads", "messages")
 
 
 @dataclass
@@ -137,7 +137,8 @@ class CollisionPredictor:
         message pays no numba compile or cache load (the node prepares them before it subscribes,
         through ``pipeline.kernels.prepare``, which compiles cold paths in parallel processes).
 
-        ``paths`` (any of WARM_UP_PATHS): ``exact`` the scene's serial kernels; ``threads`` the
+        ``paths`` (any of WARM_UP_PATHS): ``exact`` the scene's serial kernels; ``large`` those of
+        frames of ``Scene.COMPILED_ROWS`` pairs or more (the vectorised path); ``threads`` the
         threaded twins the policy picks for large frames, and the message path with them;
         ``uncertain`` the probability of contact and messages with covariance;
         ``uncertain_threads`` the same with threads; ``messages`` decoding and encoding."""
@@ -151,7 +152,9 @@ class CollisionPredictor:
         for path in paths:
             threaded = path in ("threads", "uncertain_threads")
             if path in ("exact", "threads"):
-                warm_scenes(d, horizon, threaded)
+                warm_scenes(d, horizon, threaded, large=threaded)
+            if path == "large":
+                warm_large_frames(d, horizon)
             if path in ("uncertain", "uncertain_threads"):
                 warm_uncertain(d, horizon, threshold, threaded)
             with threads_forced(threaded):

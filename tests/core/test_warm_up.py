@@ -6,10 +6,14 @@ Guarantees proved here:
 - two preparers started together (a set-up step and a node, two test workers) run each job
   once: the second waits on the job's lock and finds the stamp;
 - a failing job raises RuntimeError naming the job and carrying its output;
-- threads_reachable follows the parallel policy's smallest threshold.
+- threads_reachable follows the parallel policy's smallest threshold;
+- the ``parts`` job never reaches the solver or a kernel that calls it, so it can compile
+  beside ``narrow``, and ``exact`` then compiles only the solver's callers.
 """
 from __future__ import annotations
 
+import subprocess
+import sys
 import threading
 
 import numba
@@ -108,3 +112,24 @@ def test_source_hash_follows_compiled_modules_only(tmp_path, monkeypatch) -> Non
     with open(package / "core/narrow/batch.py", "a") as f:
         f.write("\n# an edit\n")
     assert warm_up.source_hash() != base
+
+
+_PARTS_PROBE = """
+from circle_collision_ros.core.narrow.batch import ttc_scalar, ttc_scalar2
+from circle_collision_ros.core.scene import kernels
+from circle_collision_ros.core.warm_up import warm_scene_parts
+warm_scene_parts({d}, 5.0)
+solver = [f.__name__ for f in (ttc_scalar, ttc_scalar2, kernels.evaluate_rows,
+          kernels.evaluate_and_store, kernels.ordered_query) if f.signatures]
+parts = [f.__name__ for f in (kernels.split_and_order, kernels.incremental_pairs) if f.signatures]
+print(solver, parts)
+"""
+
+
+@pytest.mark.parametrize("d", [2, 3])
+def test_scene_parts_never_reach_the_solver(d: int) -> None:
+    """In a fresh interpreter (no kernel loaded yet), the parts job's scenes load or compile
+    the ordering and broad-phase kernels and not one kernel that calls the solver."""
+    out = subprocess.run([sys.executable, "-c", _PARTS_PROBE.format(d=d)], capture_output=True,
+                         text=True, check=True, cwd=warm_up._PACKAGE.parent).stdout
+    assert out.split("\n")[-2] == "[] ['split_and_order', 'incremental_pairs']"

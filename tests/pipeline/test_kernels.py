@@ -1,7 +1,8 @@
 """pipeline.kernels: which warm-up paths a node prepares, and that they suffice.
 
 Guarantees proved here:
-- a node prepares the exact and message paths always, the threaded twins only when
+- a node prepares the exact and message paths always, the vectorised path of large frames
+  only when max_bodies allows Scene.COMPILED_ROWS pairs, the threaded twins only when
   max_bodies lets a frame reach the parallel policy's thresholds, and the probability path
   only when use_covariance is on;
 - every warm-up path has a compile job, and a node's paths with their dependencies compile
@@ -14,6 +15,7 @@ from __future__ import annotations
 import numpy as np
 from numba.core.registry import CPUDispatcher
 
+from circle_collision_ros.core.scene import Scene
 from circle_collision_ros.pipeline import kernels
 from circle_collision_ros.pipeline.predictor import (WARM_UP_PATHS, CollisionPredictor,
                                                      PredictorConfig)
@@ -22,12 +24,15 @@ from circle_collision_ros.pipeline.state_batch import StateBatch
 
 def test_paths_follow_the_configuration() -> None:
     assert kernels.paths_for(PredictorConfig()) == (
-        "exact", "messages", "threads", "uncertain", "uncertain_threads")
+        "exact", "messages", "large", "threads", "uncertain", "uncertain_threads")
     assert kernels.paths_for(PredictorConfig(max_bodies=40)) == ("exact", "messages", "uncertain")
     assert kernels.paths_for(PredictorConfig(max_bodies=40, use_covariance=False)) == (
         "exact", "messages")
     assert kernels.paths_for(PredictorConfig(use_covariance=False)) == (
-        "exact", "messages", "threads")
+        "exact", "messages", "large", "threads")
+    n = next(k for k in range(2, 1000) if k * (k - 1) // 2 >= Scene.COMPILED_ROWS)
+    assert "large" not in kernels.paths_for(PredictorConfig(max_bodies=n - 1))
+    assert "large" in kernels.paths_for(PredictorConfig(max_bodies=n))
     assert set(WARM_UP_PATHS) <= set(kernels.JOBS)
 
 

@@ -84,6 +84,14 @@ class OrderingMixin:
         self._cache = (self._version, res)
         return res
 
+    def compile_ordering(self) -> None:
+        """Compile (or load) the kernel that keeps the rows in order, on this scene's record
+        arrays, without evaluating a pair: it never calls the solver, so a set-up can compile
+        it beside the solver (``core.warm_up``); ``predictions`` then finds it compiled."""
+        live = self._rlive
+        _sk.split_and_order(EMPTY_I, np.flatnonzero(live[:self._rn]), EMPTY_I, live, self._rkey,
+                            self._rtp, self._rtau, 0, 1024)
+
     def _ordered_rows(self):
         """Reportable rows ``(A, B, ttc, contact_ns, overlapping, pt, nm, cs)`` at R, sorted, and
         their ids' places in the UTF-8 blob ``(start_a, len_a, start_b, len_b)`` (None: no rows).

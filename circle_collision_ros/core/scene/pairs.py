@@ -22,7 +22,7 @@ class PairsMixin:
     #: Below this many pairs the compiled row loop (kernels.evaluate_rows) beats the
     #: vectorised batch (its numpy set-up per call; measured: bench/bench_scene.py); both
     #: give the same bits.
-    _COMPILED_ROWS = 4096
+    COMPILED_ROWS = 4096
 
     def _evaluate(self, A: np.ndarray, B: np.ndarray, t_eval: np.ndarray, horizon: float,
                   compiled: bool | None = None):
@@ -34,14 +34,15 @@ class PairsMixin:
         """
         n = A.shape[0]
         if compiled is None:
-            compiled = n < self._COMPILED_ROWS
+            compiled = n < self.COMPILED_ROWS
         if compiled:
             D = self._dim
             tau, pt, nm = np.empty(n), np.empty((n, D)), np.empty((n, D))
             cs, ov = np.empty(n), np.empty(n, dtype=bool)
-            self.evaluated_pairs += _sk.evaluate_rows(self._P, self._V, self._A, self._R, self._T,
-                                                      A, B, t_eval, horizon, tau, pt, nm, cs, ov,
-                                                      self._Z)
+            if n:  # (no rows: nothing to evaluate, and no need of the solver's kernels)
+                self.evaluated_pairs += _sk.evaluate_rows(self._P, self._V, self._A, self._R,
+                                                          self._T, A, B, t_eval, horizon, tau, pt,
+                                                          nm, cs, ov, self._Z)
             hit = tau <= horizon
             if hit.all():
                 return hit, t_eval, tau, pt, nm, cs, ov
@@ -215,7 +216,7 @@ class PairsMixin:
                                                     self._rank, np.int64(self._R.shape[0]))
         if A.size == 0:
             return
-        if A.size >= self._COMPILED_ROWS:
+        if A.size >= self.COMPILED_ROWS:
             self._store(A, B, self._evaluate_at_tp(A, B))
             return
         n = self._reserve_records(A.size)
