@@ -46,6 +46,19 @@ print("\n".join(sorted(rows)))
 PYEOF
   say "wrote constraints.txt"; exit 0
 fi
+# (--demo) The demo's numba kernels (the 2-D exact path; core/warm_up.py needs only numpy and
+# numba) compile in the background while the rest installs and the interfaces build: the node
+# started next waits for this compile (a lock per job) instead of repeating it.
+# Output: build/kernels.log.
+KERNELS_STARTED=
+start_demo_kernels() {
+  [ "${1:-}" = "--demo" ] && [ -z "$KERNELS_STARTED" ] || return 0
+  KERNELS_STARTED=1
+  mkdir -p "$ROOT/build"
+  (cd "$ROOT" && PYTHONPATH="$ROOT${PYTHONPATH:+:$PYTHONPATH}" nohup "$PY" -m circle_collision_ros.core.warm_up \
+     --jobs exact --dimensions 2 > "$ROOT/build/kernels.log" 2>&1 &)
+}
+
 REQS=(requirements.txt requirements-build.txt requirements-test.txt constraints.txt)
 h=$(inputs_hash "${REQS[@]}")
 if ! is_current deps "$h"; then
@@ -53,6 +66,10 @@ if ! is_current deps "$h"; then
   # uv (pinned in constraints.txt) installs the same pins as pip in a fraction of the time;
   # pip stays the fallback where uv cannot be had.
   if "${PIP[@]}" install "uv" -c "$ROOT/constraints.txt" 2>/dev/null && [ -x "$VENV/bin/uv" ]; then
+    if [ "${1:-}" = "--demo" ]; then  # numba first, so that the kernels compile meanwhile
+      "$VENV/bin/uv" pip install --quiet --python "$PY" numpy numba -c "$ROOT/constraints.txt"
+      start_demo_kernels "$@"
+    fi
     "$VENV/bin/uv" pip install --quiet --python "$PY" -r "$ROOT/requirements.txt" \
       -r "$ROOT/requirements-build.txt" -r "$ROOT/requirements-test.txt" -c "$ROOT/constraints.txt"
   else
@@ -63,14 +80,7 @@ if ! is_current deps "$h"; then
   rm -f "$STAMPS/msgs"  # a new ROS wheel set means the interfaces must be rebuilt
 fi
 
-# 2b. (--demo) The demo's numba kernels (the 2-D exact path; core/warm_up.py needs no ROS)
-# compile in the background while the interfaces build: the node started next waits for
-# this compile (a lock per job) instead of repeating it. Output: build/kernels.log.
-if [ "${1:-}" = "--demo" ]; then
-  mkdir -p "$ROOT/build"
-  (cd "$ROOT" && PYTHONPATH="$ROOT${PYTHONPATH:+:$PYTHONPATH}" nohup "$PY" -m circle_collision_ros.core.warm_up \
-     --jobs exact --dimensions 2 > "$ROOT/build/kernels.log" 2>&1 &)
-fi
+start_demo_kernels "$@"
 
 # 3. The interface package circle_collision_msgs, built with CMake into the venv: only the
 # generators rclpy loads (C and Python; msg_defs/CMakeLists.txt), half the build of all of them.

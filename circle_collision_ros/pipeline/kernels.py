@@ -40,11 +40,18 @@ def _predictor_path(path: str) -> Callable[[int, float], None]:
     return run
 
 
+def _codec(dimensions: int, horizon: float) -> None:
+    predictor = CollisionPredictor(PredictorConfig(dimensions=dimensions, horizon=horizon))
+    predictor.warm_up_codec()
+
+
 #: Every compile job: the core's, with ``threads`` and ``uncertain`` replaced by their
-#: message-path versions, plus ``messages`` and ``uncertain_threads``.
+#: message-path versions, plus ``codec`` (decoders and encoders on bodies that are never a
+#: candidate pair, beside ``exact``), ``messages`` and ``uncertain_threads``.
 JOBS: dict[str, Job] = {
     **_core.CORE_JOBS,
-    "messages": Job(_predictor_path("messages"), ("exact",), _MODULE),
+    "codec": Job(_codec, ("parts",), _MODULE),
+    "messages": Job(_predictor_path("messages"), ("exact", "codec"), _MODULE),
     "threads": Job(_predictor_path("threads"), ("large", "messages"), _MODULE),
     "uncertain": Job(_predictor_path("uncertain"), ("exact", "messages"), _MODULE),
     "uncertain_threads": Job(_predictor_path("uncertain_threads"), ("uncertain", "threads"),

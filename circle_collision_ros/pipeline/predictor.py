@@ -163,16 +163,24 @@ class CollisionPredictor:
                 if path in ("uncertain", "uncertain_threads"):
                     self._warm_up_messages(uncertain=True)
 
-    def _warm_up_messages(self, uncertain: bool) -> None:
+    def warm_up_codec(self) -> None:
+        """Compile (or load) the decoders and encoders of the message path without evaluating
+        a pair: its bodies are never a candidate pair, so this can run beside the compile of
+        the scene's evaluating kernels (pipeline.kernels' ``codec`` job)."""
+        self._warm_up_messages(uncertain=False, apart=True)
+
+    def _warm_up_messages(self, uncertain: bool, apart: bool = False) -> None:
         """The message path on throwaway predictors: decoding both input types (``uncertain``:
         with covariance) and both output encoders (contact rows, and the column layout that
         uncertain pairs and report_all_pairs take). Left to the first messages, these would
         compile (or load from the cache) while the node is already subscribed, and its first
-        answers would come late (bench/bench_node.py's first scenario shows it)."""
+        answers would come late (bench/bench_node.py's first scenario shows it).
+        ``apart``: bodies far apart, so that no pair is a candidate (warm_up_codec)."""
         t = 1_000_000_000
         n = 3
         position = np.zeros((n, 3))
-        position[:, 0] = (0.0, 3.0, 0.5)  # a and c overlap; b approaches a
+        # a and c overlap, b approaches a; apart: 1 km from each other
+        position[:, 0] = (0.0, 1e3, 2e3) if apart else (0.0, 3.0, 0.5)
         velocity = np.zeros((n, 3))
         velocity[1, 0] = -1.0
         acceleration = np.zeros((n, 3))

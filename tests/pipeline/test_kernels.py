@@ -8,11 +8,18 @@ Guarantees proved here:
 - every warm-up path has a compile job, and a node's paths with their dependencies compile
   nothing the jobs left out: after prepare, a predictor of that configuration runs frames
   of every kind it accepts without compiling a kernel (numba's dispatchers gain no
-  signature).
+  signature);
+- the ``codec`` job reaches the decoders and encoders and no kernel that evaluates a pair,
+  so it compiles beside ``exact``.
 """
 from __future__ import annotations
 
+import subprocess
+import sys
+from pathlib import Path
+
 import numpy as np
+import pytest
 from numba.core.registry import CPUDispatcher
 
 from circle_collision_ros.core.scene import Scene
@@ -73,3 +80,26 @@ def test_a_prepared_demo_node_compiles_nothing_on_its_frames() -> None:
         assert report.covariance_ignored == (n if covariance else 0)
         predictor.predict().to_cdr()
     assert _signatures() == before
+
+
+_CODEC_PROBE = """
+import gc
+import pytest
+from numba.core.registry import CPUDispatcher
+from circle_collision_ros.pipeline.predictor import CollisionPredictor, PredictorConfig
+CollisionPredictor(PredictorConfig(dimensions={d})).warm_up_codec()
+print(sorted(o.py_func.__name__ for o in gc.get_objects()
+             if type(o) is CPUDispatcher and o.signatures))
+"""
+
+
+@pytest.mark.parametrize("d", [2, 3])
+def test_codec_job_evaluates_no_pair(d: int) -> None:
+    """In a fresh interpreter, warm_up_codec loads (or compiles) the state decoders and the
+    prediction encoders, and no solver or kernel that calls it."""
+    out = subprocess.run([sys.executable, "-c", _CODEC_PROBE.format(d=d)], capture_output=True,
+                         text=True, check=True, cwd=Path(kernels.__file__).parents[2]).stdout
+    loaded = set(eval(out.strip().splitlines()[-1]))
+    assert {"_decode_states", "_encode_contacts", "_encode_predictions"} <= loaded
+    assert not loaded & {"ttc_scalar", "ttc_scalar2", "certified_pair2", "certified_pair3",
+                         "evaluate_rows", "evaluate_and_store", "ordered_query"}

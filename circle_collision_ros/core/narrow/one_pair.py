@@ -25,6 +25,7 @@ import.  Without the extension (a source tree that was not built)
 """
 from __future__ import annotations
 
+import importlib.util
 import inspect
 import math
 import warnings
@@ -86,8 +87,12 @@ def public_entry(general: Callable) -> Callable:
     try:
         from circle_collision_ros.core.narrow import one_pair_entry
     except ImportError as exc:  # a source tree whose extension was not built
+        # Python words a missing submodule of a package still initialising as "most likely
+        # a circular import": name the real cause when the file is not there
+        found = importlib.util.find_spec("circle_collision_ros.core.narrow.one_pair_entry")
+        why = str(exc) if found else "no compiled module in the source tree"
         warnings.warn(
-            f"circle_collision_ros.core.narrow.one_pair_entry is not built ({exc}); "
+            f"circle_collision_ros.core.narrow.one_pair_entry is not built ({why}); "
             "one-pair calls of "
             f"{general.__name__} take the slower general path. Build it with "
             "scripts/bootstrap.sh, pip install -e . or colcon build.",
