@@ -5,7 +5,7 @@
 # Each step re-runs only when its inputs changed (content hashes in .venv/.bootstrap/).
 # Usage: scripts/bootstrap.sh [--kernels | --demo | --freeze]  (PYTHON=python3.12: the interpreter)
 #   --kernels  also compile every numba kernel into its cache (scripts/test.sh does)
-#   --demo     compile the demo's kernels in the background, beside the interface build
+#   --demo     compile the demo's kernels in the background from the moment numba is installed
 set -euo pipefail
 
 ROOT=$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)
