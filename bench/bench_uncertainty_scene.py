@@ -133,7 +133,7 @@ def stream(
 
 
 def run_frames(frames, scene, exact, uncertain, cov, times, core_s, core_per_frame, evaluated,
-               deferred, reported, contacts, clock) -> None:
+               deferred, reported, contacts, bounds, clock) -> None:
     """The timed frames: exact and covariance interleaved frame by frame (see the docstring)."""
     for k in range(frames + 2):  # two warm-up frames (numba caches, first allocation), not counted
         stamp = BASE_NS + k * 33_000_000
@@ -157,6 +157,15 @@ def run_frames(frames, scene, exact, uncertain, cov, times, core_s, core_per_fra
                     deferred.append(u.deferred)
                     reported.append(len(prediction.columns))
                     contacts.append(len(prediction.contacts))
+                    bounds.append(_uncertain_bounds(prediction))
+
+
+def _uncertain_bounds(prediction) -> tuple[np.ndarray, np.ndarray]:
+    """(probability, bound) of the published rows of uncertain pairs."""
+    u, col = prediction.uncertainty, prediction.columns
+    pairs = set(zip(u.id_a.tolist(), u.id_b.tolist()))
+    rows = [k for k, pair in enumerate(zip(col.id_a, col.id_b)) if pair in pairs]
+    return col.probability[rows], col.probability_bound[rows]
 
 
 def main() -> int:
@@ -196,7 +205,7 @@ def main() -> int:
     times = {"exact scene": [], "covariance scene": [], "exact pipeline": [],
              "covariance pipeline": []}
     core_per_frame: list[float] = []
-    evaluated, reported, contacts, deferred = [], [], [], []
+    evaluated, reported, contacts, deferred, bounds = [], [], [], [], []
     core_s = [0.0]
     core_call = uncertainty.uncertain_pairs
     clock = time.thread_time if opts.cpu_time else time.perf_counter
@@ -211,7 +220,7 @@ def main() -> int:
     uncertainty.uncertain_pairs = timed_core
     with threads_forced(False) if opts.cpu_time else contextlib.nullcontext():
         run_frames(frames, scene, exact, uncertain, cov, times, core_s, core_per_frame, evaluated,
-                   deferred, reported, contacts, clock)
+                   deferred, reported, contacts, bounds, clock)
     med = {k: statistics.median(v) * 1e3 for k, v in times.items()}
     print(
         f"{n} bodies, {frames} frames (every body moved and restamped each frame), horizon "
@@ -236,6 +245,15 @@ def main() -> int:
         f"uncertain pairs evaluated per frame (median): {statistics.median(evaluated):.0f}; rows "
         f"published: {statistics.median(reported):.0f} (of which mean contacts "
         f"{statistics.median(contacts):.0f}); deferred (budget) {statistics.median(deferred):.0f}"
+    )
+    p = np.concatenate([b[0] for b in bounds])
+    e = np.concatenate([b[1] for b in bounds])
+    print(
+        f"published uncertain rows: {p.size}; placeholders (1.0 +- 1.0): "
+        f"{np.count_nonzero((p == 1.0) & (e == 1.0))}; bound <= 0.01: "
+        f"{100.0 * np.count_nonzero(e <= 0.01) / max(p.size, 1):.1f} % (target >= 99 %); bound "
+        f"median {np.median(e) if e.size else float('nan'):.3f}, p90 "
+        f"{np.percentile(e, 90) if e.size else float('nan'):.3f}"
     )
     return 0
 

@@ -158,10 +158,13 @@ def warm_uncertain(dimensions: int, horizon: float, threshold: float = 0.01,
     reach); ``threaded``: with the threaded twins forced."""
     d = dimensions
     with threads_forced(threaded):
-        scene = _two_bodies(d, horizon)
-        scene.merge(["a"], [2], np.eye(1, d), np.zeros((1, d)), np.zeros((1, d)), [1.0], [False],
-                    0, covariances=np.eye(2 * d)[None] * 0.01)
-        scene.uncertain_pairs(threshold, scene.predictions())
+        # without a budget, then with a budget of 0, which defers every pair to the cheap
+        # intervals (core.uncertainty.interval): a fresh scene, as answers are kept
+        for budget in (None, 0):
+            scene = _two_bodies(d, horizon)
+            scene.merge(["a"], [2], np.eye(1, d), np.zeros((1, d)), np.zeros((1, d)), [1.0],
+                        [False], 0, covariances=np.eye(2 * d)[None] * 0.01)
+            scene.uncertain_pairs(threshold, scene.predictions(), max_evaluated=budget)
         load_fallback_kernels(d)
 
 

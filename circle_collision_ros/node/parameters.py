@@ -114,9 +114,9 @@ PARAMS: tuple[ParamSpec, ...] = (
         Parameter.Type.INTEGER,
         4,
         "Uncertain pairs given the full probability evaluation per prediction, longest-waiting "
-        "first, then earliest possible contact (0: all); the others are reported with "
-        "probability 1.0, bound 1.0 "
-        "(deferred, counted in /diagnostics). A count, so replay is bit-identical.",
+        "first, then earliest possible contact (0: all); the others are reported with a "
+        "cheap certified interval of their states as probability +- bound (deferred, counted "
+        "in /diagnostics). A count, so replay is bit-identical.",
         read_only=True,
         int_range=(0, 1_000_000),
     ),

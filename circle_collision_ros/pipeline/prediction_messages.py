@@ -200,8 +200,12 @@ class ScenePrediction:
             )
         extra = np.ones(len(u), dtype=bool)
         extra[found[found >= 0]] = False
+        # a deferred row states an interval: listed when it reaches the threshold, since its
+        # probability may lie anywhere in it
+        reach = u.probability if u.deferred_rows is None else np.where(
+            u.deferred_rows, u.probability + u.probability_bound, u.probability)
         extra &= (
-            (u.probability >= self.probability_threshold)
+            (reach >= self.probability_threshold)
             & np.isfinite(u.probability)
             & np.isfinite(u.probability_bound)
         )

@@ -42,11 +42,12 @@ class PredictorConfig:
     an uncertain pair whose mean paths miss is reported when its probability of
     contact reaches it, and the plausible time is when the overlap probability does.
     uncertain_pair_budget : at most this many uncertain pairs get the full probability
-    evaluation per prediction (0: all); the rest are deferred, reported with probability
-    1.0 and bound 1.0 (core.uncertainty.uncertain_pairs(max_evaluated=...)). A count, not
-    a time: replay reproduces it bit for bit. use_covariance : False predicts every body on
-    its mean state: covariances are dropped at intake (counted in IntakeReport.covariance_ignored)
-    and the probability kernels are never needed (a first start compiles fewer).
+    evaluation per prediction (0: all); the rest are deferred, reported with a cheap
+    certified interval of their states (core.uncertainty.uncertain_pairs(max_evaluated=...)).
+    A count, not a time: replay reproduces it bit for bit. use_covariance : False predicts
+    every body on its mean state: covariances are dropped at intake (counted in
+    IntakeReport.covariance_ignored) and the probability kernels are never needed (a first
+    start compiles fewer).
     """
 
     horizon: float = 5.0

@@ -13,7 +13,10 @@ Guarantees proved here:
 - Odometry covariance over DDS: the stored covariance is the pose position block and the
   twist linear block rotated by the orientation (R S R^T), cross terms zero;
 - a run with covariance is recorded (the new schema: mcap-ros2-support and rosbags read the
-  covariance and probability fields back from the file alone) and replays bit-identically.
+  covariance and probability fields back from the file alone) and replays bit-identically;
+- a 1,000-body tracker frame with covariance on every body, more uncertain pairs than the
+  budget: no row is a placeholder (1.0 +- 1.0), and every row's interval meets the answer of
+  a node that evaluates every pair fully (|p - q| <= both bounds).
 """
 from __future__ import annotations
 
@@ -34,7 +37,7 @@ from circle_collision_ros.node.collision_node import CollisionNode
 from circle_collision_ros.recording.bag_reader import open_bag
 from circle_collision_ros.recording.replay_engine import RecordedTypes, replay_offline
 from tests.node.conftest import reader_matched, spin_until
-from tests.node_helpers import assert_no_nan, contacts_of, state, state_array
+from tests.node_helpers import assert_no_nan, contacts_of, random_states, state, state_array
 
 SIGMA = 0.3  # m, position standard deviation of the near-miss bodies
 RELIABLE = QoSProfile(depth=50, reliability=ReliabilityPolicy.RELIABLE)
@@ -386,6 +389,38 @@ def test_use_covariance_false_predicts_mean_states_and_says_so(ros_context, ros_
         answer = future.result()
         assert answer.success and "covariance of 3 circle(s) ignored" in answer.message
         assert [(p.id_a, p.id_b) for p in answer.predictions] == [("a", "c")]
+    finally:
+        for node in nodes:
+            node.destroy_node()
+
+
+def test_tracker_frame_beyond_the_budget_has_no_placeholder_rows(ros_context, ros_node) -> None:
+    """1,000 bodies, position sigma 0.3 m and velocity sigma 0.2 m/s each (a tracker frame),
+    through a node with the default budget and one that evaluates every pair (budget 0)."""
+    nodes = _nodes(ros_context, ("/budget", "/all"),
+                   uncertain_pair_budget={"/budget": 4, "/all": 0})
+    try:
+        clients = [Client(ros_node, nodes, f"{ns}/circle_states", f"{ns}/collision_predictions")
+                   for ns in ("/budget", "/all")]
+        states = random_states(1000, seed=34, stamp_ns=_now_ns(ros_node), spread=60.0)
+        for s in states:
+            s.covariance = _covariance(0.3, 0.2)
+        for client in clients:
+            client.send(state_array(states), timeout=60.0)
+        budget, everything = (client.predictions[-1].predictions for client in clients)
+        assert nodes[0].predictor.stats.uncertain_deferred > 20
+        assert nodes[1].predictor.stats.uncertain_deferred == 0
+        full = {(r.id_a, r.id_b): r for r in everything}
+        compared = 0
+        for row in budget:
+            p, b = row.collision_probability, row.collision_probability_bound
+            assert not (p == 1.0 and b == 1.0), (row.id_a, row.id_b)
+            other = full.get((row.id_a, row.id_b))
+            if other is not None:
+                q, e = other.collision_probability, other.collision_probability_bound
+                assert abs(p - q) <= b + e + 1e-12, (row.id_a, row.id_b, p, b, q, e)
+                compared += 1
+        assert compared > 20
     finally:
         for node in nodes:
             node.destroy_node()

@@ -103,3 +103,20 @@ def test_codec_job_evaluates_no_pair(d: int) -> None:
     assert {"_decode_states", "_encode_contacts", "_encode_predictions"} <= loaded
     assert not loaded & {"ttc_scalar", "ttc_scalar2", "certified_pair2", "certified_pair3",
                          "evaluate_rows", "evaluate_and_store", "ordered_query"}
+
+
+def test_a_prepared_covariance_node_compiles_nothing_when_its_budget_defers() -> None:
+    """With covariance and a budget of one full evaluation, frames whose other uncertain pairs
+    are deferred to the cheap intervals compile no new kernel after prepare."""
+    config = PredictorConfig(frame_id="map", max_bodies=40, uncertain_pair_budget=1)
+    predictor = CollisionPredictor(config)
+    assert kernels.prepare(predictor) == ("exact", "messages", "uncertain")
+    before = _signatures()
+    t = 1_000_000_000
+    for n in (40, 2, 40):
+        t += 10_000_000
+        predictor.receive_batch(_batch(n, t, True), t)
+        prediction = predictor.predict()
+        prediction.to_cdr()
+    assert prediction.uncertainty.deferred > 0
+    assert _signatures() == before

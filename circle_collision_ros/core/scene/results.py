@@ -79,8 +79,10 @@ class SceneUncertainty:
     probability: np.ndarray
     probability_bound: np.ndarray
     plausible_ttc: np.ndarray
-    #: rows not evaluated for lack of budget (``max_evaluated``): probability 1.0, bound 1.0
-    deferred: int = 0
+    #: (K,) bool: rows the budget (``max_evaluated``) left without the full evaluation; their
+    #: probability and bound are a cheap certified interval's (core.uncertainty.interval).
+    #: None: no row was deferred
+    deferred_rows: np.ndarray | None = None
     #: (K,) int64: each row's row in `matched` (the contacts given to uncertain_pairs) for the
     #: same pair, -1 if none; None when no contacts were given
     contact_rows: np.ndarray | None = None
@@ -90,6 +92,11 @@ class SceneUncertainty:
 
     def __len__(self) -> int:
         return int(self.probability.shape[0])
+
+    @property
+    def deferred(self) -> int:
+        """How many rows the budget deferred (``deferred_rows``)."""
+        return 0 if self.deferred_rows is None else int(np.count_nonzero(self.deferred_rows))
 
 
 @dataclass(frozen=True)

@@ -178,7 +178,7 @@ class UncertainMixin:
             prob,
             bound,
             plausible,
-            int(np.count_nonzero(~answered)) if max_evaluated is not None else 0,
+            ~answered if max_evaluated is not None and not answered.all() else None,
             contact_rows,
             contacts if contact_rows is not None else None,
             self._id_utf8(sa, sb),
@@ -285,11 +285,7 @@ class UncertainMixin:
         res = unc.uncertain_pairs(*states[0], *states[1], self._h, threshold, screen=True,
                                   max_evaluated=max_evaluated, priority=waited_since,
                                   memo=self._uncertain_memo, screened_first=screened_first)
-        deferred = (
-            res.collision_probability_bound == unc.DEFERRED_BOUND
-            if max_evaluated is not None
-            else np.zeros(sa.size, dtype=bool)
-        )
+        deferred = res.deferred
         # the deferred of the rows that competed wait on (since as looked up); the rest stop
         rows = np.concatenate([r for r, _ in asked]) if asked else EMPTY_I
         since = np.concatenate([w for _, w in asked]) if asked else EMPTY_I

@@ -8,10 +8,11 @@ Method and guarantees: docs/uncertainty.md.
 
 Parts: ``covariance`` (the input check, numpy only), ``batch`` (the API over
 rows), ``pair`` (one pair's evaluation), ``tube`` (the k-sigma tube and the
-screen), ``walk`` (the plausible-time walk), ``reentry`` (accelerating pairs'
-re-entry bounds), ``qmc`` (the sampling fallbacks), ``entry_rate`` (Rice's
-entry rate), ``overlap`` (instantaneous probabilities), ``line_sampling``,
-``quadrature``, ``sobol``.
+screen), ``interval`` (the cheap certified interval of rows left unevaluated),
+``walk`` (the plausible-time walk), ``reentry`` (accelerating pairs' re-entry
+bounds), ``qmc`` (the sampling fallbacks), ``entry_rate`` (Rice's entry rate),
+``overlap`` (instantaneous probabilities), ``line_sampling``, ``quadrature``,
+``sobol``.
 
 Only ``covariance`` is imported with the package; the names of ``batch`` (and
 the numba kernels behind them) load on first use.
@@ -19,8 +20,8 @@ the numba kernels behind them) load on first use.
 from circle_collision_ros.core.uncertainty.covariance import (COV_PSD_RTOL, COV_SYMMETRY_RTOL,
                                                               covariance_problem)
 
-__all__ = ["UncertainPairs", "uncertain_pairs", "deferred_count", "DEFERRED_PROBABILITY",
-           "DEFERRED_BOUND", "BROAD_PHASE_SIGMAS", "TUBE_TAIL", "inflation_radius",
+__all__ = ["UncertainPairs", "uncertain_pairs", "deferred_count", "BROAD_PHASE_SIGMAS",
+           "TUBE_TAIL", "inflation_radius",
            "covariance_problem", "COV_SYMMETRY_RTOL", "COV_PSD_RTOL", "load_fallback_kernels"]
 
 _FROM_BATCH = frozenset(__all__) - {"covariance_problem", "COV_SYMMETRY_RTOL", "COV_PSD_RTOL"}

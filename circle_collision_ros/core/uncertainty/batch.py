@@ -31,6 +31,7 @@ from typing import NamedTuple
 import numpy as np
 
 from circle_collision_ros.core.narrow import time_to_collision
+from circle_collision_ros.core.uncertainty.interval import cheap_intervals
 from circle_collision_ros.core.uncertainty.pair import (OUT_SIZE, evaluate_uncertain_rows,
                                                         finish_row, relative_rows)
 from circle_collision_ros.core.uncertainty.qmc import (factor, line_sampled_probability,
@@ -40,18 +41,20 @@ from circle_collision_ros.core.uncertainty.tube import (BROAD_PHASE_SIGMAS, TUBE
                                                         max_sigma_rows, row_classes, screen_rows_at,
                                                         screen_sigmas)
 
-__all__ = ["UncertainPairs", "uncertain_pairs", "deferred_count", "DEFERRED_PROBABILITY",
-           "DEFERRED_BOUND", "BROAD_PHASE_SIGMAS", "TUBE_TAIL", "inflation_radius",
-           "load_fallback_kernels"]
+__all__ = ["UncertainPairs", "uncertain_pairs", "deferred_count", "BROAD_PHASE_SIGMAS",
+           "TUBE_TAIL", "inflation_radius", "load_fallback_kernels"]
 
 
 class UncertainPairs(NamedTuple):
-    """Per-row results of ``uncertain_pairs`` (all (n,) float64)."""
+    """Per-row results of ``uncertain_pairs``: three (n,) float64 columns and a (n,) bool."""
 
     collision_probability: np.ndarray  # P(contact within [0, H])
     collision_probability_bound: np.ndarray  # stated bound on |reported - true|
     # s: first t in [0, H] with P(|X(t)| <= R) >= threshold; +inf if none
     plausible_time: np.ndarray
+    # (n,) bool: rows the budget left without the full evaluation (max_evaluated): their
+    # probability and bound are the cheap certified interval's (interval.cheap_intervals)
+    deferred: np.ndarray
 
 
 def _rows(x, n, D, name):
@@ -88,10 +91,11 @@ def uncertain_pairs(pa, va, aa, ra, cov_a, pb, vb, ab, rb, cov_b, horizon: float
     max_evaluated=m (with screen=True): at most m uncertain rows get the full
     evaluation, those whose screening tube may reach the ball first (ties:
     row order; deterministic, no clock); every other unscreened row is
-    *deferred*: answered (1.0, 1.0, t_first), i.e. "possible, not evaluated":
-    the bound 1.0 holds for any probability, and t_first (where the screening
+    *deferred*: answered from a cheap certified interval [lo, hi] of this call's
+    states (``interval.cheap_intervals``) as ((lo + hi) / 2, (hi - lo) / 2,
+    t_first): still |reported - true| <= bound, and t_first (where the screening
     tube first may reach the ball) is never later than the true plausible time.
-    ``deferred_count(result)`` counts them.
+    ``result.deferred`` marks them; ``deferred_count(result)`` counts them.
 
     priority (with max_evaluated): called once, only when more than
     max_evaluated rows need the full evaluation, with those rows' indices
@@ -137,6 +141,7 @@ def uncertain_pairs(pa, va, aa, ra, cov_a, pb, vb, ab, rb, cov_b, horizon: float
 
     prob = np.zeros(n)
     bound = np.zeros(n)
+    deferred = np.zeros(n, dtype=np.bool_)
     tpl = np.empty(n)
     tpl.fill(np.inf)  # (np.full costs more than the rest of a one-row call's set-up)
     sigma = cov_a + cov_b
@@ -225,7 +230,9 @@ def uncertain_pairs(pa, va, aa, ra, cov_a, pb, vb, ab, rb, cov_b, horizon: float
         order = np.lexsort((todo, todo_first, rank))
         later = np.sort(order[m:])
         rows = todo[later]
-        prob[rows], bound[rows], tpl[rows] = DEFERRED_PROBABILITY, DEFERRED_BOUND, todo_first[later]
+        lo, hi = cheap_intervals(pa, va, aa, ra, pb, vb, ab, rb, sigma, rows, H)
+        prob[rows], bound[rows], tpl[rows] = 0.5 * (lo + hi), 0.5 * (hi - lo), todo_first[later]
+        deferred[rows] = True
         now = np.sort(order[:m])
         todo, dp, dv, da, rad, sig = todo[now], dp[now], dv[now], da[now], rad[now], sig[now]
     out = np.empty((todo.size, OUT_SIZE))
@@ -239,17 +246,12 @@ def uncertain_pairs(pa, va, aa, ra, cov_a, pb, vb, ab, rb, cov_b, horizon: float
     if memo is not None:
         memo.clear()
         memo.update(fresh)
-    return UncertainPairs(prob, bound, tpl)
-
-
-DEFERRED_PROBABILITY = 1.0  # a row uncertain_pairs(max_evaluated=...) did not evaluate
-DEFERRED_BOUND = 1.0
+    return UncertainPairs(prob, bound, tpl, deferred)
 
 
 def deferred_count(result: UncertainPairs) -> int:
-    """Rows of ``result`` deferred by ``max_evaluated`` (probability 1.0 with bound 1.0: a
-    full evaluation states a bound below 1: RQMC at most ~0.53, the rest <= 0.02)."""
-    return int(np.count_nonzero(result.collision_probability_bound == DEFERRED_BOUND))
+    """Rows of ``result`` deferred by ``max_evaluated`` (answered by the cheap interval)."""
+    return int(np.count_nonzero(result.deferred))
 
 
 def inflation_radius(cov, horizon: float) -> np.ndarray:

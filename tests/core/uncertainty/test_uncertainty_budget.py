@@ -24,8 +24,7 @@ import math
 import numpy as np
 
 from circle_collision_ros.core.scene import Scene
-from circle_collision_ros.core.uncertainty import (DEFERRED_BOUND, batch, deferred_count,
-                                                   uncertain_pairs)
+from circle_collision_ros.core.uncertainty import batch, deferred_count, uncertain_pairs
 from circle_collision_ros.core.uncertainty.tube import screen_sigmas
 
 BASE = 1_700_000_000 * 1_000_000_000
@@ -57,6 +56,13 @@ def _rows(u):
     }
 
 
+def _deferred(u) -> set:
+    """The pairs of a SceneUncertainty the budget deferred."""
+    if u.deferred_rows is None:
+        return set()
+    return {(u.id_a[j], u.id_b[j]) for j in np.flatnonzero(u.deferred_rows)}
+
+
 def test_budget_serves_the_longest_waiting_pairs_first() -> None:
     ids, p, v, r, cov = _crowd(14, seed=3)
     m = 2
@@ -82,8 +88,9 @@ def test_budget_serves_the_longest_waiting_pairs_first() -> None:
         )
         want = _rows(full)
         state = {}
+        waiting = _deferred(got)
         for key, (prob, bound, t) in _rows(got).items():
-            if bound == DEFERRED_BOUND:
+            if key in waiting:
                 state[key] = "deferred"
             elif bound != U:  # not cleared by the screen: fully evaluated, the unbudgeted bits
                 assert (prob, bound, t) == want[key]
@@ -123,11 +130,11 @@ def test_memo_reuses_full_evaluations_outside_the_budget() -> None:
     m = 3
     memo: dict = {}
     first = uncertain_pairs(*args, H, THR, screen=True, max_evaluated=m, memo=memo)
-    done1 = np.flatnonzero(first.collision_probability_bound != DEFERRED_BOUND)
-    open1 = np.flatnonzero(first.collision_probability_bound == DEFERRED_BOUND)
+    done1 = np.flatnonzero(~first.deferred)
+    open1 = np.flatnonzero(first.deferred)
     assert open1.size > m and len(memo) == m
     second = uncertain_pairs(*args, H, THR, screen=True, max_evaluated=m, memo=memo)
-    deferred2 = second.collision_probability_bound == DEFERRED_BOUND
+    deferred2 = second.deferred
     assert np.count_nonzero(deferred2) == open1.size - m  # the m reused rows did not count
     assert len(memo) == 2 * m
     for f, g in zip(full, second):
@@ -151,7 +158,7 @@ def test_scene_reuses_pairs_a_change_elsewhere_leaves_alone() -> None:
     after = scene.uncertain_pairs(THR, scene.predictions(), max_evaluated=m)
     rows0, rows1 = _rows(before), _rows(after)
     assert rows0.keys() == rows1.keys()
-    done0 = {k for k, x in rows0.items() if x[1] != DEFERRED_BOUND}
+    done0 = rows0.keys() - _deferred(before)
     assert all(rows1[k] == rows0[k] for k in done0)
     assert after.deferred == before.deferred - m > 0
 
@@ -168,8 +175,9 @@ def test_a_body_removed_and_added_again_is_a_new_body_for_the_budget() -> None:
     _, U = screen_sigmas(THR, 4)
 
     def kinds(u):
+        waiting = _deferred(u)
         return {
-            k: "deferred" if e == DEFERRED_BOUND else ("screened" if e == U else "evaluated")
+            k: "deferred" if k in waiting else ("screened" if e == U else "evaluated")
             for k, (_, e, _) in _rows(u).items()
         }
 
@@ -216,7 +224,7 @@ def test_waiting_rows_with_known_screening_skip_the_screen(monkeypatch) -> None:
     cov = np.tile(np.diag([0.04, 0.04, 0.01, 0.01]), (n, 1, 1))
     args = (pa, va, zero, r, cov, zero, zero, zero, r, cov)
     first = uncertain_pairs(*args, H, THR, screen=True, max_evaluated=3)
-    waiting = first.collision_probability_bound == DEFERRED_BOUND
+    waiting = first.deferred
     assert waiting.sum() > 5
     known = np.where(waiting, first.plausible_time, np.nan)
     seen = _screened_rows(monkeypatch)

@@ -118,8 +118,9 @@ def test_screen_leaves_exact_rows_alone():
 
 def test_budget_defers_the_latest_pairs_honestly():
     """max_evaluated=m: the m uncleared rows whose screening tube may reach the ball first get
-    the full answer (bit for bit); the others (1.0, 1.0, t_first) with t_first never later
-    than the full answer's plausible time; deferred_count counts them."""
+    the full answer (bit for bit); the others the cheap certified interval of their own states
+    (probability +- bound containing the full answer, never 1.0 +- 1.0) with t_first never
+    later than the full answer's plausible time; deferred_count counts them."""
     from circle_collision_ros.core.uncertainty import deferred_count
 
     rng = np.random.default_rng(21)
@@ -131,9 +132,12 @@ def test_budget_defers_the_latest_pairs_honestly():
     assert open_rows.size > 5
     m = 3
     part = uncertain_pairs(*args, H, thr, screen=True, max_evaluated=m)
-    deferred = part.collision_probability_bound == 1.0
+    deferred = part.deferred
     assert deferred_count(part) == np.count_nonzero(deferred) == open_rows.size - m
-    assert np.all(part.collision_probability[deferred] == 1.0)
+    p, b = part.collision_probability[deferred], part.collision_probability_bound[deferred]
+    q, e = full.collision_probability[deferred], full.collision_probability_bound[deferred]
+    assert np.all(np.abs(p - q) <= b + e)
+    assert np.all((p - b >= 0.0) & (p + b <= 1.0)) and not np.any((p == 1.0) & (b == 1.0))
     assert np.all(part.plausible_time[deferred] <= full.plausible_time[deferred])
     kept = ~deferred
     for f, g in zip(full, part):

@@ -1,0 +1,96 @@
+"""A cheap certified interval for P(contact within [0, H]), for rows without the full evaluation.
+
+When the per-prediction budget leaves a pair unevaluated, its row still states an interval
+[lo, hi] that contains the true probability, computed from this call's states in a few
+microseconds:
+
+* hi: the k-sigma tube screen (``tube.screen_rows_at``) at a ladder of k, largest first;
+  the first k whose tube never reaches the ball gives hi = P(chi^2_2D > k^2), since every
+  contact path has |z| > k (docs/uncertainty.md, "Screening"); 1 where none does.
+* lo: P(contact within [0, H]) >= P(|X(t)| <= R) at any t in [0, H] (a body overlapping
+  at t has touched by t), at the t of the mean path's closest approach on a grid,
+  less the stated error of ``overlap_probability`` (P0_ERR); 0 at worst.
+
+The row then reads probability (lo + hi) / 2 with bound (hi - lo) / 2: the same meaning as a
+fully evaluated row's, |reported - true| <= bound.  An interval as wide as [0, 1] reads
+0.5 +- 0.5, which says "unknown", never "certain contact".
+
+References
+----------
+.. [1] docs/uncertainty.md, "Screening" (the tube and the chi-square tail) and
+   "Screening and the per-prediction budget".
+"""
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+from circle_collision_ros.core.uncertainty.overlap import overlap_probability
+from circle_collision_ros.core.uncertainty.tube import S_at, screen_rows_at, screen_sigmas
+from circle_collision_ros.core.uncertainty.walk import P0_ERR
+
+__all__ = ["INTERVAL_TAILS", "CLOSEST_GRID", "cheap_intervals", "lower_bounds_at"]
+
+#: Upper bounds tried, smallest first (each P(chi^2_2D > k^2) of its k): ten steps up to
+#: 0.5, then 0.8; a row that no tube of these clears gets hi = 1.
+INTERVAL_TAILS = (0.001, 0.002, 0.005, 0.01, 0.02, 0.05, 0.1, 0.2, 0.35, 0.5, 0.8)
+#: Grid points on [0, H] where the mean relative distance is compared for the lower bound.
+CLOSEST_GRID = 64
+
+
+@njit(cache=True, error_model="numpy")
+def lower_bounds_at(pa, va, aa, ra, pb, vb, ab, rb, sigma, rows, H, lo):
+    """lo[j] = max(0, P(|X(t*)| <= R) - P0_ERR) for row ``rows[j]`` of the per-body arrays,
+    t* the point of a CLOSEST_GRID-step grid on [0, H] nearest the ball along the mean
+    relative path m(t) = dp + dv t + da t^2 / 2 (X(t) ~ N(m(t), S(t)), S_at).  A lower
+    bound on P(contact within [0, H]) whatever t* is; the grid only makes it tight."""
+    D = pa.shape[1]
+    mean = np.empty(D)
+    for j in range(rows.shape[0]):
+        i = rows[j]
+        best_t, best = 0.0, np.inf
+        for g in range(CLOSEST_GRID + 1):
+            t = H * g / CLOSEST_GRID
+            d2 = 0.0
+            for c in range(D):
+                m = (pa[i, c] - pb[i, c]) + (va[i, c] - vb[i, c]) * t \
+                    + 0.5 * (aa[i, c] - ab[i, c]) * t * t
+                d2 += m * m
+            if d2 < best:
+                best, best_t = d2, t
+        for c in range(D):
+            t = best_t
+            mean[c] = (pa[i, c] - pb[i, c]) + (va[i, c] - vb[i, c]) * t \
+                + 0.5 * (aa[i, c] - ab[i, c]) * t * t
+        p = overlap_probability(mean, S_at(sigma[i], best_t), ra[i] + rb[i])
+        # P0_ERR: overlap_probability's stated absolute error; 0 below it, and where S(t*)
+        # is indefinite by rounding (NaN fails the comparison): 0 is always a bound
+        lo[j] = p - P0_ERR if p - P0_ERR > 0.0 else 0.0
+
+
+def cheap_intervals(pa, va, aa, ra, pb, vb, ab, rb, sigma, rows: np.ndarray,
+                    H: float) -> tuple[np.ndarray, np.ndarray]:
+    """(lo, hi): (len(rows),) certified bounds on P(contact within [0, H]) of the rows
+    ``rows`` of the per-body arrays (as ``uncertain_pairs`` takes them, C-contiguous
+    float64; sigma (n, 2D, 2D) the joint covariance of the relative state).  Deterministic:
+    a function of the rows' inputs and H only."""
+    D = pa.shape[1]
+    n = rows.shape[0]
+    hi = np.ones(n)
+    open_ = np.arange(n)
+    clear = np.empty(n, dtype=np.bool_)
+    t_first = np.empty(n)
+    for tail in INTERVAL_TAILS:
+        if not open_.size:
+            break
+        k, U = screen_sigmas(2.0 * tail, 2 * D)  # the k with P(chi^2_2D > k^2) = U <= tail
+        m = open_.size
+        screen_rows_at(pa, va, aa, ra, pb, vb, ab, rb, sigma, rows[open_], H, k, clear[:m],
+                       t_first[:m])
+        done = clear[:m]
+        hi[open_[done]] = U
+        open_ = open_[~done]
+    lo = np.empty(n)
+    lower_bounds_at(pa, va, aa, ra, pb, vb, ab, rb, sigma, rows, H, lo)
+    # both are bounds on one number, so lo <= hi up to the stated errors; keep the order
+    return np.minimum(lo, hi), hi
