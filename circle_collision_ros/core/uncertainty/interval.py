@@ -4,9 +4,9 @@ When the per-prediction budget leaves a pair unevaluated, its row still states a
 [lo, hi] that contains the true probability, computed from this call's states in a few
 microseconds:
 
-* hi: the k-sigma tube screen (``tube.screen_rows_at``) at a ladder of k, largest first;
-  the first k whose tube never reaches the ball gives hi = P(chi^2_2D > k^2), since every
-  contact path has |z| > k (docs/uncertainty.md, "Screening"); 1 where none does.
+* hi: the k-sigma tube screen (``tube.screen_rows_at``) on a ladder of k, by bisection: the
+  largest k found whose tube never reaches the ball gives hi = P(chi^2_2D > k^2), since
+  every contact path has |z| > k (docs/uncertainty.md, "Screening"); 1 where none does.
 * lo: P(contact within [0, H]) >= P(|X(t)| <= R) at any t in [0, H] (a body overlapping
   at t has touched by t), at the t of the mean path's closest approach on a grid,
   less the stated error of ``overlap_probability`` (P0_ERR); 0 at worst.
@@ -22,6 +22,8 @@ References
 """
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 from numba import njit
 
@@ -29,7 +31,8 @@ from circle_collision_ros.core.uncertainty.overlap import overlap_probability
 from circle_collision_ros.core.uncertainty.tube import S_at, screen_rows_at, screen_sigmas
 from circle_collision_ros.core.uncertainty.walk import P0_ERR
 
-__all__ = ["INTERVAL_TAILS", "CLOSEST_GRID", "cheap_intervals", "lower_bounds_at"]
+__all__ = ["INTERVAL_TAILS", "CLOSEST_GRID", "cheap_intervals", "lower_bounds_at",
+           "upper_bounds_at"]
 
 #: Upper bounds tried, smallest first (each P(chi^2_2D > k^2) of its k): ten steps up to
 #: 0.5, then 0.8; a row that no tube of these clears gets hi = 1.
@@ -68,29 +71,51 @@ def lower_bounds_at(pa, va, aa, ra, pb, vb, ab, rb, sigma, rows, H, lo):
         lo[j] = p - P0_ERR if p - P0_ERR > 0.0 else 0.0
 
 
+@njit(cache=True, error_model="numpy")
+def upper_bounds_at(pa, va, aa, ra, pb, vb, ab, rb, sigma, rows, H, ks, tails, hi):
+    """hi[j] = the smallest of ``tails`` whose tube (k = ks[level], tails ascending, ks
+    descending) the screen finds never reaching the ball for row ``rows[j]``, by bisection
+    over the levels; 1 where the largest tail's tube reaches it.  Every level the screen
+    clears bounds the probability (tube.screen_rows), so the answer is certified even where
+    clearing were not monotone in k; bisection only makes it the smallest in ~log2 screens."""
+    clear = np.empty(1, dtype=np.bool_)
+    t_first = np.empty(1)
+    top = ks.shape[0] - 1
+    for j in range(rows.shape[0]):
+        one = rows[j:j + 1]
+        screen_rows_at(pa, va, aa, ra, pb, vb, ab, rb, sigma, one, H, ks[top], clear, t_first)
+        if not clear[0]:
+            hi[j] = 1.0
+            continue
+        good, bad = top, -1  # levels: good cleared; none at or below bad is known cleared
+        while good - bad > 1:
+            mid = (good + bad) // 2
+            screen_rows_at(pa, va, aa, ra, pb, vb, ab, rb, sigma, one, H, ks[mid], clear, t_first)
+            if clear[0]:
+                good = mid
+            else:
+                bad = mid
+        hi[j] = tails[good]
+
+
 def cheap_intervals(pa, va, aa, ra, pb, vb, ab, rb, sigma, rows: np.ndarray,
                     H: float) -> tuple[np.ndarray, np.ndarray]:
     """(lo, hi): (len(rows),) certified bounds on P(contact within [0, H]) of the rows
     ``rows`` of the per-body arrays (as ``uncertain_pairs`` takes them, C-contiguous
     float64; sigma (n, 2D, 2D) the joint covariance of the relative state).  Deterministic:
     a function of the rows' inputs and H only."""
-    D = pa.shape[1]
+    ks, tails = _ladder(2 * pa.shape[1])
     n = rows.shape[0]
-    hi = np.ones(n)
-    open_ = np.arange(n)
-    clear = np.empty(n, dtype=np.bool_)
-    t_first = np.empty(n)
-    for tail in INTERVAL_TAILS:
-        if not open_.size:
-            break
-        k, U = screen_sigmas(2.0 * tail, 2 * D)  # the k with P(chi^2_2D > k^2) = U <= tail
-        m = open_.size
-        screen_rows_at(pa, va, aa, ra, pb, vb, ab, rb, sigma, rows[open_], H, k, clear[:m],
-                       t_first[:m])
-        done = clear[:m]
-        hi[open_[done]] = U
-        open_ = open_[~done]
+    hi = np.empty(n)
+    upper_bounds_at(pa, va, aa, ra, pb, vb, ab, rb, sigma, rows, H, ks, tails, hi)
     lo = np.empty(n)
     lower_bounds_at(pa, va, aa, ra, pb, vb, ab, rb, sigma, rows, H, lo)
     # both are bounds on one number, so lo <= hi up to the stated errors; keep the order
     return np.minimum(lo, hi), hi
+
+
+@functools.lru_cache(maxsize=4)
+def _ladder(dof: int) -> tuple[np.ndarray, np.ndarray]:
+    """(ks, tails) of INTERVAL_TAILS: P(chi^2_dof > ks[i]^2) = tails[i] <= INTERVAL_TAILS[i]."""
+    pairs = [screen_sigmas(2.0 * tail, dof) for tail in INTERVAL_TAILS]
+    return np.array([k for k, _ in pairs]), np.array([u for _, u in pairs])
