@@ -12,6 +12,7 @@ Guarantees proved here:
 """
 from __future__ import annotations
 
+import os
 import subprocess
 import sys
 import threading
@@ -121,7 +122,8 @@ from circle_collision_ros.core.warm_up import warm_scene_parts
 warm_scene_parts({d}, 5.0)
 solver = [f.__name__ for f in (ttc_scalar, ttc_scalar2, kernels.evaluate_rows,
           kernels.evaluate_and_store, kernels.ordered_query) if f.signatures]
-parts = [f.__name__ for f in (kernels.split_and_order, kernels.incremental_pairs) if f.signatures]
+parts = [f.__name__ for f in (kernels.split_and_order, kernels.assemble, kernels.incremental_pairs)
+         if f.signatures]
 print(solver, parts)
 """
 
@@ -132,4 +134,26 @@ def test_scene_parts_never_reach_the_solver(d: int) -> None:
     the ordering and broad-phase kernels and not one kernel that calls the solver."""
     out = subprocess.run([sys.executable, "-c", _PARTS_PROBE.format(d=d)], capture_output=True,
                          text=True, check=True, cwd=warm_up._PACKAGE.parent).stdout
-    assert out.split("\n")[-2] == "[] ['split_and_order', 'incremental_pairs']"
+    assert out.split("\n")[-2] == "[] ['split_and_order', 'assemble', 'incremental_pairs']"
+
+
+_SAME_TYPES_PROBE = """
+import os
+from circle_collision_ros.core import warm_up
+from circle_collision_ros.core.scene import kernels
+warm_up.warm_scene_parts({d}, 5.0)
+warm_up.warm_scenes({d}, 5.0, large=False)
+print(len(kernels.split_and_order.signatures), len(kernels.assemble.signatures))
+"""
+
+
+@pytest.mark.parametrize("d", [2, 3])
+def test_scene_parts_compile_the_types_the_scene_calls(tmp_path, d: int) -> None:
+    """With an empty cache (every kernel compiled in this interpreter, so callees record
+    their signatures), the parts' direct calls and the scene's own calls give each kernel one
+    specialisation: the exact job finds them compiled instead of compiling its own."""
+    env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path)}
+    out = subprocess.run([sys.executable, "-c", _SAME_TYPES_PROBE.format(d=d)],
+                         capture_output=True, text=True, check=True, env=env,
+                         cwd=warm_up._PACKAGE.parent).stdout
+    assert out.split("\n")[-2] == "1 1"

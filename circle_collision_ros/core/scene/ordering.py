@@ -85,12 +85,19 @@ class OrderingMixin:
         return res
 
     def compile_ordering(self) -> None:
-        """Compile (or load) the kernel that keeps the rows in order, on this scene's record
-        arrays, without evaluating a pair: it never calls the solver, so a set-up can compile
-        it beside the solver (``core.warm_up``); ``predictions`` then finds it compiled."""
+        """Compile (or load) the kernels that order and merge the rows, on this scene's record
+        arrays, without evaluating a pair: they never call the solver, so a set-up can compile
+        them beside it (``core.warm_up``); ``predictions`` then finds them compiled."""
         live = self._rlive
         _sk.split_and_order(EMPTY_I, np.flatnonzero(live[:self._rn]), EMPTY_I, live, self._rkey,
                             self._rtp, self._rtau, 0, 1024)
+        # the merge with the types reported_rows passes (fresh C arrays): no future row and one
+        # past one, record 0 (read, not written: the buffers exist from construction)
+        one, zero = np.zeros(1, dtype=np.int64), np.zeros(1)
+        rows = np.zeros((1, self._rpt.shape[1]))
+        _sk.assemble(EMPTY_I, np.empty(0), EMPTY_I, one, zero, np.zeros(1, dtype=np.bool_), rows,
+                     rows, zero, self._ra, self._rb, self._rkey, self._rids, self._rtp, self._rtau,
+                     self._rov, self._rpt, self._rnm, self._rcs, 0)
 
     def _ordered_rows(self):
         """Reportable rows ``(A, B, ttc, contact_ns, overlapping, pt, nm, cs)`` at R, sorted, and
