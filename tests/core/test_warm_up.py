@@ -147,6 +147,7 @@ print(len(kernels.split_and_order.signatures), len(kernels.assemble.signatures))
 """
 
 
+@pytest.mark.stress  # compiles the scene from an empty cache: ~45 s of one core a dimension
 @pytest.mark.parametrize("d", [2, 3])
 def test_scene_parts_compile_the_types_the_scene_calls(tmp_path, d: int) -> None:
     """With an empty cache (every kernel compiled in this interpreter, so callees record
