@@ -9,6 +9,7 @@ other and run side by side:
 
 * ``narrow``: the scalar first-contact solver every scene evaluation calls;
 * ``parts``: the scene's kernels that never call it (broad phase, ordering), beside it;
+* ``rows``: the scene's kernels that evaluate pairs and store records, once ``narrow`` is;
 * ``batch``: the vectorised batch solver of large frames (independent of ``narrow``);
 * ``exact``: the scene's serial kernels (frames, one-body updates);
 * ``large``: frames of more than ``Scene.COMPILED_ROWS`` pairs (the vectorised path);
@@ -48,7 +49,7 @@ from circle_collision_ros.core.scene import Scene
 from circle_collision_ros.core.uncertainty import load_fallback_kernels
 
 __all__ = ["Job", "CORE_JOBS", "large_frames_reachable", "threads_reachable", "warm_scene_parts",
-           "warm_scenes", "warm_large_frames", "warm_uncertain",
+           "warm_scene_rows", "warm_scenes", "warm_large_frames", "warm_uncertain",
            "source_hash", "is_compiled", "with_dependencies", "compile_jobs", "main"]
 
 _PACKAGE = Path(__file__).resolve().parents[1]
@@ -116,6 +117,16 @@ def warm_scene_parts(dimensions: int, horizon: float) -> None:
     _stream(d, horizon, spacing=1e3)
 
 
+def warm_scene_rows(dimensions: int, horizon: float) -> None:
+    """Run the scene's kernels that evaluate pairs and store records (``Scene.
+    compile_evaluation``): they call the solver and nothing of ``parts``, so they compile as
+    soon as ``narrow`` is, beside the rest of ``parts``."""
+    scene = Scene(horizon, dimensions)
+    scene.upsert_many(["a", "b"], np.eye(2, dimensions), np.zeros((2, dimensions)),
+                      np.zeros((2, dimensions)), np.ones(2), 1)
+    scene.compile_evaluation()
+
+
 def _stream(d: int, horizon: float, spacing: float) -> None:
     """A stream of single states, bodies arriving one by one ``spacing`` apart: the compiled
     query passes, including the specialisations for the read-only arrays a published
@@ -173,7 +184,9 @@ CORE_JOBS: dict[str, Job] = {
     "narrow": Job(_narrow, (), _MODULE),
     "parts": Job(warm_scene_parts, (), _MODULE),
     "batch": Job(_batch, (), _MODULE),
-    "exact": Job(lambda d, h: warm_scenes(d, h, large=False), ("narrow", "parts"), _MODULE),
+    "rows": Job(warm_scene_rows, ("narrow",), _MODULE),
+    "exact": Job(lambda d, h: warm_scenes(d, h, large=False), ("narrow", "parts", "rows"),
+                 _MODULE),
     "large": Job(warm_large_frames, ("exact", "batch"), _MODULE),
     "threads": Job(lambda d, h: warm_scenes(d, h, threaded=True), ("large",), _MODULE),
     "uncertain": Job(warm_uncertain, ("exact",), _MODULE),

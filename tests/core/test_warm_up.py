@@ -8,7 +8,8 @@ Guarantees proved here:
 - a failing job raises RuntimeError naming the job and carrying its output;
 - threads_reachable follows the parallel policy's smallest threshold;
 - the ``parts`` job never reaches the solver or a kernel that calls it, so it can compile
-  beside ``narrow``, and ``exact`` then compiles only the solver's callers.
+  beside ``narrow``; the ``rows`` job reaches nothing of ``parts``, so it can compile beside
+  it once ``narrow`` is done; their direct calls compile the types the scene calls.
 """
 from __future__ import annotations
 
@@ -128,6 +129,25 @@ print(solver, parts)
 """
 
 
+_ROWS_PROBE = """
+from circle_collision_ros.core.scene import kernels
+from circle_collision_ros.core.warm_up import warm_scene_rows
+warm_scene_rows({d}, 5.0)
+print([f.__name__ for f in (kernels.evaluate_rows, kernels.evaluate_and_store) if f.signatures],
+      [f.__name__ for f in (kernels.split_and_order, kernels.assemble, kernels.incremental_pairs,
+                            kernels.ordered_query) if f.signatures])
+"""
+
+
+@pytest.mark.parametrize("d", [2, 3])
+def test_scene_rows_reach_no_part_of_the_parts_job(d: int) -> None:
+    """The rows job loads the kernels that evaluate and store pairs, and nothing the parts job
+    compiles (so it can run once ``narrow`` is done, beside ``parts``)."""
+    out = subprocess.run([sys.executable, "-c", _ROWS_PROBE.format(d=d)], capture_output=True,
+                         text=True, check=True, cwd=warm_up._PACKAGE.parent).stdout
+    assert out.split("\n")[-2] == "['evaluate_rows', 'evaluate_and_store'] []"
+
+
 @pytest.mark.parametrize("d", [2, 3])
 def test_scene_parts_never_reach_the_solver(d: int) -> None:
     """In a fresh interpreter (no kernel loaded yet), the parts job's scenes load or compile
@@ -142,8 +162,10 @@ import os
 from circle_collision_ros.core import warm_up
 from circle_collision_ros.core.scene import kernels
 warm_up.warm_scene_parts({d}, 5.0)
+warm_up.warm_scene_rows({d}, 5.0)
 warm_up.warm_scenes({d}, 5.0, large=False)
-print(len(kernels.split_and_order.signatures), len(kernels.assemble.signatures))
+print(*(len(f.signatures) for f in (kernels.split_and_order, kernels.assemble,
+                                    kernels.evaluate_rows, kernels.evaluate_and_store)))
 """
 
 
@@ -151,10 +173,10 @@ print(len(kernels.split_and_order.signatures), len(kernels.assemble.signatures))
 @pytest.mark.parametrize("d", [2, 3])
 def test_scene_parts_compile_the_types_the_scene_calls(tmp_path, d: int) -> None:
     """With an empty cache (every kernel compiled in this interpreter, so callees record
-    their signatures), the parts' direct calls and the scene's own calls give each kernel one
-    specialisation: the exact job finds them compiled instead of compiling its own."""
+    their signatures), the direct calls of the parts and rows jobs and the scene's own calls
+    give each kernel one specialisation: the exact job finds them compiled."""
     env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path)}
     out = subprocess.run([sys.executable, "-c", _SAME_TYPES_PROBE.format(d=d)],
                          capture_output=True, text=True, check=True, env=env,
                          cwd=warm_up._PACKAGE.parent).stdout
-    assert out.split("\n")[-2] == "1 1"
+    assert out.split("\n")[-2] == "1 1 1 1"

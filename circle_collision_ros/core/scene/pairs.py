@@ -63,6 +63,20 @@ class PairsMixin:
             ov[z] = np.linalg.norm(pa[hz] - pb[hz], axis=1) - (ra[hz] + rb[hz]) < 0.0
         return hit, t_eval[h], tau[h], pt, nm, cs, ov
 
+    def compile_evaluation(self) -> None:
+        """Compile (or load) the kernels that evaluate pairs and store their records, on this
+        scene's arrays and no pair: they call the solver and no broad-phase or ordering kernel,
+        so a set-up can compile them as soon as the solver is (``core.warm_up``)."""
+        D, e = self._dim, np.empty(0)
+        _sk.evaluate_rows(self._P, self._V, self._A, self._R, self._T, EMPTY_I, EMPTY_I, EMPTY_I,
+                          self._h_eval, e, np.empty((0, D)), np.empty((0, D)), e,
+                          np.empty(0, dtype=np.bool_), self._Z)
+        _sk.evaluate_and_store(EMPTY_I, EMPTY_I, 0, self._P, self._V, self._A, self._R, self._T,
+                               self._h_eval, self._ra, self._rb, self._rtp, self._rtau, self._rpt,
+                               self._rnm, self._rcs, self._rov, self._rlive, self._rnext,
+                               self._rhead, self._rsP, self._rsV, self._rsA, self._rsR, self._rsT,
+                               self._reserve_records(0), self._Z)
+
     def _evaluate_at_tp(self, A, B, compiled: bool | None = None):
         t_p = np.maximum(self._epoch, np.maximum(self._T[A], self._T[B]))
         return self._evaluate(A, B, t_p, self._h_eval, compiled)
