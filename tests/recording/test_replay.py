@@ -236,11 +236,16 @@ def test_sigterm_closes_the_bag_and_replay_publish_drives_a_live_node(tmp_path: 
     assert "Traceback" not in output
     contents = open_bag(bag)  # strict: a complete file with summary and footer
     assert not contents.truncated
-    assert contents.topics["/circle_states"].message_count > 20
-    assert contents.topics["/collision_predictions"].message_count > 20
+    n_in = contents.topics["/circle_states"].message_count
+    n_out = contents.topics["/collision_predictions"].message_count
+    assert n_in > 20
+    # Each prediction answers at least one input. On a loaded machine the node answers inputs
+    # that wait together with one prediction (docs/node.md, "Fresh, coalesced output"), so the
+    # number of predictions is the machine's to choose; that replay reproduces every one is not.
+    assert 1 <= n_out <= n_in
     assert "recording_state: closed" in (bag / "metadata.yaml").read_text()
     report = replay_offline(_records(bag))
-    assert report.ok and report.predictions > 20
+    assert report.ok and report.predictions == n_out
     shutil.rmtree(bag)
 
 
