@@ -246,8 +246,8 @@ def main() -> int:
         f"published: {statistics.median(reported):.0f} (of which mean contacts "
         f"{statistics.median(contacts):.0f}); deferred (budget) {statistics.median(deferred):.0f}"
     )
-    p = np.concatenate([b[0] for b in bounds])
-    e = np.concatenate([b[1] for b in bounds])
+    p = np.concatenate([np.empty(0)] + [b[0] for b in bounds])
+    e = np.concatenate([np.empty(0)] + [b[1] for b in bounds])
     print(
         f"published uncertain rows: {p.size}; placeholders (1.0 +- 1.0): "
         f"{np.count_nonzero((p == 1.0) & (e == 1.0))}; bound <= 0.01: "

@@ -12,7 +12,7 @@ other and run side by side:
 * ``rows``: the scene's kernels that evaluate pairs and store records, once ``narrow`` is;
 * ``batch``: the vectorised batch solver of large frames (independent of ``narrow``);
 * ``exact``: the scene's serial kernels (frames, one-body updates);
-* ``large``: frames of more than ``Scene.COMPILED_ROWS`` pairs (the vectorised path);
+* ``large``: frames of ``Scene.COMPILED_ROWS`` pairs or more (the vectorised path);
 * ``threads``: the threaded twins the parallel policy picks for large frames;
 * ``uncertain``: the probability of contact (screen, per-pair kernels and fallbacks).
 
@@ -64,8 +64,8 @@ class Job(NamedTuple):
 
 
 def large_frames_reachable(max_bodies: int) -> bool:
-    """Whether a scene of at most ``max_bodies`` bodies can have more than
-    ``Scene.COMPILED_ROWS`` pairs to evaluate at once (the vectorised path)."""
+    """Whether a scene of at most ``max_bodies`` bodies can have ``Scene.COMPILED_ROWS`` pairs
+    or more to evaluate at once (the vectorised path)."""
     return max_bodies * (max_bodies - 1) // 2 >= Scene.COMPILED_ROWS
 
 
@@ -143,8 +143,8 @@ def _stream(d: int, horizon: float, spacing: float) -> None:
 def warm_scenes(dimensions: int, horizon: float, threaded: bool = False,
                 large: bool = True) -> None:
     """Run the scene's kernels once on tiny scenes: a two-body frame, a stream of one-body
-    updates and (``large``) a 100-body frame, the vectorised path of frames of more than
-    ``Scene.COMPILED_ROWS`` pairs; ``threaded``: with the threaded twins forced."""
+    updates and (``large``) a 100-body frame, the vectorised path of frames of
+    ``Scene.COMPILED_ROWS`` pairs or more; ``threaded``: with the threaded twins forced."""
     with threads_forced(threaded):
         _two_bodies(dimensions, horizon)
         _stream(dimensions, horizon, spacing=0.5)
@@ -153,8 +153,8 @@ def warm_scenes(dimensions: int, horizon: float, threaded: bool = False,
 
 
 def warm_large_frames(dimensions: int, horizon: float) -> None:
-    """A rebuild (a tracker array, an epoch crossing) of more than ``Scene.COMPILED_ROWS``
-    pairs, which runs the vectorised kernels: 100 overlapping bodies."""
+    """A rebuild (a tracker array, an epoch crossing) of ``Scene.COMPILED_ROWS`` pairs or more,
+    which runs the vectorised kernels: 100 overlapping bodies."""
     d, k = dimensions, 100
     rows = np.random.default_rng(0).uniform(0.0, 1.0, (k, d))
     crowd = Scene(horizon, d)

@@ -2,7 +2,7 @@
 
 Namespaces: `bodies` (one cylinder or sphere per body, coloured by its most
 urgent contact) and `contacts` (a small sphere at each predicted contact
-point). Probability (issue 18) is opacity: a body's colour band comes from its
+point). Probability is opacity: a body's colour band comes from its
 earliest plausible contact (= the contact time for exact states) and its alpha
 is scaled by Urgency.opacity of its most probable listed pair; a contact
 sphere's alpha by its pair's probability. Exact contacts (probability 1) are

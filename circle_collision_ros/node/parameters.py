@@ -105,7 +105,8 @@ PARAMS: tuple[ParamSpec, ...] = (
         Parameter.Type.DOUBLE,
         0.01,
         "In (0, 1]: an uncertain pair (covariance given) whose mean paths miss is reported when "
-        "its probability of contact within the horizon reaches this; plausible_time_to_collision "
+        "its probability of contact within the horizon reaches this (a deferred pair: when the "
+        "top of its interval does); plausible_time_to_collision "
         "is the first time the overlap probability does.",
         float_range=(0.0, 1.0),
     ),
@@ -139,7 +140,8 @@ PARAMS: tuple[ParamSpec, ...] = (
     ParamSpec("marker_rate", Parameter.Type.DOUBLE, 10.0,
               "Hz at most for ~/markers; 0 disables markers.", float_range=(0.0, 1000.0)),
     ParamSpec("max_bodies", Parameter.Type.INTEGER, 10_000,
-              "New ids beyond this many are rejected (bounds memory and compute).", read_only=True,
+              "New ids beyond this many are rejected (bounds memory and compute), as are service "
+              "requests of more circles.", read_only=True,
               int_range=(1, 1_000_000)),
     ParamSpec(
         "state_reliability",

@@ -15,7 +15,7 @@ the ROS 2 wire format (OMG XCDR1, little endian, as Fast DDS writes it):
 Two layouts of our interfaces exist on the wire and in recordings: the current
 one (CircleState ends with `float64[<=36] covariance`; CollisionPrediction ends
 with collision_probability, collision_probability_bound,
-plausible_time_to_collision) and the one before issue 18 (neither). The node
+plausible_time_to_collision) and the one before the probability fields (neither). The node
 speaks the current one; replay reads and writes the one a recording's schema
 names (`uncertainty=False`), so old bags replay bit-identically.
 

@@ -8,8 +8,8 @@ every path its configuration lets a message reach, and only those:
 * ``threads`` when ``max_bodies`` lets a frame reach the parallel policy's thresholds;
 * ``uncertain`` (and ``uncertain_threads`` with threads) unless ``use_covariance`` is off.
 
-The core's jobs (``core.warm_up``: ``narrow``, ``parts``, ``batch``, ``exact``,
-``large``, ``threads``, ``uncertain``) need no ROS, so a set-up step can compile
+The core's jobs (``core.warm_up``: ``narrow``, ``parts``, ``rows``, ``batch``,
+``exact``, ``large``, ``threads``, ``uncertain``) need no ROS, so a set-up step can compile
 them while the interfaces build; this module adds the jobs that touch the
 message types.  A cold start
 compiles in separate processes (one per core), each writing numba's cache, then

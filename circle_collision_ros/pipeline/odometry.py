@@ -14,7 +14,7 @@ frame check, latest-by-stamp merge, recording, replay):
 - velocity: `twist.twist.linear`, which REP-105 gives in the `child_frame_id`
   (body) frame, rotated by `pose.pose.orientation` into `header.frame_id`.
   Acceleration: zero (Odometry has none).
-- covariance (issue 18): the position block (x, y, z rows and columns) of
+- covariance: the position block (x, y, z rows and columns) of
   `pose.covariance`, which is in header.frame_id like the pose; the linear
   block of `twist.covariance`, which is in child_frame_id like the twist,
   rotated into header.frame_id as R S R^T by the same orientation; no cross

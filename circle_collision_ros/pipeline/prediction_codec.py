@@ -2,7 +2,7 @@
 
 Encoding (encode_prediction_array, encode_contact_rows) writes the node's
 output bytes in one compiled pass, little-endian XCDR1 (pipeline/cdr.py), the
-current layout or (`uncertainty=False`) the one before issue 18.
+current layout or (`uncertainty=False`) the one before the probability fields.
 
 Decoding (decode_prediction_array, peek_prediction_array) reads what replay
 takes from a recording. A bag is untrusted input, and rclpy's deserializer can
@@ -203,7 +203,7 @@ def encode_prediction_array(stamp: tuple[int, int], frame_id: str, horizon: floa
         refuse, so callers keep times inside int32 range.
     utf8_ids : the same ids already encoded, ``(blob, start_a, len_a, start_b,
         len_b)`` (core.scene.SceneContacts.id_utf8): no per-name work here.
-    uncertainty : False writes the layout before issue 18 (no probability
+    uncertainty : False writes the layout before the probability fields (none
         fields), as recordings of that time hold it (replay).
     """
     if sys.byteorder != "little":  # the views below write native floats

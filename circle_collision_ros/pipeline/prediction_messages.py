@@ -12,9 +12,10 @@ Guarantee: nothing published is NaN. Contacts carry finite times and details;
 NO_CONTACT entries carry time +inf and zeros elsewhere, as the message
 definition documents.
 
-Reporting rule (issue 18): a pair is listed iff its mean contact lies within the
-horizon (the exact path, unchanged), or it has an uncertain body and its
-collision_probability >= probability_threshold (then NO_CONTACT if the mean
+Reporting rule: a pair is listed iff its mean contact lies within the horizon
+(the exact path, unchanged), or it has an uncertain body and its
+collision_probability >= probability_threshold (a pair the budget deferred:
+probability + bound, the top of its interval; then NO_CONTACT if the mean
 paths miss). Rows of exact pairs carry probability 1.0, bound 0.0 and
 plausible time = time_to_collision (NO_CONTACT rows of report_all_pairs: 0.0,
 0.0, +inf). Order: contacts by (time, id_a, id_b) as the scene keeps them;

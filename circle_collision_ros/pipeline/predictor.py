@@ -40,7 +40,8 @@ class PredictorConfig:
     remembered removals). dimensions : 2 (circles, z ignored) or 3 (spheres).
     frame_id : "" adopts the first frame seen. probability_threshold : in (0, 1];
     an uncertain pair whose mean paths miss is reported when its probability of
-    contact reaches it, and the plausible time is when the overlap probability does.
+    contact reaches it (a deferred pair: the top of its interval), and the plausible
+    time is when the overlap probability does.
     uncertain_pair_budget : at most this many uncertain pairs get the full probability
     evaluation per prediction (0: all); the rest are deferred, reported with a cheap
     certified interval of their states (core.uncertainty.uncertain_pairs(max_evaluated=...)).
@@ -93,7 +94,7 @@ class PredictionStats:
     contacts: int = 0
     # pairs the narrow phase evaluated (only changed bodies' pairs when incremental)
     candidate_pairs: int = 0
-    uncertain_deferred: int = 0  # uncertain pairs not evaluated for lack of uncertain_pair_budget
+    uncertain_deferred: int = 0  # uncertain pairs not fully evaluated (uncertain_pair_budget)
     compute_s: float = 0.0
 
 
@@ -320,7 +321,8 @@ def predict_once(states: Sequence[CircleState], config: PredictorConfig,
     Rules (README, "Service"):
     - horizon None or 0 uses config.horizon; any other value must lie in
       [HorizonLimits.MIN_S, HorizonLimits.MAX_S], as for the parameter;
-    - an empty request is refused (there is no scene to predict);
+    - an empty request is refused (there is no scene to predict), and one of more than
+      config.max_bodies circles (the node's compiled paths are prepared for that many);
     - a circle with a zero header.stamp is taken as stamped at `request_time_ns`
       (`ros2 service call` cannot fill in the time); if that is 0 too it is refused;
     - `remove: true` is refused (nothing persists between requests);
@@ -339,6 +341,11 @@ def predict_once(states: Sequence[CircleState], config: PredictorConfig,
         )
     if not states:
         return False, "the request has no circles", None
+    if len(states) > config.max_bodies:
+        # the node prepares its compiled paths for at most max_bodies bodies: a larger request
+        # could meet a cold compile inside the executor that also answers the streams
+        return (False, f"the request has {len(states)} circles; this node predicts at most "
+                f"max_bodies = {config.max_bodies}", None)
     batch = StateBatch.from_messages(states)
     unstamped = batch.stamp_ns == 0
     if unstamped.any() and request_time_ns > 0:

@@ -172,7 +172,7 @@ def decode_states(data: bytes, msg_type: type, *, uncertainty: bool = True) -> S
     """StateBatch from serialized CircleStateArray or CircleState bytes.
 
     uncertainty : False decodes the layout before CircleState had `covariance`
-        (recordings made before issue 18; replay reads the recorded schema).
+        (older recordings; replay reads the recorded schema).
 
     Raises
     ------

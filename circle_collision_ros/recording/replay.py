@@ -35,9 +35,10 @@ from circle_collision_ros.recording.replay_engine import (RecordedLayout, Record
 def current_layout_bytes(record: BagRecord) -> bytes:
     """The record's input bytes in the current interface layout (republishing an older recording).
 
-    A CircleState(Array) recorded before issue 18 is decoded by its recorded layout and
-    written again with an empty covariance (the same states; the array header's frame is
-    carried by each state, as the node reads it). Anything else is returned unchanged.
+    A CircleState(Array) recorded before CircleState had `covariance` is decoded by its
+    recorded layout and written again with an empty covariance (the same states; the array
+    header's frame is carried by each state, as the node reads it). Anything else is returned
+    unchanged.
     """
     if record.type_name not in (
         RecordedTypes.STATE,

@@ -51,7 +51,7 @@ class RecordedTypes:
 class RecordedLayout:
     """Which layout of our interfaces a recorded schema describes (pipeline/cdr.py, "Two layouts").
 
-    A recording made before issue 18 embeds CircleState without `covariance` and
+    An older recording embeds CircleState without `covariance` and
     CollisionPrediction without `collision_probability`; replay decodes its inputs and
     writes its predictions in that layout, so it compares bit for bit. A schema that
     names neither type (empty: not recorded by us) is taken as the current layout.

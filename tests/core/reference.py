@@ -150,7 +150,7 @@ def reference(p_a, v_a, a_a, r_a, p_b, v_b, a_b, r_b, horizon=math.inf) -> Ref:
 
 
 # --------------------------------------------------------------------------
-# Exact-rational reference (issue 17): no rounding before the final one.
+# Exact-rational reference: no rounding before the final one.
 # Independent of circle_collision_ros.core.narrow.exact (which counts roots
 # with Sturm sequences and bisects over float bit patterns): here real roots
 # of the square-free part are isolated with Descartes' rule of signs on

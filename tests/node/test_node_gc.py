@@ -1,6 +1,6 @@
 """collision_node keeps the cyclic garbage collector off its start-up objects.
 
-Measured (issue 14): after start-up a collision_node process holds ~10^5
+Measured: after start-up a collision_node process holds ~10^5
 objects (rclpy, numba's compiled kernels); one full collection over them took
 ~0.4 s, and a 300-body CircleState stream (9,000 states/s) triggered four in
 9 s -- a 0.4 s stall of the stream each time. The executable's node factory

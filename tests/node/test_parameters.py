@@ -202,8 +202,8 @@ def test_string_or_bool_for_double_refused_at_start(value: str) -> None:
 
 
 def test_probability_threshold_is_in_zero_exclusive_to_one(ros_node) -> None:
-    """Issue 18: (0, 1], validated like the other doubles (an integer 1 is the double 1.0);
-    a valid change reaches the predictor, a refused one changes nothing."""
+    """probability_threshold: (0, 1], validated like the other doubles (an integer 1 is the
+    double 1.0); a valid change reaches the predictor, a refused one changes nothing."""
     context, node = _start(["-p", "probability_threshold:=0.05"])
     try:
         assert node.predictor.config.probability_threshold == 0.05

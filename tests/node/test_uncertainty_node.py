@@ -1,4 +1,4 @@
-"""Uncertain states (issue 18) through a live collision_node over real DDS on localhost.
+"""Uncertain states through a live collision_node over real DDS on localhost.
 
 Guarantees proved here:
 - every bad-covariance class (wrong length, NaN, not symmetric, not PSD) is rejected per

@@ -84,7 +84,6 @@ def test_a_prepared_demo_node_compiles_nothing_on_its_frames() -> None:
 
 _CODEC_PROBE = """
 import gc
-import pytest
 from numba.core.registry import CPUDispatcher
 from circle_collision_ros.pipeline.predictor import CollisionPredictor, PredictorConfig
 CollisionPredictor(PredictorConfig(dimensions={d})).warm_up_codec()

@@ -189,7 +189,7 @@ def test_ids_and_radii_from_topics() -> None:
 
 
 def test_covariance_position_block_and_rotated_twist_block() -> None:
-    """Issue 18: pose.covariance's x/y/z block as is (header frame); twist.covariance's linear
+    """pose.covariance's x/y/z block as is (header frame); twist.covariance's linear
     block rotated into the header frame (R S R^T, R from an independent mpmath rotation about z
     by the yaw); no cross terms."""
     yaw = 0.7

@@ -5,7 +5,7 @@ Guarantees proved here for the encoder, on random predictions (2-D and 3-D, empt
 report_all_pairs NO_CONTACT rows, non-ASCII and empty ids, empty and long frame ids):
 - the bytes equal those of the straightforward struct-based writer the node used
   before (kept below as the reference), byte for byte, padding included;
-- the layout before issue 18 (uncertainty=False, what old recordings hold) is the
+- the layout before the probability fields (uncertainty=False, what old recordings hold) is the
   same bytes without the three probability fields;
 - the one-pass encoder of exact contacts (the node's common case) writes the same
   bytes as the general path, and a non-finite row sends it to the general path;
@@ -15,7 +15,7 @@ report_all_pairs NO_CONTACT rows, non-ASCII and empty ids, empty and long frame 
 
 And for the decoder:
 - on every recorded prediction of the test bags (Fast CDR bytes with garbage
-  padding, from a node before issue 18: the layout without the probability
+  padding, from a node before the probability fields: the layout without the probability
   fields) the decoder (uncertainty=False) gives exactly the fields
   mcap-ros2-support decodes by the schema recorded in the file; on the node's
   own encoder output and on rclpy's bytes (current layout) exactly the fields

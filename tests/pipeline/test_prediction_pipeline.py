@@ -223,7 +223,7 @@ def test_predict_once_names_the_bad_circle() -> None:
 
 
 def test_late_state_after_removal_is_ignored() -> None:
-    """Issue 14 repro: a state older than the body's removal must not bring it back."""
+    """A state older than the body's removal must not bring it back."""
     predictor = CollisionPredictor(PredictorConfig(horizon=5.0))
     receive(predictor, [state("a", (0, 0), r=1.0), state("g", (3, 0), (-1, 0, 0), r=1.0)], NOW)
     assert contacts_of(predictor.predict().to_message()) == {("a", "g"): 1.0}
@@ -257,7 +257,7 @@ def test_removal_memory_is_kept_for_stale_timeout() -> None:
 
 
 def test_max_bodies_counts_after_removals_in_the_same_message() -> None:
-    """Issue 14 repro: full scene (3 of 3), one message [remove g, add h] must accept h."""
+    """Full scene (3 of 3), one message [remove g, add h] must accept h."""
     predictor = CollisionPredictor(PredictorConfig(max_bodies=3))
     receive(predictor, [state("a", (0, 0)), state("b", (5, 0)), state("g", (10, 0))], NOW)
     report = receive(

@@ -7,7 +7,8 @@ Guarantees proved here (README, "Service"):
 - a refusal names every bad circle with every reason (a zero stamp never hides
   a negative radius);
 - the horizon follows the parameter's rule: 0 = the node's horizon, otherwise
-  [0.001, 3600] s; an empty request is refused;
+  [0.001, 3600] s; an empty request is refused, and so is one of more circles than
+  max_bodies (the paths the node compiled are for that many), with a message saying so;
 - topics still refuse zero stamps, and the reason says how to stamp.
 """
 from __future__ import annotations
@@ -95,3 +96,12 @@ def test_topics_refuse_zero_stamps_and_say_how_to_stamp() -> None:
     )
     assert report.accepted == 0
     assert "header: {stamp: now}" in report.rejected[0].reason
+
+
+def test_requests_beyond_max_bodies_are_refused() -> None:
+    circles = [state(f"c{k}", (3.0 * k, 0.0)) for k in range(5)]
+    ok, message, out = predict_once(circles, PredictorConfig(max_bodies=4), horizon=1.0)
+    assert not ok and out is None
+    assert message == "the request has 5 circles; this node predicts at most max_bodies = 4"
+    ok, message, out = predict_once(circles[:4], PredictorConfig(max_bodies=4), horizon=1.0)
+    assert ok and out is not None, message

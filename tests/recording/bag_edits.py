@@ -10,7 +10,7 @@ def nudge_first_contact(record) -> bytes:
     """Move the first finite time_to_collision in a prediction record up by one ulp.
 
     Edits the bytes in place, so the record keeps the layout of its recorded schema
-    (before or after issue 18's fields); checks that exactly that field changed.
+    (before or after the probability fields); checks that exactly that field changed.
     """
     import struct
 

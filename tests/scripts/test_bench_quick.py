@@ -1,4 +1,4 @@
-"""The benchmark suite's --quick path produces every file, well-formed (issue #7).
+"""The benchmark suite's --quick path produces every file, well-formed.
 
 Runs ``bench/run_all.py --quick --out <tmp>`` once (about a minute: it starts
 a collision_node through DDS on localhost) and checks the tables' columns and

@@ -1,6 +1,6 @@
 /* The public time_to_collision: a C function that answers one pair itself
- * and hands every other call to the general path (issue 17: one pair from
- * Python in <= 0.8 us).
+ * and hands every other call to the general path (one pair from Python without the
+ * batch entry's array set-up).
  *
  * Why C, and why the public callable itself: measured in one run
  * (bench/bench_core.py --one-pair), numba's dispatcher alone, called with the

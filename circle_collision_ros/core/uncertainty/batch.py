@@ -92,7 +92,7 @@ def uncertain_pairs(pa, va, aa, ra, cov_a, pb, vb, ab, rb, cov_b, horizon: float
     evaluation, those whose screening tube may reach the ball first (ties:
     row order; deterministic, no clock); every other unscreened row is
     *deferred*: answered from a cheap certified interval [lo, hi] of this call's
-    states (``interval.cheap_intervals``) as ((lo + hi) / 2, (hi - lo) / 2,
+    states (``interval.cheap_intervals``) as ((lo + hi) / 2, a bound reaching lo and hi,
     t_first): still |reported - true| <= bound, and t_first (where the screening
     tube first may reach the ball) is never later than the true plausible time.
     ``result.deferred`` marks them; ``deferred_count(result)`` counts them.
@@ -230,8 +230,12 @@ def uncertain_pairs(pa, va, aa, ra, cov_a, pb, vb, ab, rb, cov_b, horizon: float
         order = np.lexsort((todo, todo_first, rank))
         later = np.sort(order[m:])
         rows = todo[later]
-        lo, hi = cheap_intervals(pa, va, aa, ra, pb, vb, ab, rb, sigma, rows, H)
-        prob[rows], bound[rows], tpl[rows] = 0.5 * (lo + hi), 0.5 * (hi - lo), todo_first[later]
+        # on the sign-canonicalised relative rows: a swapped pair gets the same bits
+        lo, hi = cheap_intervals(dp[later], dv[later], da[later], rad[later], sig[later], H)
+        mid = 0.5 * (lo + hi)
+        # hi - mid is exact (Sterbenz: mid >= hi / 2), so mid + bound reaches hi itself
+        prob[rows], bound[rows] = mid, np.maximum(hi - mid, mid - lo)
+        tpl[rows] = todo_first[later]
         deferred[rows] = True
         now = np.sort(order[:m])
         todo, dp, dv, da, rad, sig = todo[now], dp[now], dv[now], da[now], rad[now], sig[now]

@@ -9,7 +9,7 @@ Guarantees proved here:
   numbers -- gets bit for bit the answer of the same row in a batch, as a
   numpy.float64 (numpy's type for a 0-d result), in 2-D and 3-D, with
   finite, infinite and zero horizons:
-  over a random mix with the hard rows of issue 17 (classes A-D, rows for the
+  over a random mix with the hard rows of test_narrow_phase_exact (classes A-D, rows for the
   exact path, constant velocity, span rows) and a hypothesis search.
 * A batch of one -- (1, D) arrays and/or (1,) radii or horizon -- gets the
   batch answer as a float64 array of shape (1,), as the general path returns.

@@ -6,7 +6,7 @@ run scores every third of them, ``--stress`` all):
 * Well-conditioned contacts: ``|t - t_ref| / ulp(t_ref) * |cos| <= 4`` where
   ``cos`` is the angle between the centre line and the relative velocity at
   contact (grazes are inherently sensitive; this normalisation is the one
-  stated in issue #3).  ``t_ref`` is computed from the binary64 inputs *as
+  stated for the narrow phase).  ``t_ref`` is computed from the binary64 inputs *as
   given*: the implementation forms ``p_a - p_b`` etc. exactly (TwoSum), so no
   extra allowance is made for the rounding of the relative state.
 * ``t_ref == 0`` (overlap / approaching touch) must give exactly 0.

@@ -1,11 +1,11 @@
-"""Issue 17: ``time_to_collision`` is right for every input in range.
+"""``time_to_collision`` is right for every input in range.
 
 Ground truth: ``tests.core.reference.exact_reference`` (exact rationals,
 Descartes/VCA root isolation, independent of the production fallback
 ``core.narrow_exact``, which uses Sturm sequences).  Inputs are built from
 dyadic numbers, so the constructions below hold *exactly* in binary64.
 
-Guarantees proved here, for each defect class of issue 17 (generators seeded,
+Guarantees proved here, for each defect class found in it (generators seeded,
 the issue's repros as fixed examples):
 
 * 0.0 and inf are exact: 0.0 iff the bodies overlap at t = 0 or touch and

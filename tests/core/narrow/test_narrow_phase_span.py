@@ -3,8 +3,8 @@
 The solver scales the relative state by a power of two so that its largest
 component lies in [2, 4) (``narrow_eval._rel2/_rel3``).  A component far
 below the largest is then rounded on the subnormal grid or flushed to 0, and
-even an exact small component has squares that underflow.  Found in a review
-(issue 17): ``dp = 1e150, da = -1e-175`` looked like ``da = 0`` and the
+even an exact small component has squares that underflow.  Found in a review:
+``dp = 1e150, da = -1e-175`` looked like ``da = 0`` and the
 straight-line closed form answered inf; the exact answer is 4.47e162 s.
 
 Guarantee proved here (against ``tests.core.reference.exact_reference``,

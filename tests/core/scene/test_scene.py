@@ -184,7 +184,7 @@ def _static(sc: Scene, body: str, x: float, vx: float, stamp: int, received: int
 
 
 def test_removal_is_remembered_late_states_ignored() -> None:
-    """Issue 14 repro: a late state older than a removal must not bring the body back."""
+    """A late state older than a removal must not bring the body back."""
     sc = Scene(5.0, 2)
     _static(sc, "a", 0.0, 0.0, T0)
     _static(sc, "g", 3.0, -1.0, T0)
@@ -214,7 +214,7 @@ def test_removal_memory_is_forgotten_at_expiry() -> None:
 
 
 def test_max_bodies_counts_after_removals() -> None:
-    """Issue 14 repro: a full scene (3 of 3) and one message [remove g, add h] accepts h."""
+    """A full scene (3 of 3) and one message [remove g, add h] accepts h."""
     sc = Scene(5.0, 2, max_bodies=3)
     for k, b in enumerate("abg"):
         _static(sc, b, 10.0 * k, 0.0, T0)

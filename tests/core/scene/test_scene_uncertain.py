@@ -1,4 +1,4 @@
-"""The uncertain path of the scene and the published rows (issue 18), without ROS.
+"""The uncertain path of the scene and the published rows, without ROS.
 
 Guarantees proved here:
 - the exact path is untouched: with covariance on some bodies, the scene's contacts
