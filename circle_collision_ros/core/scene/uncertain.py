@@ -134,8 +134,10 @@ class UncertainMixin:
         prob, bound, tau = np.empty(I.size), np.empty(I.size), np.empty(I.size)
         hit = np.zeros(I.size, dtype=bool)
         # where the last call deferred the pair with these same inputs: its screening
-        # tube's first time (the deferred answer's time), so the core skips the screen
+        # tube's first time (the deferred answer's time), so the core skips the screen, and
+        # its deferred answer, which the core keeps should it defer the pair again
         screened_first = np.full(I.size, np.nan)
+        known = (np.full(I.size, np.nan), np.full(I.size, np.nan))
         sv_a, sv_b = self._sv[sa], self._sv[sb]
         old = self._pair_answers
         # a kept answer needs both bodies unchanged since (state serials below old.sv_next):
@@ -152,12 +154,14 @@ class UncertainMixin:
             )
             waited = same & ~old.answered[at]
             screened_first[waited] = old.tau[at[waited]]
+            known[0][waited], known[1][waited] = old.probability[at[waited]], old.bound[at[waited]]
         todo = np.flatnonzero(~hit)
         answered = hit.copy()
         if todo.size:
             deferred = self._evaluate_uncertain(unc, sa[todo], sb[todo], I[todo], J[todo], at_R,
                                                 tp[todo], key[todo], threshold, max_evaluated,
-                                                screened_first[todo])
+                                                screened_first[todo],
+                                                (known[0][todo], known[1][todo]))
             prob[todo], bound[todo], tau[todo] = deferred.probability, deferred.bound, deferred.tau
             answered[todo[~deferred.deferred]] = True
         else:
@@ -253,11 +257,13 @@ class UncertainMixin:
         return np.where(newer > R - lag, newer, R - R % lag)
 
     def _evaluate_uncertain(self, unc, sa, sb, la, lb, at_R, tp, key, threshold: float,
-                            max_evaluated: int | None, screened_first: np.ndarray) -> "_Evaluated":
+                            max_evaluated: int | None, screened_first: np.ndarray,
+                            deferred_answer: tuple[np.ndarray, np.ndarray]) -> "_Evaluated":
         """``unc.uncertain_pairs`` on these pairs (slots sa, sb; local indices la, lb into
         at_R, the bodies at R; key = sa << 32 | sb), each at its t_p over [0, H] (screened,
         within the budget; FIFO bookkeeping of the deferred, see uncertain_pairs);
-        screened_first: as ``unc.uncertain_pairs`` takes it (NaN: screen the pair)."""
+        screened_first, deferred_answer: as ``unc.uncertain_pairs`` takes them (NaN: screen
+        the pair)."""
         R = self.reference_ns
         late = np.flatnonzero(tp != R)  # t_p = R: the bodies as propagated for the listing
         states = []
@@ -284,7 +290,8 @@ class UncertainMixin:
             self._uncertain_memo_ref = R
         res = unc.uncertain_pairs(*states[0], *states[1], self._h, threshold, screen=True,
                                   max_evaluated=max_evaluated, priority=waited_since,
-                                  memo=self._uncertain_memo, screened_first=screened_first)
+                                  memo=self._uncertain_memo, screened_first=screened_first,
+                                  deferred_answer=deferred_answer)
         deferred = res.deferred
         # the deferred of the rows that competed wait on (since as looked up); the rest stop
         rows = np.concatenate([r for r, _ in asked]) if asked else EMPTY_I

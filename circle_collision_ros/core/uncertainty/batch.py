@@ -69,7 +69,9 @@ def uncertain_pairs(pa, va, aa, ra, cov_a, pb, vb, ab, rb, cov_b, horizon: float
                     *, screen: bool = False, max_evaluated: int | None = None,
                     priority: Callable[[np.ndarray], np.ndarray] | None = None,
                     memo: dict | None = None,
-                    screened_first: np.ndarray | None = None) -> UncertainPairs:
+                    screened_first: np.ndarray | None = None,
+                    deferred_answer: tuple[np.ndarray, np.ndarray] | None = None
+                    ) -> UncertainPairs:
     """Collision probability, its bound and the earliest plausible contact of n pairs.
 
     pa, va, aa, pb, vb, ab: (n, D) float64, D in {2, 3} [m, m/s, m/s^2];
@@ -109,6 +111,11 @@ def uncertain_pairs(pa, va, aa, ra, cov_a, pb, vb, ab, rb, cov_b, horizon: float
     that call reported for the row it deferred.  Such rows skip the screen (its
     outcome is a function of those inputs: the same answer, without the
     tube walk); the scene passes its waiting pairs whose bodies did not change.
+
+    deferred_answer (with screened_first): (probability, bound), (n,) float64 each, the
+    deferred answer that earlier call gave where screened_first is known (NaN elsewhere):
+    deferred again, such a row takes it instead of computing its interval anew (the same
+    bits: a function of the same inputs).
 
     memo: a dict the caller keeps between calls.  A row whose relative inputs
     (dp, dv, da, R, Sigma after the sign canonicalisation, with H and the
@@ -230,11 +237,17 @@ def uncertain_pairs(pa, va, aa, ra, cov_a, pb, vb, ab, rb, cov_b, horizon: float
         order = np.lexsort((todo, todo_first, rank))
         later = np.sort(order[m:])
         rows = todo[later]
+        new = np.ones(rows.size, dtype=np.bool_)
+        if deferred_answer is not None:  # waiting with the same inputs: the same answer
+            known_p, known_b = (np.asarray(x, dtype=np.float64)[rows] for x in deferred_answer)
+            new = np.isnan(known_p)
+            prob[rows[~new]], bound[rows[~new]] = known_p[~new], known_b[~new]
+        anew = later[new]
         # on the sign-canonicalised relative rows: a swapped pair gets the same bits
-        lo, hi = cheap_intervals(dp[later], dv[later], da[later], rad[later], sig[later], H)
+        lo, hi = cheap_intervals(dp[anew], dv[anew], da[anew], rad[anew], sig[anew], H)
         mid = 0.5 * (lo + hi)
         # hi - mid is exact (Sterbenz: mid >= hi / 2), so mid + bound reaches hi itself
-        prob[rows], bound[rows] = mid, np.maximum(hi - mid, mid - lo)
+        prob[rows[new]], bound[rows[new]] = mid, np.maximum(hi - mid, mid - lo)
         tpl[rows] = todo_first[later]
         deferred[rows] = True
         now = np.sort(order[:m])
