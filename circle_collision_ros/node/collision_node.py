@@ -4,8 +4,10 @@ Subscribes to CircleStateArray (`state_topics`), CircleState
 (`single_state_topics`) and nav_msgs/Odometry (`odometry_topics`, one robot per
 topic: pipeline/odometry.py) topics, keeps the latest state per body id, and
 publishes `collision_predictions` (CollisionPredictionArray) on every change or
-at `publish_rate`; serves `predict_collisions` (stateless); publishes
-`~/markers` for RViz/Foxglove and a DiagnosticArray on `/diagnostics` (1 Hz).
+at `publish_rate`, and with covariance on each prediction completed on
+`collision_probabilities` (node/probabilities.py); serves `predict_collisions`
+(stateless); publishes `~/markers` for RViz/Foxglove and a DiagnosticArray on
+`/diagnostics` (1 Hz).
 
 The path of a message: raw bytes (recorded as received) -> decode ->
 CollisionPredictor.receive_batch -> CollisionPredictor.predict -> CDR bytes ->
@@ -67,6 +69,7 @@ from circle_collision_ros.pipeline.state_groups import ingest_single_states
 from circle_collision_ros.cli import TransportProfile, parse_args, spin_node
 from circle_collision_ros.node.input_loss import InputLossMonitor
 from circle_collision_ros.node.markers import MarkerPublisher
+from circle_collision_ros.node.probabilities import ProbabilityPublisher
 from circle_collision_ros.pipeline.predictor import (RUNTIME_FIELDS, CollisionPredictor,
                                                      IntakeReport, PredictorConfig, predict_once)
 
@@ -225,9 +228,19 @@ class CollisionNode(Node):
         self._predictions_pub = self.create_publisher(CollisionPredictionArray,
                                                       "collision_predictions", Qos.predictions(),
                                                       qos_overriding_options=overrides)
+        self._probabilities_pub = self.create_publisher(
+            CollisionPredictionArray, "collision_probabilities", Qos.predictions(),
+            qos_overriding_options=overrides)
         self._markers_pub = self.create_publisher(MarkerArray, "~/markers", Qos.markers())
         self.markers = MarkerPublisher(p("dimensions"), p("marker_rate"), self._markers_pub.publish,
                                        on_error=lambda text: self._warn("markers", text))
+        # With covariance on, each prediction is completed on its own thread: every deferred
+        # uncertain pair evaluated in full (node/probabilities.py)
+        self.probabilities = ProbabilityPublisher(
+            self._probabilities_pub.publish,
+            lambda data, log_ns: self._record(self._probabilities_pub.topic_name, data, log_ns),
+            on_error=lambda text: self._warn("probabilities", text),
+        )
         self._diagnostics_pub = self.create_publisher(
             DiagnosticArray, "/diagnostics", qos_profile_system_default
         )
@@ -461,6 +474,8 @@ class CollisionNode(Node):
         self.counters.coalesced += max(0, pending.inputs - 1)
         self._unanswered = Unanswered()
         self.markers.offer(prediction)
+        if self.predictor.config.use_covariance:
+            self.probabilities.offer(prediction, data, now_ns)
 
     def _on_predict_request(
         self, request: PredictCollisions.Request, response: PredictCollisions.Response
@@ -524,6 +539,10 @@ class CollisionNode(Node):
             "latency_ms_p50": f"{np.percentile(lat, 50) * 1e3:.3f}",
             "latency_ms_p99": f"{np.percentile(lat, 99) * 1e3:.3f}",
             "latency_ms_max": f"{lat.max() * 1e3:.3f}",
+            "probabilities_published": self.probabilities.published,
+            "probabilities_superseded": self.probabilities.superseded,
+            "probabilities_ms_last": f"{self.probabilities.last_compute_s * 1e3:.3f}",
+            "probabilities_delay_ms_last": f"{self.probabilities.last_delay_s * 1e3:.3f}",
             "markers_drawn": self.markers.drawn,
             "marker_ms_last": f"{self.markers.last_cost_s * 1e3:.3f}",
             "errors": c.errors,
@@ -616,9 +635,9 @@ class CollisionNode(Node):
                 self._recorder.add_topic(
                     source.topic, _ros_type_name(source.msg_type), self._offered_qos(source.topic)
                 )
-            self._recorder.add_topic(self._predictions_pub.topic_name,
-                                     _ros_type_name(CollisionPredictionArray),
-                                     qos_profiles_yaml([self._predictions_pub.qos_profile]))
+            for pub in (self._predictions_pub, self._probabilities_pub):
+                self._recorder.add_topic(pub.topic_name, _ros_type_name(CollisionPredictionArray),
+                                         qos_profiles_yaml([pub.qos_profile]))
             # Recorded, not published: offered as `ros2 bag play` should replay it.
             self._recorder.add_topic(
                 self._config_topic, "std_msgs/msg/String", qos_profiles_yaml([Qos.predictions()])
@@ -663,6 +682,7 @@ class CollisionNode(Node):
             return
         config = dict(asdict(self.predictor.config),
                       publish_rate=node_parameters.value_of(self, "publish_rate"),
+                      probabilities_topic=self._probabilities_pub.topic_name,
                       odometry={t: asdict(s) for t, s in self._odometry_sources.items()})
         data = serialize_message(String(data=json.dumps(config, sort_keys=True)))
         self._record(self._config_topic, data, self.get_clock().now().nanoseconds)
@@ -690,6 +710,8 @@ class CollisionNode(Node):
         # Also called on a node whose __init__ did not finish (Ctrl-C during the warm-up,
         # a start-up error): rclpy's shutdown destroys every node of the context, so only
         # what exists is closed.
+        if hasattr(self, "probabilities"):
+            self.probabilities.close()  # publishes and records what it was given
         if hasattr(self, "markers"):
             self.markers.close()  # clears the display while the publisher still exists
             try:  # ... and delivered: the process may exit right after

@@ -25,7 +25,7 @@ report_all_pairs rest in id order.
 from __future__ import annotations
 
 from collections.abc import Iterator
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from functools import cached_property
 from typing import NamedTuple
 
@@ -35,7 +35,8 @@ from geometry_msgs.msg import Point, Vector3
 from std_msgs.msg import Header
 
 from circle_collision_msgs.msg import CollisionPrediction, CollisionPredictionArray
-from circle_collision_ros.core.scene import SceneContacts, SceneSnapshot, SceneUncertainty
+from circle_collision_ros.core.scene import (SceneContacts, SceneSnapshot, SceneUncertainty,
+                                            complete_uncertainty)
 from circle_collision_ros.pipeline.prediction_codec import (
     encode_contact_rows,
     encode_prediction_array,
@@ -102,6 +103,20 @@ class ScenePrediction:
     report_all_pairs: bool
     uncertainty: SceneUncertainty | None = None
     probability_threshold: float = 1.0
+
+    @property
+    def deferred(self) -> bool:
+        """Whether some uncertain row was deferred (``completed`` has work to do)."""
+        return self.uncertainty is not None and self.uncertainty.pending is not None
+
+    def completed(self) -> ScenePrediction:
+        """This prediction with every deferred uncertain row fully evaluated
+        (``core.scene.complete_uncertainty``): the same contacts, snapshot and stamp, and
+        bit for bit what the same scene predicts with ``uncertain_pair_budget`` 0.  Listed
+        by the reporting rule of fully evaluated rows.  Self when nothing was deferred."""
+        if not self.deferred:
+            return self
+        return replace(self, uncertainty=complete_uncertainty(self.uncertainty))
 
     @property
     def snapshot(self) -> SceneSnapshot:

@@ -27,6 +27,7 @@ from circle_collision_ros.pipeline.odometry import ODOMETRY_TYPE, OdometrySource
 from circle_collision_ros.pipeline.prediction_codec import (PredictionArray,
                                                             decode_prediction_array,
                                                             peek_prediction_array)
+from circle_collision_ros.pipeline.prediction_messages import ScenePrediction
 from circle_collision_ros.pipeline.predictor import (RUNTIME_FIELDS, CollisionPredictor,
                                                      PredictorConfig)
 from circle_collision_ros.pipeline.state_batch import StateBatch
@@ -125,6 +126,7 @@ class ReplayReport:
     inputs: int = 0
     predictions: int = 0
     coalesced: int = 0  # inputs answered together with newer ones (all but one per prediction)
+    completions: int = 0  # collision_probabilities messages compared
     pairs_compared: int = 0
     max_time_difference: float = 0.0
     mismatches: list[str] = field(default_factory=list)
@@ -160,6 +162,31 @@ def compare_predictions(
         report.mismatches.append(f"{where}: prediction order differs")
 
 
+def compare_completion(record: BagRecord, candidates: list[ScenePrediction],
+                       report: ReplayReport) -> None:
+    """A recorded collision_probabilities message against the completion of the replayed
+    prediction it completes: one of `candidates` (the predictions replayed at its log time;
+    more than one only when the clock stood still between them), newest first."""
+    report.completions += 1
+    where = f"probabilities #{report.completions}"
+    if not candidates:
+        report.mismatches.append(f"{where}: no prediction at its log time {record.log_time_ns}")
+        return
+    newest = None
+    for prediction in reversed(candidates):
+        completed = prediction.completed()
+        data = completed.to_cdr()
+        if data == record.data:
+            report.pairs_compared += len(completed.columns)
+            return
+        newest = newest or data
+    before = len(report.mismatches)
+    compare_predictions(decode_prediction_array(record.data), decode_prediction_array(newest),
+                        where, report)
+    if len(report.mismatches) == before:  # equal fields, other bytes (padding)
+        report.mismatches.append(f"{where}: bytes differ")
+
+
 PredictionHook = Callable[[int, PredictionArray, PredictionArray], None]
 """on_prediction(log_time_ns, recorded, replayed), called once per compared prediction."""
 
@@ -183,6 +210,10 @@ def replay_offline(
     report = ReplayReport()
     predictor = CollisionPredictor(config) if config is not None else None
     odometry: dict[str, OdometrySource] = {}
+    probabilities_topic = None  # the node's collision_probabilities (its recorded config)
+    # the predictions of the newest log time: a completion carries its prediction's log time
+    same_time: list[ScenePrediction] = []
+    same_time_ns = None
     unanswered = 0  # inputs since the last prediction: the node coalesced them into the next one
     run: list[bytes] = []  # consecutive CircleState records of one log time: one node drain
     run_time = -1
@@ -201,6 +232,7 @@ def replay_offline(
             text = decode_string(record.data)
             recorded = config_from_json(text)
             odometry = odometry_from_json(text) or odometry
+            probabilities_topic = json.loads(text).get("probabilities_topic", probabilities_topic)
             if predictor is None:
                 predictor = CollisionPredictor(recorded)
             else:
@@ -220,6 +252,9 @@ def replay_offline(
                 predictor.receive_batch(batch, record.log_time_ns)
             report.inputs += 1
             unanswered += 1
+        elif record.type_name == RecordedTypes.PREDICTIONS and record.topic == probabilities_topic:
+            candidates = same_time if same_time_ns == record.log_time_ns else []
+            compare_completion(record, candidates, report)
         elif record.type_name == RecordedTypes.PREDICTIONS:
             report.coalesced += max(0, unanswered - 1)
             unanswered = 0
@@ -230,7 +265,11 @@ def replay_offline(
             # records its own encoder's output, padding included); only a difference
             # needs decoding and the field-by-field comparison that says what differs.
             layout = RecordedLayout.has_uncertainty(record.schema)
-            replayed_bytes = predictor.predict(horizon=horizon).to_cdr(uncertainty=layout)
+            prediction = predictor.predict(horizon=horizon)
+            replayed_bytes = prediction.to_cdr(uncertainty=layout)
+            if same_time_ns != record.log_time_ns:
+                same_time, same_time_ns = [], record.log_time_ns
+            same_time.append(prediction)
             report.predictions += 1
             if replayed_bytes == record.data:
                 report.pairs_compared += entries

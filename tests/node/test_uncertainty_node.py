@@ -16,7 +16,11 @@ Guarantees proved here:
   covariance and probability fields back from the file alone) and replays bit-identically;
 - a 1,000-body tracker frame with covariance on every body, more uncertain pairs than the
   budget: no row is a placeholder (1.0 +- 1.0), and every row's interval meets the answer of
-  a node that evaluates every pair fully (|p - q| <= both bounds).
+  a node that evaluates every pair fully (|p - q| <= both bounds); collision_probabilities
+  then carries exactly that node's bytes (every pair fully evaluated, >= 99 % of the bounds
+  <= 0.01);
+- a recorded run with deferred pairs records its completions, and replay recomputes each
+  one bit for bit (an altered completion is reported).
 """
 from __future__ import annotations
 
@@ -35,7 +39,7 @@ from circle_collision_msgs.msg import CircleStateArray, CollisionPredictionArray
 from circle_collision_msgs.srv import PredictCollisions
 from circle_collision_ros.node.collision_node import CollisionNode
 from circle_collision_ros.recording.bag_reader import open_bag
-from circle_collision_ros.recording.replay_engine import RecordedTypes, replay_offline
+from circle_collision_ros.recording.replay_engine import RecordedTypes, load_bag, replay_offline
 from tests.node.conftest import reader_matched, spin_until
 from tests.node_helpers import assert_no_nan, contacts_of, random_states, state, state_array
 
@@ -402,12 +406,22 @@ def test_tracker_frame_beyond_the_budget_has_no_placeholder_rows(ros_context, ro
     try:
         clients = [Client(ros_node, nodes, f"{ns}/circle_states", f"{ns}/collision_predictions")
                    for ns in ("/budget", "/all")]
+        completions: list[bytes] = []
+        ros_node.create_subscription(CollisionPredictionArray, "/budget/collision_probabilities",
+                                     completions.append, RELIABLE, raw=True)
         states = random_states(1000, seed=34, stamp_ns=_now_ns(ros_node), spread=60.0)
         for s in states:
             s.covariance = _covariance(0.3, 0.2)
         for client in clients:
             client.send(state_array(states), timeout=60.0)
         budget, everything = (client.predictions[-1].predictions for client in clients)
+        # the completion of the budget node's prediction: the bytes of the node that evaluates
+        # every pair (same stamp, same rows, same bits), every bound within 0.01
+        assert spin_until(ros_node, lambda: completions, 30.0, clients[0].extra)
+        assert completions[-1] == clients[1].raw[-1]
+        assert nodes[0].probabilities.completed >= 1
+        bounds = np.array([r.collision_probability_bound for r in everything])
+        assert bounds.size > 1000 and np.mean(bounds <= 0.01) >= 0.99
         assert nodes[0].predictor.stats.uncertain_deferred > 20
         assert nodes[1].predictor.stats.uncertain_deferred == 0
         full = {(r.id_a, r.id_b): r for r in everything}
@@ -424,3 +438,43 @@ def test_tracker_frame_beyond_the_budget_has_no_placeholder_rows(ros_context, ro
     finally:
         for node in nodes:
             node.destroy_node()
+
+
+def test_completions_are_recorded_and_replayed(ros_context, ros_node, tmp_path: Path) -> None:
+    """Budget 1 with dozens of uncertain pairs: each recorded collision_probabilities message
+    is recomputed by replay from the prediction with its log time, bit for bit."""
+    bag = tmp_path / "bag"
+    node = CollisionNode(
+        context=ros_context,
+        parameter_overrides=[Parameter("horizon", value=5.0), Parameter("frame_id", value="map"),
+                             Parameter("marker_rate", value=0.0),
+                             Parameter("stale_timeout", value=60.0),
+                             Parameter("uncertain_pair_budget", value=1),
+                             Parameter("record_path", value=str(bag))],
+    )
+    completions: list[bytes] = []
+    try:
+        client = Client(ros_node, node)
+        ros_node.create_subscription(CollisionPredictionArray, "collision_probabilities",
+                                     completions.append, RELIABLE, raw=True)
+        base = _now_ns(ros_node)
+        for k in range(4):
+            states = random_states(40, seed=k, stamp_ns=base + k * 40_000_000, spread=6.0)
+            for s in states:
+                s.covariance = _covariance(0.3, 0.2)
+            client.send(state_array(states))
+            assert spin_until(ros_node, lambda: len(completions) > k, 20.0, client.extra)
+        assert node.probabilities.completed >= 1
+    finally:
+        node.destroy_node()
+    _, records = load_bag(bag)
+    recorded = [r for r in records if r.topic == "/collision_probabilities"]
+    assert [r.data for r in recorded] == completions[:len(recorded)] and len(recorded) >= 4
+    report = replay_offline(records)
+    assert report.ok and report.completions == len(recorded), report.mismatches[:3]
+    # a completion that is not the prediction's: the main topic's bytes in its place
+    main = {r.log_time_ns: r.data for r in records if r.topic == "/collision_predictions"}
+    changed = [r._replace(data=main[r.log_time_ns]) if r is recorded[-1] else r for r in records]
+    assert main[recorded[-1].log_time_ns] != recorded[-1].data
+    bad = replay_offline(changed)
+    assert not bad.ok and any("probabilities #" in m for m in bad.mismatches), bad.mismatches

@@ -7,7 +7,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-__all__ = ["MergeResult", "SceneContacts", "SceneUncertainty", "SceneSnapshot"]
+__all__ = ["MergeResult", "SceneContacts", "SceneUncertainty", "DeferredInputs", "SceneSnapshot"]
 
 
 class MergeResult(NamedTuple):
@@ -89,6 +89,8 @@ class SceneUncertainty:
     matched: SceneContacts | None = None
     #: The ids as UTF-8 for encoders, as SceneContacts.id_utf8 (None: ids not all str).
     id_utf8: tuple | None = None
+    #: The deferred rows' inputs (None when no row was deferred): core.scene.complete_uncertainty
+    pending: DeferredInputs | None = None
 
     def __len__(self) -> int:
         return int(self.probability.shape[0])
@@ -97,6 +99,27 @@ class SceneUncertainty:
     def deferred(self) -> int:
         """How many rows the budget deferred (``deferred_rows``)."""
         return 0 if self.deferred_rows is None else int(np.count_nonzero(self.deferred_rows))
+
+
+@dataclass(frozen=True)
+class DeferredInputs:
+    """The inputs of a SceneUncertainty's deferred rows, kept so that their full evaluation
+    can run later, off the prediction path (``core.scene.complete_uncertainty``).
+
+    rows : (k,) int64, the deferred rows' indices.  a, b : each body's state at the pair time
+    t_p, ``(p, v, a, radius, covariance)`` with shapes (k, D), (k, D), (k, D), (k,),
+    (k, 2D, 2D).  first : (k,) s from t_p, where each row's screening tube may first reach
+    the ball (the screen's outcome, which the full evaluation need not repeat).  lag : (k,) s,
+    R - t_p.  horizon : s; threshold: the probability threshold they were evaluated for.
+    """
+
+    rows: np.ndarray
+    a: tuple
+    b: tuple
+    first: np.ndarray
+    lag: np.ndarray
+    horizon: float
+    threshold: float
 
 
 @dataclass(frozen=True)

@@ -5,16 +5,18 @@ A part of ``Scene``.
 """
 from __future__ import annotations
 
+from dataclasses import replace
 from typing import NamedTuple
 
 import numpy as np
 from numba import njit
 
 from circle_collision_ros.core import broad as _broad
-from circle_collision_ros.core.scene.results import SceneContacts, SceneUncertainty
+from circle_collision_ros.core.scene.results import (DeferredInputs, SceneContacts,
+                                                     SceneUncertainty)
 from circle_collision_ros.core.scene.store import EMPTY_I
 
-__all__ = ["UncertainMixin", "states_at_rows", "NO_WAITING"]
+__all__ = ["UncertainMixin", "states_at_rows", "complete_uncertainty", "NO_WAITING"]
 
 
 @njit(cache=True, error_model="numpy", inline="always")
@@ -157,6 +159,7 @@ class UncertainMixin:
             known[0][waited], known[1][waited] = old.probability[at[waited]], old.bound[at[waited]]
         todo = np.flatnonzero(~hit)
         answered = hit.copy()
+        pending = None
         if todo.size:
             deferred = self._evaluate_uncertain(unc, sa[todo], sb[todo], I[todo], J[todo], at_R,
                                                 tp[todo], key[todo], threshold, max_evaluated,
@@ -164,6 +167,12 @@ class UncertainMixin:
                                                 (known[0][todo], known[1][todo]))
             prob[todo], bound[todo], tau[todo] = deferred.probability, deferred.bound, deferred.tau
             answered[todo[~deferred.deferred]] = True
+            if deferred.pending is not None:
+                late = deferred.deferred
+                rows = todo[late]
+                pending = DeferredInputs(rows, deferred.pending[0], deferred.pending[1],
+                                         tau[rows], (R - tp[rows]).astype(np.float64) * 1e-9,
+                                         self._h, threshold)
         else:
             self._uncertain_waiting = NO_WAITING
             self._uncertain_serial += 1
@@ -171,10 +180,7 @@ class UncertainMixin:
             self._h, threshold, self._sv_next, key, answered, sv_a, sv_b, tp, prob, bound, tau
         )
         self.uncertain_evaluated = int(todo.size)
-        # reported from R: the pair's plausible time counts from its t_p <= R (d = R - t_p);
-        # one already reached before R is reported as 0 (plausible now)
-        d = (R - tp).astype(np.float64) * 1e-9
-        plausible = np.where(np.isnan(tau) | (tau > d), tau - d, 0.0)
+        plausible = _from_reference(tau, (R - tp).astype(np.float64) * 1e-9)
         return SceneUncertainty(
             R,
             ida,
@@ -186,6 +192,7 @@ class UncertainMixin:
             contact_rows,
             contacts if contact_rows is not None else None,
             self._id_utf8(sa, sb),
+            pending,
         )
 
     def _uncertain_listed(self, slots: np.ndarray, R: int, contacts: SceneContacts | None, unc):
@@ -302,8 +309,12 @@ class UncertainMixin:
         rows = rows[order]
         self._uncertain_waiting = _Waiting(key[rows], born_a[rows], born_b[rows], since[order])
         self._uncertain_serial = serial + 1
+        pending = None
+        if deferred.any():  # the deferred rows' inputs, for complete_uncertainty
+            pending = tuple(tuple(x[deferred] for x in side) for side in states)
         return _Evaluated(
-            res.collision_probability, res.collision_probability_bound, res.plausible_time, deferred
+            res.collision_probability, res.collision_probability_bound, res.plausible_time,
+            deferred, pending
         )
 
 
@@ -356,3 +367,36 @@ class _Evaluated(NamedTuple):
     bound: np.ndarray
     tau: np.ndarray
     deferred: np.ndarray
+    pending: tuple | None  # the deferred rows' (a, b) states at t_p, None if none
+
+
+def _from_reference(tau: np.ndarray, lag: np.ndarray) -> np.ndarray:
+    """Plausible times reported from R: a pair's plausible time tau counts from its t_p <= R
+    (lag = R - t_p, s); one already reached before R is reported as 0 (plausible now)."""
+    return np.where(np.isnan(tau) | (tau > lag), tau - lag, 0.0)
+
+
+def complete_uncertainty(uncertainty: SceneUncertainty) -> SceneUncertainty:
+    """`uncertainty` with every deferred row given the full evaluation (no row deferred).
+
+    The same rows in the same order; each deferred row's probability, bound and plausible
+    time become those of ``core.uncertainty.uncertain_pairs`` without a budget on the inputs
+    the scene deferred (``uncertainty.pending``), bit for bit what ``Scene.uncertain_pairs``
+    without ``max_evaluated`` gives for that pair at that call (a row's answer is a function
+    of its inputs alone, and the screen the scene already ran is not repeated: its outcome
+    is kept in ``pending.first``).  A pure function of `uncertainty`: it may run later, on
+    another thread, and replay reproduces it.  Unchanged when nothing was deferred.
+    """
+    pending = uncertainty.pending
+    if pending is None:
+        return uncertainty
+    from circle_collision_ros.core import uncertainty as unc  # heavy kernels: on first use
+    res = unc.uncertain_pairs(*pending.a, *pending.b, pending.horizon, pending.threshold,
+                              screen=True, screened_first=pending.first)
+    prob, bound = uncertainty.probability.copy(), uncertainty.probability_bound.copy()
+    plausible = uncertainty.plausible_ttc.copy()
+    rows = pending.rows
+    prob[rows], bound[rows] = res.collision_probability, res.collision_probability_bound
+    plausible[rows] = _from_reference(res.plausible_time, pending.lag)
+    return replace(uncertainty, probability=prob, probability_bound=bound, plausible_ttc=plausible,
+                   deferred_rows=None, pending=None)

@@ -228,7 +228,7 @@ def pair_kernel(dp, dv, da, R, Sigma, H, thr, out):
 OUT_SIZE = 7
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", nogil=True)
 def relative_rows(pa, va, aa, ra, pb, vb, ab, rb, sigma, rows, dp, dv, da, rad, sig):
     """Relative state of the rows ``rows`` of the per-body arrays into dp, dv, da
     (a - b), rad (ra + rb), sig (sigma[row]); each row's sign canonicalised:
@@ -258,11 +258,13 @@ def relative_rows(pa, va, aa, ra, pb, vb, ab, rb, sigma, rows, dp, dv, da, rad, 
                 sig[j, r, c] = sigma[i, r, c]
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", nogil=True)
 def evaluate_uncertain_rows(dp, dv, da, rad, sig, H, thr, out):
     """pair_kernel on every row (out (n, OUT_SIZE)), serially: on numba's threads the
     node's tail latency suffered (docs/uncertainty.md, "Not guaranteed / weak");
-    rows with out[j, OUT_QMC] != 0 still need ``finish_row``'s sampling."""
+    rows with out[j, OUT_QMC] != 0 still need ``finish_row``'s sampling.  Releases the
+    interpreter lock (nogil): the node completes deferred rows on a thread beside its
+    prediction path (node/probabilities.py)."""
     for j in range(dp.shape[0]):
         pair_kernel(dp[j], dv[j], da[j], rad[j], sig[j], H, thr, out[j])
 

@@ -273,7 +273,7 @@ def quartic_crossings(p, v, a, R, H):
     return inside0, entries
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", nogil=True)
 def overcount_replicates(dp, dv, da, R, H, L, Z, m, est):
     """est[r] = mean over the first m points of replicate r of Z (r, M, 2D standard
     normals) of the over-count O = (1{inside at 0} + #entries in (0, H] - 1)^+ of the
@@ -346,7 +346,7 @@ def line_sampled(dp, dv, da, Sigma):
     return line_factor(dp, dv, Sigma)[4]
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", nogil=True)
 def line_sampled_probability(dp, dv, Sigma, R, H, Z):
     """(estimate, stated bound) of P(contact within [0, H]) of a straight 3-D pair
     by line sampling with its control variate (core.uncertainty.line_sampling), Z =

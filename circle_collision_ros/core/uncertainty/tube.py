@@ -278,7 +278,7 @@ def screen_rows(dp, dv, da, R, Sigma, H, k, clear, t_first):
         clear[i] = not (t_first[i] <= H)
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", nogil=True)
 def screen_rows_at(pa, va, aa, ra, pb, vb, ab, rb, sigma, rows, H, k, clear, t_first):
     """screen_rows on the rows ``rows`` of the per-body arrays (relative state formed
     here as a - b, Sigma = sigma[row]): the same tube test without gathering the rows

@@ -1,0 +1,114 @@
+"""collision_probabilities: each prediction completed off the prediction path.
+
+The prediction path publishes `collision_predictions` at once. Of its uncertain pairs, at
+most `uncertain_pair_budget` get the full probability evaluation there; the rest carry a
+cheap certified interval (deferred rows). This thread takes the newest such prediction,
+evaluates every deferred row in full (``ScenePrediction.completed``) and publishes the result,
+stamped as the prediction it completes, on `collision_probabilities`: the message the same
+scene publishes with ``uncertain_pair_budget`` 0, bit for bit.
+
+- The exact times never wait: the prediction path only hands over a reference.
+- The heavy kernels release the interpreter lock (numba ``nogil``), so on a multi-core
+  machine the completion runs on another core beside the prediction path.
+- Latest wins: a prediction superseded before the thread takes it is never completed
+  (counted in ``superseded``). A prediction with nothing deferred is republished as it is.
+- Recording: each message is recorded with the log time of the prediction it completes, so
+  replay knows which prediction it belongs to and recomputes it (recording/replay_engine.py).
+"""
+from __future__ import annotations
+
+import threading
+import time
+from collections.abc import Callable
+from typing import NamedTuple
+
+from circle_collision_ros.pipeline.prediction_messages import ScenePrediction
+
+__all__ = ["ProbabilityPublisher"]
+
+
+class _Job(NamedTuple):
+    prediction: ScenePrediction
+    data: bytes  # the prediction's published bytes (republished when nothing was deferred)
+    log_time_ns: int
+    offered: float  # time.monotonic() at the offer
+
+
+class ProbabilityPublisher:
+    """A thread that completes and publishes the newest offered prediction.
+
+    publish(data) sends serialized CollisionPredictionArray bytes; record(data, log_time_ns)
+    records them; on_error(text) reports a failure (the thread keeps running).
+    """
+
+    def __init__(self, publish: Callable[[bytes], None],
+                 record: Callable[[bytes, int], None] | None = None,
+                 on_error: Callable[[str], None] | None = None) -> None:
+        self._publish = publish
+        self._record = record or (lambda data, log_time_ns: None)
+        self._on_error = on_error or (lambda text: None)
+        self._cond = threading.Condition()
+        self._latest: _Job | None = None
+        self._stopped = False
+        self._busy = False
+        self.published = 0  # messages published
+        self.completed = 0  # of which had deferred rows evaluated here
+        self.superseded = 0  # offered predictions replaced before the thread took them
+        self.last_compute_s = 0.0  # the last completion's evaluation time
+        self.last_delay_s = 0.0  # the last message's offer-to-publish time
+        self._thread = threading.Thread(target=self._run, name="collision_node_probabilities",
+                                        daemon=True)
+        self._thread.start()
+
+    def offer(self, prediction: ScenePrediction, data: bytes, log_time_ns: int) -> None:
+        """Hand over the newest prediction, its published bytes and its log time."""
+        with self._cond:
+            if self._latest is not None:
+                self.superseded += 1
+            self._latest = _Job(prediction, data, log_time_ns, time.monotonic())
+            self._cond.notify()
+
+    def close(self) -> None:
+        """Stop the thread once it has published (and recorded) what was offered."""
+        with self._cond:
+            self._stopped = True
+            self._cond.notify()
+        self._thread.join(timeout=30.0)
+
+    def wait_idle(self, timeout: float) -> bool:
+        """True once every offered prediction is published or superseded (tests, replay tools)."""
+        deadline = time.monotonic() + timeout
+        while True:
+            with self._cond:
+                if self._latest is None and not self._busy:
+                    return True
+            if time.monotonic() >= deadline:
+                return False
+            time.sleep(0.005)
+
+    def _run(self) -> None:
+        while True:
+            with self._cond:
+                while not self._stopped and self._latest is None:
+                    self._cond.wait()
+                if self._latest is None:  # stopped, and everything offered is done
+                    return
+                job, self._latest = self._latest, None
+                self._busy = True
+            try:
+                data = job.data
+                if job.prediction.deferred:
+                    started = time.monotonic()
+                    data = job.prediction.completed().to_cdr()
+                    self.last_compute_s = time.monotonic() - started
+                    self.completed += 1
+                self._publish(data)
+                self.last_delay_s = time.monotonic() - job.offered
+                self.published += 1
+                self._record(data, job.log_time_ns)
+            except Exception as exc:  # one failed completion never stops the next ones
+                self._on_error(f"probabilities of the prediction at {job.log_time_ns} ns "
+                               f"skipped: {exc!r}")
+            finally:
+                with self._cond:
+                    self._busy = False

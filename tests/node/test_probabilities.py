@@ -1,0 +1,95 @@
+"""The completion thread of collision_node (node/probabilities.py), without DDS.
+
+Guarantees proved here:
+- a prediction with deferred rows is published completed: the bytes a budget-0 predictor
+  publishes for the same input; one with nothing deferred is republished as it is; each is
+  recorded with the log time it was offered with;
+- latest wins: a prediction replaced before the thread takes it is never published, and is
+  counted; the exact path's offer never waits for a completion in progress;
+- close() publishes what was offered before it; a failing publish is reported and the next
+  prediction is still completed.
+"""
+from __future__ import annotations
+
+import threading
+import time
+
+import pytest
+
+from circle_collision_ros.node.probabilities import ProbabilityPublisher
+from circle_collision_ros.pipeline.predictor import CollisionPredictor, PredictorConfig
+from tests.core.scene.test_scene_uncertain import BASE, _batch
+
+
+def _prediction(budget: int, seed: int = 9):
+    predictor = CollisionPredictor(PredictorConfig(stale_timeout=3600.0,
+                                                   uncertain_pair_budget=budget))
+    predictor.receive_batch(_batch(16, seed=seed, sigma=0.4, spread=7.0), BASE)
+    return predictor.predict()
+
+
+def test_completed_bytes_and_log_times() -> None:
+    published, recorded = [], []
+    worker = ProbabilityPublisher(published.append, lambda d, t: recorded.append((d, t)))
+    try:
+        part, full = _prediction(2), _prediction(0)
+        assert part.deferred and not full.deferred
+        worker.offer(part, part.to_cdr(), 11)
+        assert worker.wait_idle(30.0)
+        worker.offer(full, b"as published", 12)
+        assert worker.wait_idle(30.0)
+    finally:
+        worker.close()
+    assert published == [full.to_cdr(), b"as published"]
+    assert recorded == [(full.to_cdr(), 11), (b"as published", 12)]
+    assert worker.completed == 1 and worker.published == 2
+
+
+def test_latest_wins_and_the_offer_never_waits() -> None:
+    gate = threading.Event()
+    published = []
+
+    def slow_publish(data: bytes) -> None:
+        gate.wait(10.0)
+        published.append(data)
+
+    worker = ProbabilityPublisher(slow_publish)
+    try:
+        p = _prediction(0)
+        worker.offer(p, b"first", 1)
+        time.sleep(0.1)  # the thread holds "first" in publish
+        started = time.monotonic()
+        for k in range(5):
+            worker.offer(p, f"later {k}".encode(), 2 + k)
+        assert time.monotonic() - started < 0.05
+        gate.set()
+        assert worker.wait_idle(10.0)
+    finally:
+        worker.close()
+    assert published == [b"first", b"later 4"]
+    assert worker.superseded == 4
+
+
+def test_close_publishes_what_was_offered_and_errors_are_reported() -> None:
+    errors, published = [], []
+    calls = iter([RuntimeError("link down")])
+
+    def flaky(data: bytes) -> None:
+        failure = next(calls, None)
+        if failure is not None:
+            raise failure
+        published.append(data)
+
+    worker = ProbabilityPublisher(flaky, on_error=errors.append)
+    p = _prediction(0)
+    worker.offer(p, b"lost", 1)
+    assert worker.wait_idle(10.0)
+    worker.offer(p, b"kept", 2)
+    worker.close()
+    assert published == [b"kept"]
+    assert len(errors) == 1 and "link down" in errors[0] and "at 1 ns" in errors[0]
+
+
+@pytest.mark.parametrize("budget", [1, 3])
+def test_completion_is_the_unbudgeted_prediction(budget) -> None:
+    assert _prediction(budget, seed=4).completed().to_cdr() == _prediction(0, seed=4).to_cdr()
