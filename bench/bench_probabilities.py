@@ -21,6 +21,8 @@ receives both topics. Per topic it prints:
 Then --check rows sampled from the last collision_probabilities messages are checked against an
 independent --samples Monte Carlo on the same states (core.narrow.time_to_collision on sampled
 relative states): |P - MC| <= stated bound + 4 standard errors.
+
+Writes what it prints to bench/results/probabilities.md (--out; "" prints only).
 """
 
 from __future__ import annotations
@@ -96,7 +98,14 @@ def main() -> int:
     parser.add_argument("--velocity-sigma", type=float, default=0.2)
     parser.add_argument("--check", type=int, default=20)
     parser.add_argument("--samples", type=int, default=1_000_000)
+    parser.add_argument("--out", default=str(Path(__file__).resolve().parent / "results"
+                                             / "probabilities.md"))
     opts = parser.parse_args()
+    lines: list[str] = []
+
+    def say(text: str = "") -> None:
+        print(text)
+        lines.append(text)
 
     import os
     import signal
@@ -164,12 +173,12 @@ def main() -> int:
         client.destroy_node()
         rclpy.try_shutdown()
 
-    print(f"{opts.bodies} bodies in CircleStateArray frames at {opts.rate:g} Hz for "
+    say(f"{opts.bodies} bodies in CircleStateArray frames at {opts.rate:g} Hz for "
           f"{opts.seconds:g} s ({len(sent)} frames), position sigma {opts.sigma} m, velocity "
           f"sigma {opts.velocity_sigma} m/s on every body; node defaults")
-    print("| topic | frames answered | latency p50 ms | p99 ms | max ms | uncertain rows | "
+    say("| topic | frames answered | latency p50 ms | p99 ms | max ms | uncertain rows | "
           "placeholders | bound <= 0.01 |")
-    print("|---|---:|---:|---:|---:|---:|---:|---:|")
+    say("|---|---:|---:|---:|---:|---:|---:|---:|")
     decoded = {}
     for topic in TOPICS:
         msgs = [(t, decode_prediction_array(d)) for t, d in received[topic]]
@@ -182,7 +191,7 @@ def main() -> int:
         prob = np.array([p.collision_probability for p in rows])
         holders = int(np.count_nonzero((prob == 1.0) & (bound == 1.0)))
         tight = 100.0 * np.count_nonzero(bound <= 0.01) / max(bound.size, 1)
-        print(f"| {topic} | {len(msgs)} | {np.percentile(lat, 50):.1f} | "
+        say(f"| {topic} | {len(msgs)} | {np.percentile(lat, 50):.1f} | "
               f"{np.percentile(lat, 99):.1f} | {lat.max():.1f} | {bound.size} | {holders} | "
               f"{tight:.2f} % |")
     msgs = decoded["collision_probabilities"][-5:]
@@ -192,10 +201,10 @@ def main() -> int:
         picks = rng.choice(len(pool), size=min(opts.check, len(pool)), replace=False)
         block = np.diag([opts.sigma**2] * 3 + [opts.velocity_sigma**2] * 3)
         bad = 0
-        print(f"\n{len(picks)} rows of the last {len(msgs)} collision_probabilities messages vs "
+        say(f"\n{len(picks)} rows of the last {len(msgs)} collision_probabilities messages vs "
               f"{opts.samples:,}-sample Monte Carlo on the same states:")
-        print("| pair | P | bound | MC | MC se | within bound + 4 se |")
-        print("|---|---:|---:|---:|---:|:---|")
+        say("| pair | P | bound | MC | MC se | within bound + 4 se |")
+        say("|---|---:|---:|---:|---:|:---|")
         for k, j in enumerate(picks.tolist()):
             m, row = pool[j]
             frame = sent[m.header[0] * 10**9 + m.header[1]]
@@ -203,10 +212,15 @@ def main() -> int:
             mc, se = monte_carlo(frame, a, b, block, m.horizon, opts.samples, seed=k)
             ok = abs(row.collision_probability - mc) <= row.collision_probability_bound + 4 * se
             bad += not ok
-            print(f"| {row.id_a}-{row.id_b} | {row.collision_probability:.4f} | "
+            say(f"| {row.id_a}-{row.id_b} | {row.collision_probability:.4f} | "
                   f"{row.collision_probability_bound:.4f} | {mc:.4f} | {se:.4f} | "
                   f"{'yes' if ok else 'NO'} |")
-        print(f"rows outside: {bad} of {len(picks)}")
+        say(f"rows outside: {bad} of {len(picks)}")
+    if opts.out:
+        command = " ".join(["bench/bench_probabilities.py", *sys.argv[1:]])
+        text = "\n".join(lines)
+        Path(opts.out).write_text(f"# Probabilities at tracker scale, live\n\n"
+                                  f"`.venv/bin/python {command}`\n\n{text}\n")
     return 0
 
 

@@ -198,6 +198,7 @@ class CollisionNode(Node):
                             report_all_pairs=p("report_all_pairs"), max_bodies=p("max_bodies"),
                             probability_threshold=p("probability_threshold"),
                             uncertain_pair_budget=p("uncertain_pair_budget"),
+                            probability_tolerance=p("probability_tolerance"),
                             use_covariance=p("use_covariance"))
         )
         # An unusable record_path refuses the start before a first start's compile, not after

@@ -122,6 +122,16 @@ PARAMS: tuple[ParamSpec, ...] = (
         int_range=(0, 1_000_000),
     ),
     ParamSpec(
+        "probability_tolerance",
+        Parameter.Type.DOUBLE,
+        0.005,
+        "In [0, 0.1]: the stated bound (collision_probability_bound) a full probability "
+        "evaluation may reach where that saves work (also the service's); 0: every pair at "
+        "the per-pair accuracy (the core's default).",
+        read_only=True,
+        float_range=(0.0, 0.1),
+    ),
+    ParamSpec(
         "use_covariance",
         Parameter.Type.BOOL,
         True,

@@ -8,8 +8,9 @@ stamped as the prediction it completes, on `collision_probabilities`: the messag
 scene publishes with ``uncertain_pair_budget`` 0, bit for bit.
 
 - The exact times never wait: the prediction path only hands over a reference.
-- The heavy kernels release the interpreter lock (numba ``nogil``), so on a multi-core
-  machine the completion runs on another core beside the prediction path.
+- The heavy kernels release the interpreter lock (numba ``nogil``): the rows are dealt to
+  ``PARTS`` threads, which run beside the prediction path at a lower scheduling priority
+  (``NICE``), so that where cores are short the OS runs the exact path first.
 - Latest wins: a prediction superseded before the thread takes it is never completed
   (counted in ``superseded``). A prediction with nothing deferred is republished as it is.
 - Recording: each message is recorded with the log time of the prediction it completes, so
@@ -17,8 +18,10 @@ scene publishes with ``uncertain_pair_budget`` 0, bit for bit.
 """
 from __future__ import annotations
 
+import os
 import threading
 import time
+from concurrent.futures import ThreadPoolExecutor
 from collections.abc import Callable
 from typing import NamedTuple
 
@@ -34,12 +37,26 @@ class _Job(NamedTuple):
     offered: float  # time.monotonic() at the offer
 
 
+def _lower_priority() -> None:
+    """This thread at niceness ProbabilityPublisher.NICE (Linux: per thread; elsewhere or if
+    refused, unchanged: only the scheduling order is at stake, never a result)."""
+    try:
+        os.setpriority(os.PRIO_PROCESS, threading.get_native_id(), ProbabilityPublisher.NICE)
+    except (AttributeError, OSError):
+        pass
+
+
 class ProbabilityPublisher:
     """A thread that completes and publishes the newest offered prediction.
 
     publish(data) sends serialized CollisionPredictionArray bytes; record(data, log_time_ns)
     records them; on_error(text) reports a failure (the thread keeps running).
     """
+
+    #: Threads evaluating one completion's rows (each share on its own core, if there is one).
+    PARTS = min(2, os.cpu_count() or 1)
+    #: Niceness of those threads (the prediction path keeps the process's, 0 by default).
+    NICE = 10
 
     def __init__(self, publish: Callable[[bytes], None],
                  record: Callable[[bytes, int], None] | None = None,
@@ -56,6 +73,8 @@ class ProbabilityPublisher:
         self.superseded = 0  # offered predictions replaced before the thread took them
         self.last_compute_s = 0.0  # the last completion's evaluation time
         self.last_delay_s = 0.0  # the last message's offer-to-publish time
+        self._pool = ThreadPoolExecutor(self.PARTS, "collision_node_probabilities",
+                                        initializer=_lower_priority)
         self._thread = threading.Thread(target=self._run, name="collision_node_probabilities",
                                         daemon=True)
         self._thread.start()
@@ -74,6 +93,7 @@ class ProbabilityPublisher:
             self._stopped = True
             self._cond.notify()
         self._thread.join(timeout=30.0)
+        self._pool.shutdown(wait=False)
 
     def wait_idle(self, timeout: float) -> bool:
         """True once every offered prediction is published or superseded (tests, replay tools)."""
@@ -87,6 +107,7 @@ class ProbabilityPublisher:
             time.sleep(0.005)
 
     def _run(self) -> None:
+        _lower_priority()
         while True:
             with self._cond:
                 while not self._stopped and self._latest is None:
@@ -99,7 +120,7 @@ class ProbabilityPublisher:
                 data = job.data
                 if job.prediction.deferred:
                     started = time.monotonic()
-                    data = job.prediction.completed().to_cdr()
+                    data = job.prediction.completed(self._pool, self.PARTS).to_cdr()
                     self.last_compute_s = time.monotonic() - started
                     self.completed += 1
                 self._publish(data)

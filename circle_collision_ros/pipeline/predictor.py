@@ -48,7 +48,9 @@ class PredictorConfig:
     A count, not a time: replay reproduces it bit for bit. use_covariance : False predicts
     every body on its mean state: covariances are dropped at intake (counted in
     IntakeReport.covariance_ignored) and the probability kernels are never needed (a first
-    start compiles fewer).
+    start compiles fewer). probability_tolerance : in [0, 0.1]; the stated bound a full
+    evaluation may reach where that saves work (core.uncertainty.uncertain_pairs(tolerance=...));
+    0 (here, and for recordings made before it existed): every pair at the per-pair accuracy.
     """
 
     horizon: float = 5.0
@@ -60,6 +62,7 @@ class PredictorConfig:
     probability_threshold: float = 0.01
     uncertain_pair_budget: int = 0
     use_covariance: bool = True
+    probability_tolerance: float = 0.0
 
 
 #: The PredictorConfig fields that may change while running (node parameters
@@ -290,7 +293,8 @@ class CollisionPredictor:
         self._scene.set_horizon(horizon)
         contacts = self._scene.predictions()
         uncertainty = self._scene.uncertain_pairs(
-            self.config.probability_threshold, contacts, self.config.uncertain_pair_budget or None
+            self.config.probability_threshold, contacts, self.config.uncertain_pair_budget or None,
+            self.config.probability_tolerance,
         )
         prediction = ScenePrediction(contacts, self._scene.capture(), horizon, self.frame_id,
                                      self.config.report_all_pairs, uncertainty,

@@ -110,7 +110,7 @@ class DeferredInputs:
     t_p, ``(p, v, a, radius, covariance)`` with shapes (k, D), (k, D), (k, D), (k,),
     (k, 2D, 2D).  first : (k,) s from t_p, where each row's screening tube may first reach
     the ball (the screen's outcome, which the full evaluation need not repeat).  lag : (k,) s,
-    R - t_p.  horizon : s; threshold: the probability threshold they were evaluated for.
+    R - t_p.  horizon : s; threshold, tolerance: those of the call that deferred them.
     """
 
     rows: np.ndarray
@@ -120,6 +120,7 @@ class DeferredInputs:
     lag: np.ndarray
     horizon: float
     threshold: float
+    tolerance: float
 
 
 @dataclass(frozen=True)

@@ -5,6 +5,7 @@ A part of ``Scene``.
 """
 from __future__ import annotations
 
+from concurrent.futures import Executor
 from dataclasses import replace
 from typing import NamedTuple
 
@@ -72,7 +73,8 @@ class UncertainMixin:
     UNCERTAIN_LAG_NS = 100_000_000
 
     def uncertain_pairs(self, threshold: float, contacts: SceneContacts | None = None,
-                        max_evaluated: int | None = None) -> SceneUncertainty:
+                        max_evaluated: int | None = None,
+                        tolerance: float = 0.0) -> SceneUncertainty:
         """Probabilities of the pairs with an uncertain body that may touch within [R, R + H].
 
         Which pairs: those the broad phase at R over [0, H], each uncertain body's radius
@@ -90,7 +92,9 @@ class UncertainMixin:
         and `threshold` are unchanged.  `contacts` (the exact path's rows) adds their
         uncertain pairs should the inflated broad phase not list them.  Pairs certified below
         threshold / 2 skip the full evaluation (``core.uncertainty.uncertain_pairs(screen=True)``);
-        `max_evaluated` caps the full evaluations (the rest are deferred, see there).
+        `max_evaluated` caps the full evaluations (the rest are deferred, see there);
+        `tolerance`: the stated bound a full evaluation may reach where that saves work
+        (``core.uncertainty.uncertain_pairs``; 0: the per-pair accuracy).
 
         Which pairs the budget evaluates: first come, first served.  A pair that is deferred
         waits from the first evaluation (call that follows a change) that defers it until one
@@ -106,15 +110,15 @@ class UncertainMixin:
         the node's calls in the node's order, reproduces it bit for bit.
         See SceneUncertainty.
         """
-        key = (self._version, float(threshold), max_evaluated)
+        key = (self._version, float(threshold), max_evaluated, float(tolerance))
         if self._uncertain_cache is not None and self._uncertain_cache[0] == key:
             return self._uncertain_cache[1]
-        res = self._uncertain_pairs(float(threshold), contacts, max_evaluated)
+        res = self._uncertain_pairs(float(threshold), contacts, max_evaluated, float(tolerance))
         self._uncertain_cache = (key, res)
         return res
 
     def _uncertain_pairs(self, threshold: float, contacts: SceneContacts | None,
-                         max_evaluated: int | None) -> SceneUncertainty:
+                         max_evaluated: int | None, tolerance: float) -> SceneUncertainty:
         R = self.reference_ns
         if R is None or self._n_uncertain == 0:
             self._uncertain_waiting = NO_WAITING  # no pair listed: none waits
@@ -145,6 +149,7 @@ class UncertainMixin:
         # a kept answer needs both bodies unchanged since (state serials below old.sv_next):
         # when every body changed (a tracker array) there is nothing to look up
         if old is not None and old.horizon == self._h and old.threshold == threshold \
+                and old.tolerance == tolerance \
                 and self._sv[slots].min() < old.sv_next and old.key.size:
             keep = np.argsort(old.key, kind="stable")  # keys are distinct
             at = keep[np.minimum(np.searchsorted(old.key[keep], key), keep.size - 1)]
@@ -164,7 +169,7 @@ class UncertainMixin:
             deferred = self._evaluate_uncertain(unc, sa[todo], sb[todo], I[todo], J[todo], at_R,
                                                 tp[todo], key[todo], threshold, max_evaluated,
                                                 screened_first[todo],
-                                                (known[0][todo], known[1][todo]))
+                                                (known[0][todo], known[1][todo]), tolerance)
             prob[todo], bound[todo], tau[todo] = deferred.probability, deferred.bound, deferred.tau
             answered[todo[~deferred.deferred]] = True
             if deferred.pending is not None:
@@ -172,12 +177,13 @@ class UncertainMixin:
                 rows = todo[late]
                 pending = DeferredInputs(rows, deferred.pending[0], deferred.pending[1],
                                          tau[rows], (R - tp[rows]).astype(np.float64) * 1e-9,
-                                         self._h, threshold)
+                                         self._h, threshold, tolerance)
         else:
             self._uncertain_waiting = NO_WAITING
             self._uncertain_serial += 1
         self._pair_answers = _PairAnswers(
-            self._h, threshold, self._sv_next, key, answered, sv_a, sv_b, tp, prob, bound, tau
+            self._h, threshold, tolerance, self._sv_next, key, answered, sv_a, sv_b, tp, prob,
+            bound, tau
         )
         self.uncertain_evaluated = int(todo.size)
         plausible = _from_reference(tau, (R - tp).astype(np.float64) * 1e-9)
@@ -265,7 +271,8 @@ class UncertainMixin:
 
     def _evaluate_uncertain(self, unc, sa, sb, la, lb, at_R, tp, key, threshold: float,
                             max_evaluated: int | None, screened_first: np.ndarray,
-                            deferred_answer: tuple[np.ndarray, np.ndarray]) -> "_Evaluated":
+                            deferred_answer: tuple[np.ndarray, np.ndarray],
+                            tolerance: float) -> "_Evaluated":
         """``unc.uncertain_pairs`` on these pairs (slots sa, sb; local indices la, lb into
         at_R, the bodies at R; key = sa << 32 | sb), each at its t_p over [0, H] (screened,
         within the budget; FIFO bookkeeping of the deferred, see uncertain_pairs);
@@ -298,7 +305,7 @@ class UncertainMixin:
         res = unc.uncertain_pairs(*states[0], *states[1], self._h, threshold, screen=True,
                                   max_evaluated=max_evaluated, priority=waited_since,
                                   memo=self._uncertain_memo, screened_first=screened_first,
-                                  deferred_answer=deferred_answer)
+                                  deferred_answer=deferred_answer, tolerance=tolerance)
         deferred = res.deferred
         # the deferred of the rows that competed wait on (since as looked up); the rest stop
         rows = np.concatenate([r for r, _ in asked]) if asked else EMPTY_I
@@ -351,6 +358,7 @@ class _PairAnswers(NamedTuple):
 
     horizon: float
     threshold: float
+    tolerance: float
     sv_next: int  # Scene._sv_next then: every state serial of that call is below it
     key: np.ndarray
     answered: np.ndarray
@@ -376,7 +384,8 @@ def _from_reference(tau: np.ndarray, lag: np.ndarray) -> np.ndarray:
     return np.where(np.isnan(tau) | (tau > lag), tau - lag, 0.0)
 
 
-def complete_uncertainty(uncertainty: SceneUncertainty) -> SceneUncertainty:
+def complete_uncertainty(uncertainty: SceneUncertainty,
+                         executor: Executor | None = None, parts: int = 1) -> SceneUncertainty:
     """`uncertainty` with every deferred row given the full evaluation (no row deferred).
 
     The same rows in the same order; each deferred row's probability, bound and plausible
@@ -386,17 +395,34 @@ def complete_uncertainty(uncertainty: SceneUncertainty) -> SceneUncertainty:
     of its inputs alone, and the screen the scene already ran is not repeated: its outcome
     is kept in ``pending.first``).  A pure function of `uncertainty`: it may run later, on
     another thread, and replay reproduces it.  Unchanged when nothing was deferred.
+
+    executor, parts: the rows dealt into `parts` interleaved shares, evaluated on the
+    executor's threads (the kernels release the interpreter lock); the same bits, since
+    rows are independent.
     """
     pending = uncertainty.pending
     if pending is None:
         return uncertainty
     from circle_collision_ros.core import uncertainty as unc  # heavy kernels: on first use
-    res = unc.uncertain_pairs(*pending.a, *pending.b, pending.horizon, pending.threshold,
-                              screen=True, screened_first=pending.first)
+
+    def evaluate(share):
+        a, b = (tuple(x[share] for x in side) for side in (pending.a, pending.b))
+        return unc.uncertain_pairs(*a, *b, pending.horizon, pending.threshold, screen=True,
+                                   screened_first=pending.first[share],
+                                   tolerance=pending.tolerance)
+
+    k = pending.rows.size
+    if executor is not None and parts > 1 and k > 1:
+        shares = [np.arange(j, k, parts) for j in range(parts)]
+        results = list(executor.map(evaluate, shares))
+    else:
+        shares = [slice(None)]
+        results = [evaluate(shares[0])]
     prob, bound = uncertainty.probability.copy(), uncertainty.probability_bound.copy()
     plausible = uncertainty.plausible_ttc.copy()
-    rows = pending.rows
-    prob[rows], bound[rows] = res.collision_probability, res.collision_probability_bound
-    plausible[rows] = _from_reference(res.plausible_time, pending.lag)
+    for share, res in zip(shares, results):
+        rows = pending.rows[share]
+        prob[rows], bound[rows] = res.collision_probability, res.collision_probability_bound
+        plausible[rows] = _from_reference(res.plausible_time, pending.lag[share])
     return replace(uncertainty, probability=prob, probability_bound=bound, plausible_ttc=plausible,
                    deferred_rows=None, pending=None)

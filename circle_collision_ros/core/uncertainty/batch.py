@@ -70,8 +70,8 @@ def uncertain_pairs(pa, va, aa, ra, cov_a, pb, vb, ab, rb, cov_b, horizon: float
                     priority: Callable[[np.ndarray], np.ndarray] | None = None,
                     memo: dict | None = None,
                     screened_first: np.ndarray | None = None,
-                    deferred_answer: tuple[np.ndarray, np.ndarray] | None = None
-                    ) -> UncertainPairs:
+                    deferred_answer: tuple[np.ndarray, np.ndarray] | None = None,
+                    tolerance: float = 0.0) -> UncertainPairs:
     """Collision probability, its bound and the earliest plausible contact of n pairs.
 
     pa, va, aa, pb, vb, ab: (n, D) float64, D in {2, 3} [m, m/s, m/s^2];
@@ -117,10 +117,14 @@ def uncertain_pairs(pa, va, aa, ra, cov_a, pb, vb, ab, rb, cov_b, horizon: float
     deferred again, such a row takes it instead of computing its interval anew (the same
     bits: a function of the same inputs).
 
+    tolerance: the stated bound a fully evaluated row may reach where that saves work
+    (``pair.finish_row``: accelerating pairs' bracket and over-count sampling), e.g. 0.005;
+    0 (default): every row at the per-pair accuracy.
+
     memo: a dict the caller keeps between calls.  A row whose relative inputs
-    (dp, dv, da, R, Sigma after the sign canonicalisation, with H and the
-    threshold) equal those of a row fully evaluated by the previous call takes
-    that row's answer bit for bit (the answer is a function of exactly these
+    (dp, dv, da, R, Sigma after the sign canonicalisation, with H, the threshold
+    and the tolerance) equal those of a row fully evaluated by the previous call
+    takes that row's answer bit for bit (the answer is a function of exactly these
     inputs), without counting against max_evaluated; on return the memo holds
     exactly this call's fully evaluated and reused rows.
     """
@@ -145,6 +149,9 @@ def uncertain_pairs(pa, va, aa, ra, cov_a, pb, vb, ab, rb, cov_b, horizon: float
     thr = float(threshold)
     if not (0.0 < thr <= 1.0):
         raise ValueError(f"threshold must be in (0, 1], got {threshold!r}")
+    tol = float(tolerance)
+    if not (0.0 <= tol < 1.0):
+        raise ValueError(f"tolerance must be in [0, 1), got {tolerance!r}")
 
     prob = np.zeros(n)
     bound = np.zeros(n)
@@ -213,7 +220,7 @@ def uncertain_pairs(pa, va, aa, ra, cov_a, pb, vb, ab, rb, cov_b, horizon: float
 
     def key(j):  # everything a row's answer depends on (pair_probability's arguments)
         return np.concatenate(
-            (dp[j], dv[j], da[j], rad[j : j + 1], sig[j].ravel(), (H, thr))
+            (dp[j], dv[j], da[j], rad[j : j + 1], sig[j].ravel(), (H, thr, tol))
         ).tobytes()
 
     if memo and todo.size:  # (an empty memo, e.g. after a new reference time: no look-ups)
@@ -256,7 +263,7 @@ def uncertain_pairs(pa, va, aa, ra, cov_a, pb, vb, ab, rb, cov_b, horizon: float
     evaluate_uncertain_rows(dp, dv, da, rad, sig, H, thr, out)
     for j, i in enumerate(todo.tolist()):
         prob[i], bound[i], tpl[i] = r = finish_row(
-            dp[j], dv[j], da[j], float(rad[j]), sig[j], H, out[j]
+            dp[j], dv[j], da[j], float(rad[j]), sig[j], H, out[j], tol
         )
         if memo is not None:
             fresh[key(j)] = r
