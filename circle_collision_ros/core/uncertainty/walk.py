@@ -26,8 +26,8 @@ from circle_collision_ros.core.uncertainty.overlap import (overlap_probability,
                                                            overlap_probability_2d,
                                                            overlap_probability_2d_tol,
                                                            overlap_probability_tol)
-from circle_collision_ros.core.uncertainty.quadrature import (P31_K15_POS, P31_NEW_POS, push_halves,
-                                                              subinterval_integral)
+from circle_collision_ros.core.uncertainty.quadrature import (P31_K15_POS, P31_NEW_POS, k15_error,
+                                                              push_halves, subinterval_integral)
 from circle_collision_ros.core.uncertainty.tube import TUBE_TAIL, S_at, max_sigma_over, mean_range
 
 __all__ = ["instant_probability", "instant_probability_tol", "instant_bound", "det_lower", "PANELS",
@@ -234,6 +234,10 @@ def rice_panel(dp, dv, da, R, Sigma, pa, pb, j, cache, acc, st):
         v, e, inner, inner_max = entry_rate_k15(
             dp, dv, da, R, Sigma, pa[j], pb[j], _RICE_TOL, acc, f15, fe
         )
+        # the whole panel is one K15: QUADPACK's estimate, not |K15 - G7| alone, which
+        # can understate a peak between the nodes (k15_error); the halves below use the
+        # adaptive rule's own estimates
+        e = k15_error(f15, 0.5 * (pb[j] - pa[j]), v, e)
         if not (e > _RICE_TOL):  # (a NaN estimate is accepted, as by the adaptive rule)
             cache[j, _C_NODES_OK] = 15.0
             cache[j, _C_INNER_MAX] = inner_max

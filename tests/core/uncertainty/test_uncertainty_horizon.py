@@ -181,3 +181,27 @@ def test_monotone_in_radius_and_horizon(seed, dr, dh):
     for r in (r1, r2):
         assert r.collision_probability[0] >= p0 - b0 - r.collision_probability_bound[0]
         assert r.plausible_time[0] <= r0.plausible_time[0] or r is r2
+
+
+# A 2-D accelerating pair of a 1,000-body tracker frame (bench/bench_probabilities.py) whose
+# entry rate peaks between the nodes of the one K15 over its first Rice panel: K15 was 9.7e-4
+# off with |K15 - G7| = 4.3e-4, and the pair was reported 0.99901 +- 7.6e-4 (true 0.99999).
+PEAK_BETWEEN_NODES_PAIR = {
+    "dp": [float.fromhex("0x1.dbf48d787ab40p+2"), float.fromhex("0x1.01bfc2ad84c00p+0")],
+    "dv": [-float.fromhex("0x1.0739ecaa43291p+2"), -float.fromhex("0x1.778445b049072p-1")],
+    "da": [-float.fromhex("0x1.1aa72cd6d304fp-1"), float.fromhex("0x1.b9074f020f019p-4")],
+    "R": float.fromhex("0x1.5eea4ef1a8dc0p+1"),
+    "Sigma": np.diag([0.18, 0.18, 0.08, 0.08]),
+}
+
+
+def test_peak_between_k15_nodes_pair_within_the_stated_bound():
+    """rice_panel's one-K15 panel takes QUADPACK's error estimate (quadrature.k15_error)."""
+    c = PEAK_BETWEEN_NODES_PAIR
+    z = np.zeros(2)
+    pair = tuple(np.asarray(x, dtype=np.float64) for x in (
+        c["dp"], c["dv"], c["da"], c["R"] / 2, c["Sigma"], z, z, z, c["R"] / 2, np.zeros((4, 4))))
+    r = uncertain_pairs(*(x[None] for x in pair), 5.0, 0.01)
+    p, b = r.collision_probability[0], r.collision_probability_bound[0]
+    ref, se = mc_probability(*pair, 5.0, 1_000_000, seed=600)
+    assert abs(p - ref) <= b + 4 * se, (p, b, ref, se)

@@ -240,3 +240,19 @@ def test_subinterval_estimate_covers_the_error_of_a_bump(width: float, nodes: st
         pts = [xl, centre, xr] if xl < centre < xr else [xl, xr]
         exact = float(mpmath.quad(lambda x: mpmath.exp(-(((x - centre) / width) ** 2) / 2), pts))
         assert abs(v - exact) <= e
+
+
+@pytest.mark.parametrize("seed", range(5))
+def test_k15_error_is_quadpacks_and_never_below_the_difference(seed: int) -> None:
+    from circle_collision_ros.core.uncertainty.quadrature import G7_WEIGHTS, k15_error
+
+    rng = np.random.default_rng(seed)
+    h = float(rng.uniform(0.1, 2.0))
+    f = np.exp(-((q.K15_NODES - rng.uniform(-1, 1)) / rng.uniform(0.05, 1.0)) ** 2)
+    value = h * float(q.K15_WEIGHTS @ f)
+    diff = abs(value - h * float(G7_WEIGHTS @ f))
+    resasc = h * float(q.K15_WEIGHTS @ np.abs(f - value / (2 * h)))
+    expected = max(diff, resasc * min(1.0, (200 * diff / resasc) ** 1.5))
+    assert k15_error(f, h, value, diff) == pytest.approx(expected, rel=1e-12)
+    assert k15_error(f, h, value, diff) >= diff
+    assert k15_error(np.full(15, 2.0), h, 4.0 * h, 0.0) == 0.0  # a constant: exact
