@@ -68,6 +68,7 @@ from circle_collision_ros.pipeline.state_batch import StateBatch
 from circle_collision_ros.pipeline.state_groups import ingest_single_states
 from circle_collision_ros.cli import TransportProfile, parse_args, spin_node
 from circle_collision_ros.node.input_loss import InputLossMonitor
+from circle_collision_ros.node.activity import NodeActivity
 from circle_collision_ros.node.markers import MarkerPublisher
 from circle_collision_ros.node.probabilities import ProbabilityPublisher
 from circle_collision_ros.pipeline.predictor import (RUNTIME_FIELDS, CollisionPredictor,
@@ -233,14 +234,17 @@ class CollisionNode(Node):
             CollisionPredictionArray, "collision_probabilities", Qos.predictions(),
             qos_overriding_options=overrides)
         self._markers_pub = self.create_publisher(MarkerArray, "~/markers", Qos.markers())
+        # the prediction path's busy flag: markers and completions step aside meanwhile
+        self.activity = NodeActivity()
         self.markers = MarkerPublisher(p("dimensions"), p("marker_rate"), self._markers_pub.publish,
-                                       on_error=lambda text: self._warn("markers", text))
+                                       on_error=lambda text: self._warn("markers", text),
+                                       activity=self.activity)
         # With covariance on, each prediction is completed on its own thread: every deferred
         # uncertain pair evaluated in full (node/probabilities.py)
         self.probabilities = ProbabilityPublisher(
             self._probabilities_pub.publish,
             lambda data, log_ns: self._record(self._probabilities_pub.topic_name, data, log_ns),
-            on_error=lambda text: self._warn("probabilities", text),
+            on_error=lambda text: self._warn("probabilities", text), activity=self.activity,
         )
         self._diagnostics_pub = self.create_publisher(
             DiagnosticArray, "/diagnostics", qos_profile_system_default
@@ -307,7 +311,7 @@ class CollisionNode(Node):
 
     def _on_input(self, source: InputTopic, data: bytes, info: dict) -> None:
         """Ingest this input and every input already waiting, then publish once (on-change mode)."""
-        with self.markers.node_busy():
+        with self.activity.busy():
             now_ns = self._drain_clock()
             taken = [(source, data, info)]
             self._take_waiting(taken)
@@ -438,7 +442,7 @@ class CollisionNode(Node):
 
     # -- outputs --------------------------------------------------------------------------------
     def _on_publish_timer(self) -> None:
-        with self.markers.node_busy():
+        with self.activity.busy():
             now_ns = self.get_clock().now().nanoseconds
             self.counters.expired += len(self.predictor.expire(now_ns))
             self._publish(now_ns)
@@ -449,7 +453,7 @@ class CollisionNode(Node):
         expired = self.predictor.expire(now_ns)
         if expired:
             self.counters.expired += len(expired)
-            with self.markers.node_busy():
+            with self.activity.busy():
                 self._publish(now_ns)
 
     def _publish(self, now_ns: int) -> None:

@@ -27,13 +27,13 @@ from __future__ import annotations
 import heapq
 import threading
 import time
-from collections.abc import Callable, Hashable, Iterator, Sequence
-from contextlib import contextmanager
+from collections.abc import Callable, Hashable, Sequence
 from typing import NamedTuple
 
 import numpy as np
 
 from circle_collision_msgs.msg import CollisionPrediction
+from circle_collision_ros.node.activity import NodeActivity
 from circle_collision_ros.pipeline.prediction_messages import ScenePrediction
 
 # visualization_msgs/Marker constants (kept here so encoding needs no message objects).
@@ -401,19 +401,16 @@ class MarkerPublisher:
     publish : sends serialized MarkerArray bytes (the node's raw publisher).
     offer() is all the prediction path pays: it replaces a reference under a lock.
 
-    Python threads share one interpreter lock, so a drawing running beside a
-    prediction would slow it. The node therefore wraps its prediction work in
-    `node_busy()`, and the drawing, cut into short steps (MarkerBuilder.CHUNK
-    keys, MarkerArrayEncoder.CHUNK markers), waits at each step while the node
-    is busy, for at most MAX_PAUSE_S (so a node that is never idle still gets
-    markers, late).
+    The drawing is cut into short steps (MarkerBuilder.CHUNK keys,
+    MarkerArrayEncoder.CHUNK markers) and steps aside at each while the node
+    is busy (`activity`, node/activity.py).
     """
 
     BUDGET = 0.1  # fraction of wall time markers may take
-    MAX_PAUSE_S = 0.25
 
     def __init__(self, dimensions: int, rate_hz: float, publish: Callable[[bytes], None],
-                 on_error: Callable[[str], None] | None = None) -> None:
+                 on_error: Callable[[str], None] | None = None,
+                 activity: NodeActivity | None = None) -> None:
         self.builder = MarkerBuilder(dimensions)
         self._publish = publish
         self._on_error = on_error or (lambda text: None)
@@ -423,8 +420,7 @@ class MarkerPublisher:
         self._clear_pending = False
         self._stopped = False
         self._next_time = 0.0
-        self._node_idle = threading.Event()
-        self._node_idle.set()
+        self.activity = activity or NodeActivity()
         self.drawn = 0
         self.last_cost_s = 0.0
         self._thread = threading.Thread(
@@ -443,18 +439,6 @@ class MarkerPublisher:
         with self._cond:
             self._latest = prediction
             self._cond.notify()
-
-    @contextmanager
-    def node_busy(self) -> Iterator[None]:
-        """Around the node's prediction work: drawing steps wait meanwhile."""
-        self._node_idle.clear()
-        try:
-            yield
-        finally:
-            self._node_idle.set()
-
-    def _pause(self) -> None:
-        self._node_idle.wait(self.MAX_PAUSE_S)
 
     def set_rate(self, rate_hz: float) -> None:
         """Change the rate; 0 stops drawing and clears what is on screen."""
@@ -513,7 +497,7 @@ class MarkerPublisher:
                 if clear:
                     self._send(self.builder.clear_all())
                 else:
-                    self._send(self.builder.build(prediction, self._pause))
+                    self._send(self.builder.build(prediction, self.activity.pause))
                     self.drawn += 1
                 self.last_cost_s = time.monotonic() - started
                 if self._rate > 0:

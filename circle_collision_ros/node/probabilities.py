@@ -10,7 +10,8 @@ scene publishes with ``uncertain_pair_budget`` 0, bit for bit.
 - The exact times never wait: the prediction path only hands over a reference.
 - The heavy kernels release the interpreter lock (numba ``nogil``): the rows are dealt to
   ``PARTS`` threads, which run beside the prediction path at a lower scheduling priority
-  (``NICE``), so that where cores are short the OS runs the exact path first.
+  (``NICE``), in steps of a few rows that wait while the prediction path is busy
+  (node/activity.py): the exact path is not slowed by the cores or the lock they hold.
 - Latest wins: a prediction superseded before the thread takes it is never completed
   (counted in ``superseded``). A prediction with nothing deferred is republished as it is.
 - Recording: each message is recorded with the log time of the prediction it completes, so
@@ -25,6 +26,7 @@ from concurrent.futures import ThreadPoolExecutor
 from collections.abc import Callable
 from typing import NamedTuple
 
+from circle_collision_ros.node.activity import NodeActivity
 from circle_collision_ros.pipeline.prediction_messages import ScenePrediction
 
 __all__ = ["ProbabilityPublisher"]
@@ -60,10 +62,12 @@ class ProbabilityPublisher:
 
     def __init__(self, publish: Callable[[bytes], None],
                  record: Callable[[bytes, int], None] | None = None,
-                 on_error: Callable[[str], None] | None = None) -> None:
+                 on_error: Callable[[str], None] | None = None,
+                 activity: NodeActivity | None = None) -> None:
         self._publish = publish
         self._record = record or (lambda data, log_time_ns: None)
         self._on_error = on_error or (lambda text: None)
+        self.activity = activity or NodeActivity()
         self._cond = threading.Condition()
         self._latest: _Job | None = None
         self._stopped = False
@@ -120,7 +124,8 @@ class ProbabilityPublisher:
                 data = job.data
                 if job.prediction.deferred:
                     started = time.monotonic()
-                    data = job.prediction.completed(self._pool, self.PARTS).to_cdr()
+                    data = job.prediction.completed(self._pool, self.PARTS,
+                                                    self.activity.pause).to_cdr()
                     self.last_compute_s = time.monotonic() - started
                     self.completed += 1
                 self._publish(data)

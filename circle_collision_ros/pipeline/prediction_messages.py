@@ -24,7 +24,7 @@ report_all_pairs rest in id order.
 """
 from __future__ import annotations
 
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from concurrent.futures import Executor
 from dataclasses import dataclass, replace
 from functools import cached_property
@@ -110,16 +110,17 @@ class ScenePrediction:
         """Whether some uncertain row was deferred (``completed`` has work to do)."""
         return self.uncertainty is not None and self.uncertainty.pending is not None
 
-    def completed(self, executor: Executor | None = None, parts: int = 1) -> ScenePrediction:
+    def completed(self, executor: Executor | None = None, parts: int = 1,
+                  pause: Callable[[], None] | None = None) -> ScenePrediction:
         """This prediction with every deferred uncertain row fully evaluated
-        (``core.scene.complete_uncertainty``, on `parts` threads of `executor` if given): the
+        (``core.scene.complete_uncertainty``, with its `executor`, `parts` and `pause`): the
         same contacts, snapshot and stamp, and bit for bit what the same scene predicts with
         ``uncertain_pair_budget`` 0.  Listed by the reporting rule of fully evaluated rows.
         Self when nothing was deferred."""
         if not self.deferred:
             return self
-        return replace(self,
-                       uncertainty=complete_uncertainty(self.uncertainty, executor, parts))
+        return replace(self, uncertainty=complete_uncertainty(self.uncertainty, executor, parts,
+                                                              pause))
 
     @property
     def snapshot(self) -> SceneSnapshot:

@@ -93,3 +93,21 @@ def test_close_publishes_what_was_offered_and_errors_are_reported() -> None:
 @pytest.mark.parametrize("budget", [1, 3])
 def test_completion_is_the_unbudgeted_prediction(budget) -> None:
     assert _prediction(budget, seed=4).completed().to_cdr() == _prediction(0, seed=4).to_cdr()
+
+
+def test_completion_steps_aside_while_the_node_is_busy() -> None:
+    from circle_collision_ros.node.activity import NodeActivity
+
+    activity = NodeActivity()
+    published = []
+    worker = ProbabilityPublisher(published.append, activity=activity)
+    try:
+        part = _prediction(2)
+        with activity.busy():
+            worker.offer(part, part.to_cdr(), 1)
+            time.sleep(0.1)  # within MAX_PAUSE_S: the first step still waits
+            assert published == []
+        assert worker.wait_idle(30.0)
+    finally:
+        worker.close()
+    assert published == [_prediction(0).to_cdr()]

@@ -5,6 +5,7 @@ A part of ``Scene``.
 """
 from __future__ import annotations
 
+from collections.abc import Callable
 from concurrent.futures import Executor
 from dataclasses import replace
 from typing import NamedTuple
@@ -17,7 +18,8 @@ from circle_collision_ros.core.scene.results import (DeferredInputs, SceneContac
                                                      SceneUncertainty)
 from circle_collision_ros.core.scene.store import EMPTY_I
 
-__all__ = ["UncertainMixin", "states_at_rows", "complete_uncertainty", "NO_WAITING"]
+__all__ = ["UncertainMixin", "states_at_rows", "complete_uncertainty", "COMPLETION_STEP",
+           "NO_WAITING"]
 
 
 @njit(cache=True, error_model="numpy", inline="always")
@@ -384,8 +386,13 @@ def _from_reference(tau: np.ndarray, lag: np.ndarray) -> np.ndarray:
     return np.where(np.isnan(tau) | (tau > lag), tau - lag, 0.0)
 
 
-def complete_uncertainty(uncertainty: SceneUncertainty,
-                         executor: Executor | None = None, parts: int = 1) -> SceneUncertainty:
+#: complete_uncertainty with a pause: rows per step (a few ms of evaluation at most)
+COMPLETION_STEP = 32
+
+
+def complete_uncertainty(uncertainty: SceneUncertainty, executor: Executor | None = None,
+                         parts: int = 1,
+                         pause: Callable[[], None] | None = None) -> SceneUncertainty:
     """`uncertainty` with every deferred row given the full evaluation (no row deferred).
 
     The same rows in the same order; each deferred row's probability, bound and plausible
@@ -397,7 +404,8 @@ def complete_uncertainty(uncertainty: SceneUncertainty,
     another thread, and replay reproduces it.  Unchanged when nothing was deferred.
 
     executor, parts: the rows dealt into `parts` interleaved shares, evaluated on the
-    executor's threads (the kernels release the interpreter lock); the same bits, since
+    executor's threads (the kernels release the interpreter lock); pause: called before each
+    step of COMPLETION_STEP rows (a caller's way to step aside).  The same bits either way:
     rows are independent.
     """
     pending = uncertainty.pending
@@ -405,11 +413,22 @@ def complete_uncertainty(uncertainty: SceneUncertainty,
         return uncertainty
     from circle_collision_ros.core import uncertainty as unc  # heavy kernels: on first use
 
+    def evaluate_rows(rows):
+        a, b = (tuple(x[rows] for x in side) for side in (pending.a, pending.b))
+        res = unc.uncertain_pairs(*a, *b, pending.horizon, pending.threshold, screen=True,
+                                  screened_first=pending.first[rows], tolerance=pending.tolerance)
+        return res.collision_probability, res.collision_probability_bound, res.plausible_time
+
     def evaluate(share):
-        a, b = (tuple(x[share] for x in side) for side in (pending.a, pending.b))
-        return unc.uncertain_pairs(*a, *b, pending.horizon, pending.threshold, screen=True,
-                                   screened_first=pending.first[share],
-                                   tolerance=pending.tolerance)
+        if pause is None:
+            return evaluate_rows(share)
+        rows = np.arange(pending.rows.size)[share]
+        steps = []
+        for at in range(0, rows.size, COMPLETION_STEP):
+            pause()
+            steps.append(evaluate_rows(rows[at:at + COMPLETION_STEP]))
+        return tuple(np.concatenate([s[c] for s in steps]) if steps else np.empty(0)
+                     for c in range(3))
 
     k = pending.rows.size
     if executor is not None and parts > 1 and k > 1:
@@ -420,9 +439,9 @@ def complete_uncertainty(uncertainty: SceneUncertainty,
         results = [evaluate(shares[0])]
     prob, bound = uncertainty.probability.copy(), uncertainty.probability_bound.copy()
     plausible = uncertainty.plausible_ttc.copy()
-    for share, res in zip(shares, results):
+    for share, (p, e, tau) in zip(shares, results):
         rows = pending.rows[share]
-        prob[rows], bound[rows] = res.collision_probability, res.collision_probability_bound
-        plausible[rows] = _from_reference(res.plausible_time, pending.lag[share])
+        prob[rows], bound[rows] = p, e
+        plausible[rows] = _from_reference(tau, pending.lag[share])
     return replace(uncertainty, probability=prob, probability_bound=bound, plausible_ttc=plausible,
                    deferred_rows=None, pending=None)

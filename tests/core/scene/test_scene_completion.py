@@ -89,3 +89,26 @@ def test_nothing_deferred_is_returned_as_it_is() -> None:
     _merge_batch(scene, next(_frames(seed=3, frames=1)))
     u = scene.uncertain_pairs(0.01, scene.predictions())
     assert u.pending is None and complete_uncertainty(u) is u
+
+
+def test_steps_with_a_pause_give_the_same_bits() -> None:
+    """With a pause (the node's way to step aside), rows go in steps of COMPLETION_STEP, the
+    pause is called before each, and the answer is the same, also split over threads."""
+    from concurrent.futures import ThreadPoolExecutor
+
+    from circle_collision_ros.core.scene.uncertain import COMPLETION_STEP
+
+    scene = Scene(5.0, 2, method="grid")
+    batch = _batch(40, seed=13, sigma=0.5, spread=6.0)
+    _merge_batch(scene, batch)
+    u = scene.uncertain_pairs(0.01, scene.predictions(), 1)
+    assert u.pending.rows.size > 2 * COMPLETION_STEP
+    calls = []
+    plain = complete_uncertainty(u)
+    with ThreadPoolExecutor(2) as pool:
+        for executor, parts in ((None, 1), (pool, 2)):
+            calls.clear()
+            stepped = complete_uncertainty(u, executor, parts, lambda: calls.append(1))
+            _same(stepped, plain)
+            per_share = -(-u.pending.rows.size // parts)
+            assert len(calls) >= parts * (-(-per_share // COMPLETION_STEP)) - parts
