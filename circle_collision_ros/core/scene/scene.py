@@ -196,6 +196,7 @@ class Scene(StoreMixin, StreamMixin, PairsMixin, OrderingMixin, UncertainMixin, 
         # core.uncertainty.uncertain_pairs(memo=...): last full evaluations
         self._uncertain_memo = {}
         self._uncertain_memo_ref = None  # the reference time of those evaluations
+        self._listing = None           # the inflated broad phase's pairs (_inflated_pairs)
         self._pair_answers = None      # _PairAnswers of the last uncertain_pairs call
         self.uncertain_evaluated = 0   # pairs the last uncertain_pairs call gave the core
         self._sv = np.zeros(cap, dtype=np.int64)  # each slot's state serial (bumped per change)

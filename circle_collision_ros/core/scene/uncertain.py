@@ -79,11 +79,12 @@ class UncertainMixin:
                         tolerance: float = 0.0) -> SceneUncertainty:
         """Probabilities of the pairs with an uncertain body that may touch within [R, R + H].
 
-        Which pairs: those the broad phase at R over [0, H], each uncertain body's radius
-        inflated by ``core.uncertainty.inflation_radius``, cannot rule out.  Each listed pair
-        is evaluated at its pair time t_p over [t_p, t_p + H]: t_p is the newer of its two
-        stamps when that lies within ``UNCERTAIN_LAG_NS`` of R (always so for a tracker array,
-        where t_p = R; for per-body streams the pair's newest information), else
+        Which pairs: those the broad phase over R's lag period and the horizon, each uncertain
+        body's radius inflated by ``core.uncertainty.inflation_radius``, cannot rule out
+        (``_inflated_pairs``: kept between calls, a one-body update looks up that body).
+        Each listed pair is evaluated at its pair time t_p over [t_p, t_p + H]: t_p is the
+        newer of its two stamps when that lies within ``UNCERTAIN_LAG_NS`` of R (always so for
+        a tracker array, where t_p = R; for per-body streams the pair's newest information), else
         ``R - (R mod UNCERTAIN_LAG_NS)``; so 0 <= R - t_p < UNCERTAIN_LAG_NS.  Both states and
         covariances are propagated to t_p.  A pair's answer is thus a pure function of its two
         stored states and t_p, and is kept between calls: a call evaluates only the listed pairs
@@ -205,31 +206,19 @@ class UncertainMixin:
 
     def _uncertain_listed(self, slots: np.ndarray, R: int, contacts: SceneContacts | None, unc):
         """``(I, J, at_R, contact_rows)``: local index pairs (I < J, into `slots`, id order) with
-        an uncertain body that the broad phase at R over [0, H], radii inflated by
-        ``unc.inflation_radius``, cannot rule out, plus the uncertain pairs of `contacts`;
-        at_R = (P, V, A, radius, C) of `slots`, propagated to R (C zero for exact bodies);
-        contact_rows:
-        each pair's row in `contacts`, -1 if none (None without contacts)."""
+        an uncertain body listed by the inflated broad phase (``_inflated_pairs``), plus the
+        uncertain pairs of `contacts`; at_R = (P, V, A, radius, C) of `slots`, propagated to R
+        (C zero for exact bodies); contact_rows: each pair's row in `contacts`, -1 if none
+        (None without contacts)."""
         P, V, C = self._states_at(slots, np.full(slots.size, R, dtype=np.int64))
         A, Rad = self._A[slots], self._R[slots]
         u = self._U[slots]
-        if u.all():
-            grow = unc.inflation_radius(C, self._h)
-        else:
-            grow = np.zeros(slots.size)
-            grow[u] = unc.inflation_radius(C[u], self._h)
-        zero = np.zeros(slots.size)
-        lo, hi = _broad.swept_bounds(P, V, A, Rad + grow, zero, zero + self._h)
-        # the sweep whatever the scene's method: on these few inflated bodies per cell it is
-        # measured faster than the grid (same pairs; bench/bench_node.py's density)
-        I, J, _ = _broad.candidate_pairs(lo, hi, p=P, v=V, a=A, r=Rad + grow, tref=zero,
-                                         t_start=0.0, t_end=self._h, method="sweep")
-        keep = u[I] | u[J]
-        I, J = I[keep], J[keep]
+        sa, sb = self._inflated_pairs(slots, R, unc)
+        # slot -> local index through an array (no dict of every body per call)
+        local = np.empty(self._ids.shape[0], dtype=np.int64)
+        local[slots] = np.arange(slots.size)
+        I, J = local[sa], local[sb]
         if contacts is not None and len(contacts):
-            # slot -> local index through an array (no dict of every body per call)
-            local = np.empty(self._ids.shape[0], dtype=np.int64)
-            local[slots] = np.arange(slots.size)
             if contacts.slot_ids is self._ids:  # no body came or went since: its slots hold
                 ca, cb = local[contacts.slot_a], local[contacts.slot_b]
             else:
@@ -254,6 +243,77 @@ class UncertainMixin:
                 same = ckey[order[at]] == key
                 rows[same] = order[at[same]]
         return key // n, key % n, (P, V, A, Rad, C), rows
+
+    #: The inflated broad phase is rebuilt whole when more than this share of the bodies
+    #: changed since it was last brought up to date (below, only theirs are looked up).
+    LISTING_REBUILD_SHARE = 0.125
+
+    def _inflated_pairs(self, slots: np.ndarray, R: int, unc) -> tuple[np.ndarray, np.ndarray]:
+        """``(sa, sb)``: slot pairs, sa < sb, with an uncertain body whose paths, each body's
+        radius inflated by ``unc.inflation_radius``, may come within reach over [R0, R0 + H +
+        lag], R0 = R - (R mod UNCERTAIN_LAG_NS) the start of R's lag period (every pair time
+        t_p lies in it, so [t_p, t_p + H] is covered): their boxes over that window overlap
+        (inclusive) and the relative test (``broad.relative_filter``, the lower slot as body a)
+        keeps them.
+
+        A function of the stored states and R0 alone: kept between calls, and brought up to
+        date by looking up only the bodies whose state changed since (one body's update: its
+        box against every box, O(N) comparisons, no sweep), rebuilt whole when R0 or H moves
+        or many changed.  Both ways give the same set (the same predicate on every pair)."""
+        lag = self.UNCERTAIN_LAG_NS
+        R0 = R - R % lag
+        span = self._h + lag * 1e-9
+        cap = self._sv.shape[0]
+        old = self._listing
+        if old is None or old.R0 != R0 or old.span != span or old.sv.shape[0] != cap:
+            changed = None
+        else:
+            changed = slots[old.sv[slots] != self._sv[slots]]
+            if changed.size > self.LISTING_REBUILD_SHARE * slots.size:
+                changed = None
+        if changed is None:
+            lst = _Listing(R0, span, np.full(cap, -1, dtype=np.int64), np.zeros((cap, self._dim)),
+                           np.zeros((cap, self._dim)), np.zeros((cap, self._dim)),
+                           np.zeros((cap, self._dim)), np.zeros(cap), EMPTY_I)
+            self._listing_boxes(lst, slots, R0, unc)
+            I, J, _ = _broad.candidate_pairs(lst.lo[slots], lst.hi[slots], method="sweep")
+            I, J = slots[I], slots[J]
+        else:
+            lst = old
+            gone = np.zeros(cap, dtype=bool)
+            gone[changed] = True
+            gone |= ~self._alive
+            ka, kb = lst.key >> 32, lst.key & 0xFFFFFFFF
+            lst = lst._replace(key=lst.key[~(gone[ka] | gone[kb])])
+            self._listing_boxes(lst, changed, R0, unc)
+            I, J = _box_neighbours(lst.lo, lst.hi, changed, slots)
+        a, b = np.minimum(I, J), np.maximum(I, J)
+        keep = self._U[a] | self._U[b]
+        a, b = a[keep], b[keep]
+        if a.size:
+            keep = _broad.relative_filter(lst.p, lst.v, self._A, lst.reach, np.zeros(cap), a, b,
+                                          0.0, span)
+            a, b = a[keep], b[keep]
+        key = np.concatenate([lst.key, (a << 32) | b])
+        key.sort()
+        self._listing = lst._replace(key=key)
+        return key >> 32, key & 0xFFFFFFFF
+
+    def _listing_boxes(self, lst: "_Listing", changed: np.ndarray, R0: int, unc) -> None:
+        """The boxes (over [0, span] from R0), states at R0 and inflated radii of `changed`."""
+        if changed.size == 0:
+            return
+        P, V, C = self._states_at(changed, np.full(changed.size, R0, dtype=np.int64))
+        u = self._U[changed]
+        grow = np.zeros(changed.size)
+        if u.any():
+            grow[u] = unc.inflation_radius(C[u], lst.span)
+        reach = self._R[changed] + grow
+        zero = np.zeros(changed.size)
+        lo, hi = _broad.swept_bounds(P, V, self._A[changed], reach, zero, zero + lst.span)
+        lst.lo[changed], lst.hi[changed], lst.p[changed], lst.v[changed] = lo, hi, P, V
+        lst.reach[changed] = reach
+        lst.sv[changed] = self._sv[changed]
 
     def _states_at(self, slots: np.ndarray, t_ns: np.ndarray):
         """(P, V, C) of the bodies `slots` moved to the times t_ns (int64 ns, per body), C zero
@@ -370,6 +430,40 @@ class _PairAnswers(NamedTuple):
     probability: np.ndarray
     bound: np.ndarray
     tau: np.ndarray  # plausible time from t_p, s
+
+
+class _Listing(NamedTuple):
+    """Scene._inflated_pairs' state, per slot (capacity-sized): the lag period's start R0
+    (ns) and window span (s) it lists for; each slot's state serial when its box was made
+    (-1: none); box lo/hi; state p, v at R0; inflated radius; the listed pairs as sorted
+    keys slot_a << 32 | slot_b (slot_a < slot_b)."""
+
+    R0: int
+    span: float
+    sv: np.ndarray
+    lo: np.ndarray
+    hi: np.ndarray
+    p: np.ndarray
+    v: np.ndarray
+    reach: np.ndarray
+    key: np.ndarray
+
+
+def _box_neighbours(lo, hi, changed, slots) -> tuple[np.ndarray, np.ndarray]:
+    """Pairs (c, o) of each changed slot c with every alive slot o (`slots`) whose box
+    overlaps c's (inclusive, as the sweep's test), each pair once: o not changed, or o > c."""
+    alive = slots
+    out_a, out_b = [EMPTY_I], [EMPTY_I]
+    is_changed = np.zeros(lo.shape[0], dtype=bool)
+    is_changed[changed] = True
+    L, Hh = lo[alive], hi[alive]
+    for c in changed.tolist():
+        hit = np.all((L <= hi[c]) & (lo[c] <= Hh), axis=1)
+        o = alive[hit]
+        o = o[(o != c) & (~is_changed[o] | (o > c))]
+        out_a.append(np.full(o.size, c, dtype=np.int64))
+        out_b.append(o)
+    return np.concatenate(out_a), np.concatenate(out_b)
 
 
 class _Evaluated(NamedTuple):

@@ -580,3 +580,61 @@ def test_published_rows_from_the_scenes_pair_match_equal_the_id_match() -> None:
                  "probability_bound", "plausible_ttc"):
         assert getattr(fast, name).tobytes() == getattr(slow, name).tobytes(), name
     assert prediction.to_cdr() == by_ids.to_cdr()
+
+
+def test_inflated_listing_kept_up_to_date_equals_a_rebuild() -> None:
+    """Scene._inflated_pairs brought up to date body by body (updates, covariance dropped and
+    given again, removals, new bodies, a new lag period) lists exactly the pairs a rebuild
+    from the same stored states lists; a one-body update looks up only that body."""
+    from circle_collision_ros.core import uncertainty as unc
+
+    rng = np.random.default_rng(17)
+    batch = _batch(60, seed=17, sigma=0.4, spread=12.0, every=2)
+    scene = Scene(5.0, 2, method="grid")
+    _merge_batch(scene, batch)
+    scene.uncertain_pairs(0.01, scene.predictions(), 4)
+    rebuilds = 0
+    for step in range(1, 40):
+        k = int(rng.integers(len(batch)))
+        stamp = batch.stamp_ns + step * 9_000_000  # crosses lag periods (0.1 s) now and then
+        moved = StateBatch(**{**batch.__dict__, "stamp_ns": stamp,
+                              "position": batch.position + rng.normal(0, 0.3, batch.position.shape),
+                              "remove": np.full(len(batch), step % 11 == 0)})
+        if step % 5 == 0:  # the body loses (or regains) its covariance
+            moved.covariance[k] = 0.0 if moved.covariance[k].any() else batch.covariance[0]
+        _merge_batch(scene, moved, [k])
+        if step % 7 == 0:  # a body comes back after a removal: a new body in a reused slot
+            _merge_batch(scene, moved, [(k + 1) % len(batch)])
+        before = scene._listing
+        slots = scene._sorted_slots()
+        kept = scene._inflated_pairs(slots, scene.reference_ns, unc)
+        rebuilds += scene._listing.R0 != getattr(before, "R0", None)
+        scene._listing = None
+        fresh = scene._inflated_pairs(slots, scene.reference_ns, unc)
+        assert np.array_equal(kept[0], fresh[0]) and np.array_equal(kept[1], fresh[1]), step
+        assert kept[0].size > 0
+    assert rebuilds >= 2
+
+
+def test_one_body_update_does_not_rebuild_the_inflated_broad_phase(monkeypatch) -> None:
+    """Within a lag period, a one-body update of a 2,000-body covariance scene computes one
+    box and never runs the sweep over every body (it did on every call before)."""
+    from circle_collision_ros.core import broad
+
+    batch = _batch(2000, seed=23, sigma=0.3, spread=400.0)
+    scene = Scene(5.0, 2, method="grid")
+    _merge_batch(scene, batch)
+    scene.uncertain_pairs(0.01, scene.predictions(), 4)
+    sweeps, boxes = [], []
+    real_sweep, real_boxes = broad.candidate_pairs, broad.swept_bounds
+    monkeypatch.setattr(broad, "candidate_pairs",
+                        lambda *a, **k: sweeps.append(len(a[0])) or real_sweep(*a, **k))
+    monkeypatch.setattr(broad, "swept_bounds",
+                        lambda p, *a, **k: boxes.append(len(p)) or real_boxes(p, *a, **k))
+    for step in range(1, 6):
+        moved = StateBatch(**{**batch.__dict__, "stamp_ns": batch.stamp_ns + step * 1_000_000,
+                              "position": batch.position + 0.01 * step})
+        _merge_batch(scene, moved, [step])
+        scene.uncertain_pairs(0.01, scene.predictions(), 4)
+    assert boxes == [1] * 5
+    assert all(n < 100 for n in sweeps), sweeps  # the exact path's own few, never 2,000
