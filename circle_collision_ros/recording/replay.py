@@ -181,7 +181,8 @@ def main(args: list[str] | None = None) -> int:
     except Exception as exc:  # a message that does not decode as its recorded type, etc.
         print(f"replay: {opts.bag}: cannot replay: {exc!r}", file=sys.stderr)
         return 2
-    print(f"messages replayed: {report.inputs} inputs, {report.predictions} predictions")
+    print(f"messages replayed: {report.inputs} inputs, {report.predictions} predictions"
+          + (f", {report.completions} probability completions" if report.completions else ""))
     print(f"pairs compared: {report.pairs_compared}")
     print(f"largest time difference: {report.max_time_difference!r} s")
     if report.predictions == 0:

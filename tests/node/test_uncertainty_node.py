@@ -25,6 +25,8 @@ Guarantees proved here:
 from __future__ import annotations
 
 import math
+import subprocess
+import sys
 import time
 from pathlib import Path
 
@@ -472,6 +474,10 @@ def test_completions_are_recorded_and_replayed(ros_context, ros_node, tmp_path: 
     assert [r.data for r in recorded] == completions[:len(recorded)] and len(recorded) >= 4
     report = replay_offline(records)
     assert report.ok and report.completions == len(recorded), report.mismatches[:3]
+    run = subprocess.run([sys.executable, "-m", "circle_collision_ros.recording.replay",
+                          str(bag)], capture_output=True, text=True, timeout=120)
+    assert run.returncode == 0, run.stderr
+    assert f", {len(recorded)} probability completions" in run.stdout, run.stdout
     # a completion that is not the prediction's: the main topic's bytes in its place
     main = {r.log_time_ns: r.data for r in records if r.topic == "/collision_predictions"}
     changed = [r._replace(data=main[r.log_time_ns]) if r is recorded[-1] else r for r in records]
