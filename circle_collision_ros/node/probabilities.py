@@ -22,8 +22,8 @@ from __future__ import annotations
 import os
 import threading
 import time
-from concurrent.futures import ThreadPoolExecutor
 from collections.abc import Callable
+from concurrent.futures import ThreadPoolExecutor
 from typing import NamedTuple
 
 from circle_collision_ros.node.activity import NodeActivity
@@ -100,7 +100,7 @@ class ProbabilityPublisher:
         self._pool.shutdown(wait=False)
 
     def wait_idle(self, timeout: float) -> bool:
-        """True once every offered prediction is published or superseded (tests, replay tools)."""
+        """True once every offered prediction is published or superseded (tests)."""
         deadline = time.monotonic() + timeout
         while True:
             with self._cond:
