@@ -89,26 +89,20 @@ class ProbabilityPublisher:
             if self._latest is not None:
                 self.superseded += 1
             self._latest = _Job(prediction, data, log_time_ns, time.monotonic())
-            self._cond.notify()
+            self._cond.notify_all()  # the thread, and wait_idle's callers, wait on it
 
     def close(self) -> None:
         """Stop the thread once it has published (and recorded) what was offered."""
         with self._cond:
             self._stopped = True
-            self._cond.notify()
+            self._cond.notify_all()
         self._thread.join(timeout=30.0)
         self._pool.shutdown(wait=False)
 
     def wait_idle(self, timeout: float) -> bool:
         """True once every offered prediction is published or superseded (tests)."""
-        deadline = time.monotonic() + timeout
-        while True:
-            with self._cond:
-                if self._latest is None and not self._busy:
-                    return True
-            if time.monotonic() >= deadline:
-                return False
-            time.sleep(0.005)
+        with self._cond:
+            return self._cond.wait_for(lambda: self._latest is None and not self._busy, timeout)
 
     def _run(self) -> None:
         _lower_priority()
@@ -138,3 +132,4 @@ class ProbabilityPublisher:
             finally:
                 with self._cond:
                     self._busy = False
+                    self._cond.notify_all()

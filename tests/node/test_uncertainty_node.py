@@ -286,6 +286,18 @@ def test_odometry_covariance_is_rotated_into_the_header_frame(ros_context, ros_n
         node.destroy_node()
 
 
+def _recording_node(ros_context, bag: Path, **parameters) -> CollisionNode:
+    """A node recording to `bag`, markers off, with `parameters` on top of the defaults here."""
+    return CollisionNode(
+        context=ros_context,
+        parameter_overrides=[Parameter("horizon", value=5.0), Parameter("frame_id", value="map"),
+                             Parameter("marker_rate", value=0.0),
+                             Parameter("stale_timeout", value=60.0),
+                             Parameter("record_path", value=str(bag))]
+        + [Parameter(name, value=value) for name, value in parameters.items()],
+    )
+
+
 def test_covariance_run_is_recorded_read_independently_and_replayed(
     ros_context, ros_node, tmp_path: Path
 ) -> None:
@@ -294,13 +306,7 @@ def test_covariance_run_is_recorded_read_independently_and_replayed(
     from rosbags.highlevel import AnyReader
 
     bag = tmp_path / "bag"
-    node = CollisionNode(
-        context=ros_context,
-        parameter_overrides=[Parameter("horizon", value=5.0), Parameter("frame_id", value="map"),
-                             Parameter("marker_rate", value=0.0),
-                             Parameter("stale_timeout", value=60.0),
-                             Parameter("record_path", value=str(bag))],
-    )
+    node = _recording_node(ros_context, bag)
     try:
         client = Client(ros_node, node)
         base = _now_ns(ros_node)
@@ -446,14 +452,7 @@ def test_completions_are_recorded_and_replayed(ros_context, ros_node, tmp_path: 
     """Budget 1 with dozens of uncertain pairs: each recorded collision_probabilities message
     is recomputed by replay from the prediction with its log time, bit for bit."""
     bag = tmp_path / "bag"
-    node = CollisionNode(
-        context=ros_context,
-        parameter_overrides=[Parameter("horizon", value=5.0), Parameter("frame_id", value="map"),
-                             Parameter("marker_rate", value=0.0),
-                             Parameter("stale_timeout", value=60.0),
-                             Parameter("uncertain_pair_budget", value=1),
-                             Parameter("record_path", value=str(bag))],
-    )
+    node = _recording_node(ros_context, bag, uncertain_pair_budget=1)
     completions: list[bytes] = []
     try:
         client = Client(ros_node, node)

@@ -107,15 +107,18 @@ class DeferredInputs:
     can run later, off the prediction path (``core.scene.complete_uncertainty``).
 
     rows : (k,) int64, the deferred rows' indices.  a, b : each body's state at the pair time
-    t_p, ``(p, v, a, radius, covariance)`` with shapes (k, D), (k, D), (k, D), (k,),
-    (k, 2D, 2D).  first : (k,) s from t_p, where each row's screening tube may first reach
-    the ball (the screen's outcome, which the full evaluation need not repeat).  lag : (k,) s,
-    R - t_p.  horizon : s; threshold, tolerance: those of the call that deferred them.
+    t_p, ``(p, v, a, radius, covariance)`` with shapes (m, D), (m, D), (m, D), (m,),
+    (m, 2D, 2D), of which the deferred rows are ``pick`` (k,): the arrays the scene evaluated,
+    kept as they are so that the prediction path copies nothing.  first : (k,) s from t_p,
+    where each row's screening tube may first reach the ball (the screen's outcome, which the
+    full evaluation need not repeat).  lag : (k,) s, R - t_p.  horizon : s; threshold,
+    tolerance: those of the call that deferred them.
     """
 
     rows: np.ndarray
     a: tuple
     b: tuple
+    pick: np.ndarray
     first: np.ndarray
     lag: np.ndarray
     horizon: float

@@ -178,9 +178,9 @@ class UncertainMixin:
             if deferred.pending is not None:
                 late = deferred.deferred
                 rows = todo[late]
-                pending = DeferredInputs(rows, deferred.pending[0], deferred.pending[1],
-                                         tau[rows], (R - tp[rows]).astype(np.float64) * 1e-9,
-                                         self._h, threshold, tolerance)
+                pending = DeferredInputs(rows, *deferred.pending, tau[rows],
+                                         (R - tp[rows]).astype(np.float64) * 1e-9, self._h,
+                                         threshold, tolerance)
         else:
             self._uncertain_waiting = NO_WAITING
             self._uncertain_serial += 1
@@ -244,9 +244,10 @@ class UncertainMixin:
                 rows[same] = order[at[same]]
         return key // n, key % n, (P, V, A, Rad, C), rows
 
-    #: The inflated broad phase is rebuilt whole when more than this share of the bodies
-    #: changed since it was last brought up to date (below, only theirs are looked up).
-    LISTING_REBUILD_SHARE = 0.125
+    #: The inflated broad phase is rebuilt whole when more than this many bodies changed
+    #: since it was last brought up to date (below, only theirs are looked up): each looked-up
+    #: body costs a pass over every box, and a few such passes cost a rebuild.
+    LISTING_REBUILD_BODIES = 8
 
     def _inflated_pairs(self, slots: np.ndarray, R: int, unc) -> tuple[np.ndarray, np.ndarray]:
         """``(sa, sb)``: slot pairs, sa < sb, with an uncertain body whose paths, each body's
@@ -259,7 +260,8 @@ class UncertainMixin:
         A function of the stored states and R0 alone: kept between calls, and brought up to
         date by looking up only the bodies whose state changed since (one body's update: its
         box against every box, O(N) comparisons, no sweep), rebuilt whole when R0 or H moves
-        or many changed.  Both ways give the same set (the same predicate on every pair)."""
+        or more than LISTING_REBUILD_BODIES changed.  Both ways give the same set (the same
+        predicate on every pair)."""
         lag = self.UNCERTAIN_LAG_NS
         R0 = R - R % lag
         span = self._h + lag * 1e-9
@@ -269,7 +271,7 @@ class UncertainMixin:
             changed = None
         else:
             changed = slots[old.sv[slots] != self._sv[slots]]
-            if changed.size > self.LISTING_REBUILD_SHARE * slots.size:
+            if changed.size > self.LISTING_REBUILD_BODIES:
                 changed = None
         if changed is None:
             lst = _Listing(R0, span, np.full(cap, -1, dtype=np.int64), np.zeros((cap, self._dim)),
@@ -379,8 +381,8 @@ class UncertainMixin:
         self._uncertain_waiting = _Waiting(key[rows], born_a[rows], born_b[rows], since[order])
         self._uncertain_serial = serial + 1
         pending = None
-        if deferred.any():  # the deferred rows' inputs, for complete_uncertainty
-            pending = tuple(tuple(x[deferred] for x in side) for side in states)
+        if deferred.any():  # the deferred rows' inputs, for complete_uncertainty (no copy)
+            pending = (states[0], states[1], np.flatnonzero(deferred))
         return _Evaluated(
             res.collision_probability, res.collision_probability_bound, res.plausible_time,
             deferred, pending
@@ -471,7 +473,7 @@ class _Evaluated(NamedTuple):
     bound: np.ndarray
     tau: np.ndarray
     deferred: np.ndarray
-    pending: tuple | None  # the deferred rows' (a, b) states at t_p, None if none
+    pending: tuple | None  # (a states, b states, deferred rows among them) at t_p, or None
 
 
 def _from_reference(tau: np.ndarray, lag: np.ndarray) -> np.ndarray:
@@ -508,7 +510,8 @@ def complete_uncertainty(uncertainty: SceneUncertainty, executor: Executor | Non
     from circle_collision_ros.core import uncertainty as unc  # heavy kernels: on first use
 
     def evaluate_rows(rows):
-        a, b = (tuple(x[rows] for x in side) for side in (pending.a, pending.b))
+        at = pending.pick[rows]
+        a, b = (tuple(x[at] for x in side) for side in (pending.a, pending.b))
         res = unc.uncertain_pairs(*a, *b, pending.horizon, pending.threshold, screen=True,
                                   screened_first=pending.first[rows], tolerance=pending.tolerance)
         return res.collision_probability, res.collision_probability_bound, res.plausible_time
