@@ -1,0 +1,359 @@
+"""Certified first contact of a moving circle with the interior of one static segment.
+
+The circle's centre is ``c(t) = p + v t + a t^2/2``, its radius ``r``; the segment is
+``A -> B``.  With ``e = B - A``, ``w = (-e_y, e_x)`` (its left normal), ``L = |e|`` and
+``g(t) = c(t) - A``, the distance to the segment's line is ``|psi(t)| / L`` with the
+power-basis quadratic ``psi(t) = w.g(t) = psi0 + psi1 t + psi2 t^2``, and the foot point is
+inside the open segment while ``0 < pi(t) = e.g(t) < L^2``.  For each side
+``sigma = +-1``, ``phi(t) = sigma psi(t) - r L`` has at most one *entering* root (phi goes
+from > 0 to <= 0); the edge's contact is the earliest entering root in ``[0, H]`` whose foot
+point is inside the open segment (the endpoints are point features of their own, so a contact
+whose foot point is exactly an endpoint is the endpoint's).  The full contract, t = 0 rules
+included, is ``edge_exact.exact_edge_contact``'s; this kernel answers the rows it can prove
+and returns ``UNDECIDED`` for the rest, which the exact solver decides.
+
+What this kernel proves, and how:
+
+* Relative state by TwoSum: ``p - A`` and ``B - A`` are exact double-doubles, so map-sized
+  coordinates (1e4 m and beyond) with millimetre gaps lose nothing.
+* Signs of ``psi2 = w.a/2`` and ``psi1 = w.v`` are exact (two_prod and two_sum on the
+  2 x 2 determinant; a wall parallel to the acceleration or velocity gives exactly 0).  They
+  fix the shape of phi: which piece of [0, H] is decreasing, so whether an entering root
+  can exist at all.
+* Every other sign (phi at 0, at H, at the bracket's ends, the discriminant, phi' at H) is
+  taken from float64 only beyond the rounding bound ``16 eps M(t)``, and from the
+  double-double evaluation only beyond ``64 eps^2 M(t)``, with
+  ``M(t) = |e|_1 (|g0|_1 + |v|_1 t + |a|_1 t^2/2 + r)`` bounding every term's magnitude.
+  Either bound is several times the worst-case rounding error of its evaluation, so a sign
+  that clears it is the sign of the exact value.
+* A time is returned only when ``phi(pred t) > 0`` and ``phi(succ t) < 0`` are proved (the
+  entering root is the only + -> - crossing of a quadratic), so it lies within one ulp of
+  the exact root, and only when the foot point is proved inside the open segment on that
+  whole bracket.
+* Touching at t = 0 (phi(0) within its bound of 0), near-tangent grazes, a foot point at an
+  endpoint to within rounding, and inputs outside [2^-300, 2^300] are left UNDECIDED.
+
+References: J. R. Shewchuk, "Adaptive Precision Floating-Point Arithmetic and Fast Robust
+Geometric Predicates", Discrete Comput. Geom. 18 (1997) (filtered predicates, exact
+fallback); T. Ogita, S. M. Rump, S. Oishi, "Accurate sum and dot product", SIAM J. Sci.
+Comput. 26 (2005) (error-free transformations).
+"""
+from __future__ import annotations
+
+import math
+
+from numba import njit
+
+from circle_collision_ros.core.narrow.dd import (
+    dd_add,
+    dd_mul,
+    next_down,
+    next_up,
+    two_prod,
+    two_sum,
+)
+from circle_collision_ros.core.narrow.evaluate import EPS, UNDECIDED
+
+INF = math.inf
+NAN = math.nan
+F_BOUND = 16.0 * EPS  # float64 evaluation: error < ~4 eps M(t), see the module docstring
+DD_BOUND = 64.0 * EPS * EPS  # double-double evaluation: error < ~5 eps^2 M(t)
+# Inputs whose nonzero magnitudes lie in [2^-300, 2^300] keep every product below (up to
+# 4 factors, times t^2 <= H^2 bounded separately) normal and finite; the rest go exact.
+_TINY = 2.0 ** -300
+_HUGE = 2.0 ** 300
+_UNKNOWN = 2  # a sign the filters could not decide
+
+
+@njit(cache=True, error_model="numpy", inline="always")
+def _certain(x, err):
+    """+1 or -1 when |x| > err proves the sign, else _UNKNOWN."""
+    if x > err:
+        return 1
+    if x < -err:
+        return -1
+    return _UNKNOWN
+
+
+@njit(cache=True, error_model="numpy", inline="always")
+def _det_sign(exh, exl, eyh, eyl, x, y):
+    """Exact sign of ``w.(x, y) = e_x y - e_y x`` (0 exactly when it is 0), or _UNKNOWN.
+
+    The high products and their rounding errors are exact (two_prod); the low parts of e
+    add less than 2u of the products' size, so a two_sum head beyond 4u of it decides.
+    When the head cancels exactly and e has no low part, the sign of the exact error terms
+    decides, 0 included: that is the wall parallel to the motion, which must be exact.
+    """
+    p1, e1 = two_prod(exh, y)
+    p2, e2 = two_prod(eyh, x)
+    s, es = two_sum(p1, -p2)
+    size = abs(p1) + abs(p2)
+    if abs(s) > 2.0 * EPS * size:
+        return 1 if s > 0.0 else -1
+    if s == 0.0 and es == 0.0 and exl == 0.0 and eyl == 0.0:
+        d = e1 - e2  # a float difference is 0 only when exact, and keeps the exact sign
+        if d == 0.0:
+            return 0
+        return 1 if d > 0.0 else -1
+    return _UNKNOWN
+
+
+@njit(cache=True, error_model="numpy", inline="always")
+def _g_dd(gh, gl, v, a, t):
+    """One coordinate of ``g(t) = g0 + v t + a t^2/2`` as a double-double (~6u^2 relative
+    to |g0| + |v| t + |a| t^2/2): the products are exact (two_prod), the sums accurate."""
+    vth, vtl = two_prod(v, t)
+    tth, ttl = two_prod(t, t)
+    ath, atl = two_prod(0.5 * a, tth)
+    atl += 0.5 * a * ttl
+    sh, sl = dd_add(gh, gl, vth, vtl)
+    return dd_add(sh, sl, ath, atl)
+
+
+@njit(cache=True, error_model="numpy")
+def _phi_dd(sig, gxh, gxl, gyh, gyl, exh, exl, eyh, eyl, vx, vy, ax, ay, rLh, rLl, t):
+    """``sigma w.g(t) - r L`` in double-double (value as one float; error < 5 eps^2 M(t))."""
+    Gxh, Gxl = _g_dd(gxh, gxl, vx, ax, t)
+    Gyh, Gyl = _g_dd(gyh, gyl, vy, ay, t)
+    p1h, p1l = dd_mul(exh, exl, Gyh, Gyl)
+    p2h, p2l = dd_mul(eyh, eyl, Gxh, Gxl)
+    ph, pl = dd_add(p1h, p1l, -p2h, -p2l)
+    fh, fl = dd_add(sig * ph, sig * pl, -rLh, -rLl)
+    return fh + fl
+
+
+@njit(cache=True, error_model="numpy")
+def _pi_dd(gxh, gxl, gyh, gyl, exh, exl, eyh, eyl, vx, vy, ax, ay, t):
+    """``e.g(t)`` in double-double (value as one float)."""
+    Gxh, Gxl = _g_dd(gxh, gxl, vx, ax, t)
+    Gyh, Gyl = _g_dd(gyh, gyl, vy, ay, t)
+    p1h, p1l = dd_mul(exh, exl, Gxh, Gxl)
+    p2h, p2l = dd_mul(eyh, eyl, Gyh, Gyl)
+    ph, pl = dd_add(p1h, p1l, p2h, p2l)
+    return ph + pl
+
+
+@njit(cache=True, error_model="numpy")
+def edge_contact(px, py, vx, vy, ax, ay, r, Ax, Ay, Bx, By, solid_side, H):
+    """First contact time (s) of the circle with the open segment A-B's interior.
+
+    0.0 for overlap at t = 0, inf for none in [0, H], NaN for invalid input, UNDECIDED where
+    the proof fails (see the module docstring).  ``solid_side`` (+1 solid on the left of
+    A -> B, -1 on the right, 0 a two-sided wall) only matters for a point body (r = 0)
+    touching at t = 0, which is always UNDECIDED here.
+    """
+    chk = px + py + vx + vy + ax + ay + r + Ax + Ay + Bx + By
+    if not (chk - chk == 0.0) or not (r >= 0.0) or not (H >= 0.0) or (Ax == Bx and Ay == By):
+        return NAN
+    gxh, gxl = two_sum(px, -Ax)
+    gyh, gyl = two_sum(py, -Ay)
+    exh, exl = two_sum(Bx, -Ax)
+    eyh, eyl = two_sum(By, -Ay)
+    big = max(abs(gxh), abs(gyh), abs(exh), abs(eyh), abs(vx), abs(vy), abs(ax), abs(ay), r)
+    if big > _HUGE:
+        return UNDECIDED
+    for x in (gxh, gyh, exh, eyh, vx, vy, ax, ay, r):
+        if x != 0.0 and abs(x) < _TINY:
+            return UNDECIDED
+    Le = abs(exh) + abs(eyh)
+    l1g = abs(gxh) + abs(gyh)
+    l1v = abs(vx) + abs(vy)
+    l1a = abs(ax) + abs(ay)
+
+    # --- cheap, exact-safe rejection: the swept box of the centre against the segment's box
+    if H < INF:
+        for c0, c1, c2, s0, s1 in ((px, vx, ax, Ax, Bx), (py, vy, ay, Ay, By)):
+            lo_c = min(c0, c0 + H * (c1 + 0.5 * H * c2))
+            hi_c = max(c0, c0 + H * (c1 + 0.5 * H * c2))
+            if c2 != 0.0:
+                tv = -c1 / c2
+                if 0.0 < tv < H:
+                    cv = c0 + tv * (c1 + 0.5 * tv * c2)
+                    lo_c = min(lo_c, cv)
+                    hi_c = max(hi_c, cv)
+            # margin: 16 ulps of the coordinate's scale covers the rounding of these few
+            # operations (the vertex value included, whose tv is itself rounded)
+            m = F_BOUND * (abs(c0) + H * abs(c1) + H * H * abs(c2) + abs(s0) + abs(s1) + r)
+            if lo_c - r - m > max(s0, s1) or hi_c + r + m < min(s0, s1):
+                return INF
+
+    # --- power-basis coefficients in float64 (high parts; bounds cover the low parts)
+    psi0 = exh * gyh - eyh * gxh
+    psi1 = exh * vy - eyh * vx
+    psi2 = 0.5 * (exh * ay - eyh * ax)
+    pi0 = exh * gxh + eyh * gyh
+    pi1 = exh * vx + eyh * vy
+    pi2 = 0.5 * (exh * ax + eyh * ay)
+    Q = exh * exh + eyh * eyh
+    L = math.sqrt(Q)
+    rL = r * L
+    # r L in double-double: L from Q = e.e in dd (sqrt's Newton correction)
+    qh, ql = two_prod(exh, exh)
+    q2h, q2l = two_prod(eyh, eyh)
+    qh, ql2 = two_sum(qh, q2h)
+    ql = ql + q2l + ql2 + 2.0 * (exh * exl + eyh * eyl)
+    Lh = math.sqrt(qh)
+    sqh, sql = two_prod(Lh, Lh)
+    Ll = ((qh - sqh) - sql + ql) / (2.0 * Lh)
+    rLh, rLl = two_prod(r, Lh)
+    rLl += r * Ll
+
+    def m_at(t):
+        return Le * (l1g + l1v * t + 0.5 * l1a * t * t + r)
+
+    # --- the band: if |psi| stays beyond r L (or the foot point stays outside the segment)
+    # on all of [0, H], no entering root counts
+    if H < INF:
+        lo_p = min(psi0, psi0 + H * (psi1 + H * psi2))
+        hi_p = max(psi0, psi0 + H * (psi1 + H * psi2))
+        lo_q = min(pi0, pi0 + H * (pi1 + H * pi2))
+        hi_q = max(pi0, pi0 + H * (pi1 + H * pi2))
+        if psi2 != 0.0:
+            tv = -psi1 / (2.0 * psi2)
+            if 0.0 < tv < H:
+                x = psi0 + tv * (psi1 + tv * psi2)
+                lo_p = min(lo_p, x)
+                hi_p = max(hi_p, x)
+        if pi2 != 0.0:
+            tv = -pi1 / (2.0 * pi2)
+            if 0.0 < tv < H:
+                x = pi0 + tv * (pi1 + tv * pi2)
+                lo_q = min(lo_q, x)
+                hi_q = max(hi_q, x)
+        # the vertex's own rounding (tv is rounded) is covered: psi is flat there
+        err = 2.0 * F_BOUND * m_at(H)
+        if lo_p - rL > err or hi_p + rL < -err:
+            return INF
+        errq = 2.0 * F_BOUND * (m_at(H) + Le * Le)
+        if hi_q < -errq or lo_q - Q > errq:
+            return INF
+
+    # --- t = 0: overlap, or an exact touch (left to the exact solver)
+    e0 = F_BOUND * m_at(0.0)
+    sp0 = _certain(psi0 - rL, e0)  # phi_+(0)
+    sm0 = _certain(-psi0 - rL, e0)  # phi_-(0)
+    if sp0 == _UNKNOWN or sm0 == _UNKNOWN:
+        d0 = DD_BOUND * m_at(0.0)
+        sp0 = _certain(_phi_dd(1.0, gxh, gxl, gyh, gyl, exh, exl, eyh, eyl, vx, vy, ax, ay,
+                               rLh, rLl, 0.0), d0)
+        sm0 = _certain(_phi_dd(-1.0, gxh, gxl, gyh, gyl, exh, exl, eyh, eyl, vx, vy, ax, ay,
+                               rLh, rLl, 0.0), d0)
+        if sp0 == _UNKNOWN or sm0 == _UNKNOWN:
+            return UNDECIDED
+    if sp0 < 0 and sm0 < 0:  # |psi0| < r L: inside the band
+        eq = F_BOUND * (m_at(0.0) + Le * Le)
+        if pi0 > eq and Q - pi0 > eq:
+            return 0.0
+        if not (pi0 < -eq or pi0 - Q > eq):
+            return UNDECIDED  # foot point at an endpoint to within rounding
+
+    s2 = 0 if (ax == 0.0 and ay == 0.0) else _det_sign(exh, exl, eyh, eyl, ax, ay)
+    s1 = 0 if (vx == 0.0 and vy == 0.0) else _det_sign(exh, exl, eyh, eyl, vx, vy)
+    if s2 == _UNKNOWN or s1 == _UNKNOWN:
+        return UNDECIDED
+
+    best = INF
+    for side in (1, -1):
+        sig = float(side)
+        f0 = sp0 if side == 1 else sm0
+        k2s = side * s2
+        k1s = side * s1
+        k0 = sig * psi0 - rL
+        k1 = sig * psi1
+        k2 = sig * psi2
+        # sign of phi at H (at infinity: the leading coefficient's)
+        if H == INF:
+            fH = k2s if k2s != 0 else (k1s if k1s != 0 else f0)
+        else:
+            fH = _certain(k0 + H * (k1 + H * k2), F_BOUND * m_at(H))
+            if fH == _UNKNOWN:
+                fH = _certain(_phi_dd(sig, gxh, gxl, gyh, gyl, exh, exl, eyh, eyl, vx, vy, ax,
+                                      ay, rLh, rLl, H), DD_BOUND * m_at(H))
+                if fH == _UNKNOWN:
+                    return UNDECIDED
+        # does phi have an entering root in (0, H]?  (signs only; see the module docstring)
+        found = False
+        if k2s == 0:
+            found = k1s < 0 and f0 > 0 and fH < 0
+        else:
+            # sign of phi'(H) = k1 + 2 k2 H: where the vertex lies against H
+            if H == INF:
+                dH = k2s
+            else:
+                dH = _certain(k1 + 2.0 * H * k2, F_BOUND * Le * (l1v + l1a * H) * 4.0)
+                if dH == _UNKNOWN:
+                    return UNDECIDED
+            disc = k1 * k1 - 4.0 * k2 * k0
+            # |error| of disc: both products carry the coefficients' relative errors
+            disc_err = 4.0 * F_BOUND * (Le * l1v * Le * l1v
+                                        + 2.0 * Le * l1a * (Le * (l1g + r)))
+            if k2s > 0:  # convex: decreasing on [0, min(tv, H)]
+                if f0 > 0 and k1s < 0:
+                    if fH < 0:
+                        found = True
+                    elif dH > 0:  # the minimum lies inside (0, H): its sign is -sign(disc)
+                        sd = _certain(disc, disc_err)
+                        if sd == _UNKNOWN:
+                            return UNDECIDED
+                        found = sd > 0
+            else:  # concave: decreasing on [max(tv, 0), H]
+                if fH < 0:
+                    if f0 > 0:
+                        found = True
+                    elif k1s > 0 and dH < 0:  # the maximum lies inside (0, H)
+                        sd = _certain(disc, disc_err)
+                        if sd == _UNKNOWN:
+                            return UNDECIDED
+                        found = sd > 0
+        if not found:
+            continue
+        # candidate: the entering root in cancellation-free form
+        if k2s == 0:
+            t = -k0 / k1
+        else:
+            sq = math.sqrt(max(disc, 0.0))
+            t = 2.0 * k0 / (-k1 + sq) if k1 < 0.0 else (-k1 - sq) / (2.0 * k2)
+        if not (t > 0.0):
+            t = 0.0
+        if t > H:
+            t = H
+        # bracket by proved signs: phi(lo) > 0 > phi(hi) with lo, hi the neighbours of t
+        ok = False
+        for _ in range(4):
+            if t <= 0.0:
+                t = next_up(0.0)
+            lo = next_down(t)
+            hi = next_up(t)
+            flo = _phi_dd(sig, gxh, gxl, gyh, gyl, exh, exl, eyh, eyl, vx, vy, ax, ay, rLh,
+                          rLl, lo)
+            fhi = _phi_dd(sig, gxh, gxl, gyh, gyl, exh, exl, eyh, eyl, vx, vy, ax, ay, rLh,
+                          rLl, hi)
+            clo = _certain(flo, DD_BOUND * m_at(lo))
+            chi = _certain(fhi, DD_BOUND * m_at(hi))
+            if clo > 0 and chi < 0:
+                ok = True
+                break
+            # Newton from the dd value (the slope needs no accuracy: only the bracket proves)
+            ft = _phi_dd(sig, gxh, gxl, gyh, gyl, exh, exl, eyh, eyl, vx, vy, ax, ay, rLh, rLl,
+                         t)
+            slope = k1 + 2.0 * k2 * t
+            if not (slope < 0.0):
+                break
+            t = t - ft / slope
+            if not (t > 0.0) or t > H or t != t:
+                break
+        if not ok or hi > H and H < INF:
+            return UNDECIDED
+        # the foot point over the bracket: inside the open segment, or certainly outside
+        qlo = _pi_dd(gxh, gxl, gyh, gyl, exh, exl, eyh, eyl, vx, vy, ax, ay, lo)
+        qhi = _pi_dd(gxh, gxl, gyh, gyl, exh, exl, eyh, eyl, vx, vy, ax, ay, hi)
+        # dd error plus the quadratic's possible dip between the ends (|pi2| (hi - lo)^2)
+        eqd = DD_BOUND * (m_at(hi) + Le * Le) + abs(pi2) * (hi - lo) * (hi - lo)
+        eQ = 4.0 * EPS * Q  # Q itself is rounded (its dd low part is below this)
+        inside = min(qlo, qhi) > eqd and Q - max(qlo, qhi) > eqd + eQ
+        outside = max(qlo, qhi) < -eqd or min(qlo, qhi) - Q > eqd + eQ
+        if inside:
+            best = min(best, t)
+        elif not outside:
+            return UNDECIDED
+    return best

@@ -1,0 +1,376 @@
+"""First contact of moving circles with a static world: the public batch entry.
+
+``time_to_static`` answers, for each body (centre ``p + v t + a t^2/2``, radius ``r``), the
+first time in ``[0, H]`` it touches any obstacle of an indexed world, which obstacle, and the
+contact point, normal and closing speed.  Per body the index lists the edges and corner points
+near its swept box; each is decided by a certified kernel (``edge.edge_contact`` for an edge's
+interior, the circle-circle narrow phase against a radius-0 point for a corner), and the few
+rows a kernel cannot prove are decided exactly (``edge_exact``, ``narrow.exact``).  A body
+whose centre starts inside a solid (polygon or occupied map cell) overlaps it: time 0.
+
+Why the union of features is exact: the distance to a segment is the distance to its line
+while the foot point is inside the segment and to the nearer endpoint otherwise, so the
+first time it reaches r is the earliest of the endpoints' contacts and the line's entering
+contacts with an interior foot point.  For a solid polygon a contact from its inner side
+can only follow an earlier contact (the body would already be inside, or within r of
+another edge), so both sides of every edge can be tested alike.
+"""
+from __future__ import annotations
+
+import math
+from fractions import Fraction
+from typing import NamedTuple
+
+import numpy as np
+from numba import njit
+
+from circle_collision_ros.core.narrow.batch import certified_pair2
+from circle_collision_ros.core.narrow.evaluate import UNDECIDED
+from circle_collision_ros.core.narrow.exact import exact_first_contact
+from circle_collision_ros.core.static.edge import F_BOUND, edge_contact
+from circle_collision_ros.core.static.edge_exact import exact_edge_contact
+from circle_collision_ros.core.static.index import StaticIndex, cell_range
+from circle_collision_ros.core.static.occupancy import cell_occupied_at
+
+__all__ = ["StaticContacts", "time_to_static", "KIND_NONE", "KIND_EDGE", "KIND_POINT",
+           "KIND_INSIDE"]
+
+KIND_NONE, KIND_EDGE, KIND_POINT, KIND_INSIDE = 0, 1, 2, 3
+
+
+class StaticContacts(NamedTuple):
+    """Per body: ``time`` (s; 0 = overlapping at t = 0, inf = none in [0, H], NaN = invalid
+    row), ``obstacle`` (index into the world's ``names``, -1 for none), ``kind``/``feature``
+    (KIND_EDGE + edge index, KIND_POINT + point index, KIND_INSIDE + -1: the centre starts
+    inside a solid), ``point`` (contact point on the obstacle, m), ``normal`` (unit, from the
+    body towards the obstacle) and ``closing_speed`` (m/s along the normal, > 0 approaching).
+    Point, normal and speed are NaN without a contact and for KIND_INSIDE rows."""
+
+    time: np.ndarray
+    obstacle: np.ndarray
+    kind: np.ndarray
+    feature: np.ndarray
+    point: np.ndarray
+    normal: np.ndarray
+    closing_speed: np.ndarray
+
+
+@njit(cache=True, inline="always")
+def _better(t, ob, kind, idx, bt, bob, bkind, bidx):
+    """Ties break on (obstacle, kind, feature), so the answer never depends on visit order."""
+    if t != bt or t == math.inf:
+        return t < bt
+    if ob != bob:
+        return ob < bob
+    if kind != bkind:
+        return kind < bkind
+    return idx < bidx
+
+
+@njit(cache=True)
+def _swept_box(px, py, vx, vy, ax, ay, r, H, lo, hi):
+    """The centre's axis ranges over [0, H], widened by r and a rounding margin."""
+    for d, (c0, c1, c2) in enumerate(((px, vx, ax), (py, vy, ay))):
+        end = c0 + H * (c1 + 0.5 * H * c2)
+        a = min(c0, end)
+        b = max(c0, end)
+        if c2 != 0.0:
+            tv = -c1 / c2
+            if 0.0 < tv < H:
+                cv = c0 + tv * (c1 + 0.5 * tv * c2)
+                a = min(a, cv)
+                b = max(b, cv)
+        m = F_BOUND * (abs(c0) + H * abs(c1) + H * H * abs(c2) + r) + r
+        lo[d] = a - m
+        hi[d] = b + m
+
+
+@njit(cache=True)
+def _query(P, V, A, R, H, ok, starts, ends, side, points, eob, pob, x0, y0, inv_h, nx, ny,
+           eptr, eitems, pptr, pitems, out_t, out_ob, out_kind, out_idx, skip_ptr, skip, und):
+    """Certified pass over every body; returns the number of undecided (row, kind, index)
+    triples written to ``und`` (or -needed when ``und`` is too small).  Row b ignores the
+    points ``skip[skip_ptr[b]:skip_ptr[b + 1]]`` (corners it only slides past)."""
+    ne = starts.shape[0]
+    npt = points.shape[0]
+    seen_e = np.full(ne, -1, np.int64)
+    seen_p = np.full(npt, -1, np.int64)
+    lo = np.empty(2)
+    hi = np.empty(2)
+    n_und = 0
+    for b in range(P.shape[0]):
+        out_t[b] = math.nan
+        out_ob[b] = -1
+        out_kind[b] = 0
+        out_idx[b] = -1
+        if not ok[b]:
+            continue
+        px, py, vx, vy, ax, ay, r = P[b, 0], P[b, 1], V[b, 0], V[b, 1], A[b, 0], A[b, 1], R[b]
+        bt, bob, bk, bi = math.inf, -1, 0, -1
+        if H < math.inf:
+            _swept_box(px, py, vx, vy, ax, ay, r, H, lo, hi)
+            i0, j0, i1, j1 = cell_range(lo, hi, x0, y0, inv_h, nx, ny)
+            full = hi[0] < lo[0]  # never: the flag below covers unbounded boxes
+        else:
+            i0, j0, i1, j1 = 0, 0, nx - 1, ny - 1
+            full = True
+        if not (lo[0] - lo[0] == 0.0 and hi[0] - hi[0] == 0.0 and lo[1] - lo[1] == 0.0
+                and hi[1] - hi[1] == 0.0):
+            full = True  # an overflowing box: visit everything rather than trust it
+        n_cells = (i1 - i0 + 1) * (j1 - j0 + 1)
+        if n_cells > ne + npt:
+            full = True
+        if full:
+            i0, j0, i1, j1 = 0, 0, 0, 0
+        for j in range(j0, j1 + 1):
+            for i in range(i0, i1 + 1):
+                c = j * nx + i
+                n_e = ne if full else eptr[c + 1] - eptr[c]
+                for q in range(n_e):
+                    k = q if full else eitems[eptr[c] + q]
+                    if seen_e[k] == b:
+                        continue
+                    seen_e[k] = b
+                    t = edge_contact(px, py, vx, vy, ax, ay, r, starts[k, 0], starts[k, 1],
+                                     ends[k, 0], ends[k, 1], side[k], H)
+                    if t == UNDECIDED:
+                        if n_und < und.shape[0]:
+                            und[n_und, 0], und[n_und, 1], und[n_und, 2] = b, 1, k
+                        n_und += 1
+                    elif _better(t, eob[k], 1, k, bt, bob, bk, bi):
+                        bt, bob, bk, bi = t, eob[k], 1, k
+                n_p = npt if full else pptr[c + 1] - pptr[c]
+                for q in range(n_p):
+                    k = q if full else pitems[pptr[c] + q]
+                    if seen_p[k] == b:
+                        continue
+                    seen_p[k] = b
+                    skipped = False
+                    for q2 in range(skip_ptr[b], skip_ptr[b + 1]):
+                        skipped |= skip[q2] == k
+                    if skipped:
+                        continue
+                    t = certified_pair2(px, py, vx, vy, ax, ay, r, points[k, 0], points[k, 1],
+                                        0.0, 0.0, 0.0, 0.0, 0.0, H)
+                    if t == UNDECIDED:
+                        if n_und < und.shape[0]:
+                            und[n_und, 0], und[n_und, 1], und[n_und, 2] = b, 2, k
+                        n_und += 1
+                    elif _better(t, pob[k], 2, k, bt, bob, bk, bi):
+                        bt, bob, bk, bi = t, pob[k], 2, k
+        out_t[b], out_ob[b], out_kind[b], out_idx[b] = bt, bob, bk, bi
+    return n_und if n_und <= und.shape[0] else -n_und
+
+
+def _rows(x, name: str, n: int | None) -> np.ndarray:
+    a = np.asarray(x, dtype=np.float64)
+    if a.ndim == 1:
+        a = a[None, :]
+    if a.ndim != 2 or a.shape[1] != 2:
+        raise ValueError(f"time_to_static: {name} must have shape (N, 2) (2-D only), "
+                         f"got {np.shape(x)}")
+    if n is not None and len(a) != n:
+        if len(a) != 1:
+            raise ValueError(f"time_to_static: {name} has {len(a)} rows, p has {n}")
+        a = np.repeat(a, n, axis=0)
+    return np.ascontiguousarray(a)
+
+
+def _inside_polygon(x: np.ndarray, y: np.ndarray, vx: np.ndarray, vy: np.ndarray) -> np.ndarray:
+    """Even-odd crossing test of points against one polygon (vertices vx, vy).  Only decides
+    rows whose centre lies farther than r from the boundary (closer rows overlap through an
+    edge or corner feature anyway), so the float crossing test suffices there."""
+    inside = np.zeros(x.shape, bool)
+    n = len(vx)
+    for i in range(n):
+        x1, y1, x2, y2 = vx[i], vy[i], vx[(i + 1) % n], vy[(i + 1) % n]
+        crosses = (y1 > y) != (y2 > y)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            xc = x1 + (y - y1) * (x2 - x1) / (y2 - y1)
+        inside ^= crosses & (x < xc)
+    return inside
+
+
+def _details(p, v, a, t, world, kind, feature):
+    """Contact point, normal and closing speed at the contact time (NaN where none)."""
+    n = len(t)
+    point = np.full((n, 2), np.nan)
+    normal = np.full((n, 2), np.nan)
+    speed = np.full(n, np.nan)
+    m = np.isfinite(t) & ((kind == KIND_EDGE) | (kind == KIND_POINT))
+    if not m.any():
+        return point, normal, speed
+    tm = t[m][:, None]
+    k = feature[m]
+    edge = kind[m] == KIND_EDGE
+    # anchor: the edge start or the corner point; centre relative to it, so map-frame
+    # offsets cancel before the products
+    anchor = np.where(edge[:, None], world.starts[np.where(edge, k, 0)],
+                      world.points[np.where(edge, 0, k)]) if len(world.starts) else \
+        world.points[k]
+    g = (p[m] - anchor) + tm * (v[m] + 0.5 * tm * a[m])
+    foot = np.zeros_like(g)
+    if edge.any():
+        e = world.ends[k[edge]] - world.starts[k[edge]]
+        lam = np.clip(np.einsum("ij,ij->i", g[edge], e) / np.einsum("ij,ij->i", e, e), 0, 1)
+        foot[edge] = lam[:, None] * e
+    d = foot - g
+    dist = np.hypot(d[:, 0], d[:, 1])
+    vel = v[m] + tm * a[m]
+    with np.errstate(invalid="ignore", divide="ignore"):
+        nrm = d / dist[:, None]
+    # a point body exactly on the obstacle: the normal is the direction of motion
+    zero = ~(dist > 0)
+    if zero.any():
+        sp = np.hypot(vel[zero, 0], vel[zero, 1])
+        nrm[zero] = np.where(sp[:, None] > 0, vel[zero] / np.where(sp > 0, sp, 1)[:, None],
+                             np.array([1.0, 0.0]))
+    point[m] = anchor + foot
+    normal[m] = nrm
+    speed[m] = np.einsum("ij,ij->i", vel, nrm)
+    return point, normal, speed
+
+
+def _certified_then_exact(P, V, A, R, H, ok, index, todo, skip_ptr, skip, out_t, out_ob,
+                          out_kind, out_idx) -> None:
+    """Rows ``todo``: the certified kernels, then the exact solvers for what they left."""
+    w = index.world
+    sub = (P[todo], V[todo], A[todo], R[todo])
+    m = len(todo)
+    t, ob, kind, idx = np.empty(m), np.empty(m, np.int32), np.empty(m, np.int8), \
+        np.empty(m, np.int64)
+    if len(skip):
+        sp = np.concatenate([[0], np.cumsum(skip_ptr[todo + 1] - skip_ptr[todo])])
+        sk = np.concatenate([skip[skip_ptr[b]:skip_ptr[b + 1]] for b in todo])
+    else:  # the first pass: nothing skipped (no per-row Python work)
+        sp, sk = np.zeros(m + 1), np.empty(0)
+    sp, sk = sp.astype(np.int64), sk.astype(np.int64)
+    und = np.empty((64, 3), np.int64)
+    args = (*sub, H, ok[todo], w.starts, w.ends, w.solid_side.astype(np.int64), w.points,
+            w.edge_obstacle, w.point_obstacle, index.x0, index.y0, 1.0 / index.h, index.nx,
+            index.ny, index.edge_ptr, index.edge_items, index.point_ptr, index.point_items,
+            t, ob, kind, idx, sp, sk)
+    n_und = _query(*args, und)
+    if n_und < 0:
+        und = np.empty((-n_und, 3), np.int64)
+        n_und = _query(*args, und)
+    for i, fk, k in und[:n_und]:
+        b = todo[i]
+        if fk == KIND_EDGE:
+            te = exact_edge_contact(P[b], V[b], A[b], R[b], w.starts[k], w.ends[k],
+                                    int(w.solid_side[k]), H)
+            obk = w.edge_obstacle[k]
+        else:
+            te = exact_first_contact(P[b], V[b], A[b], R[b], w.points[k], (0.0, 0.0),
+                                     (0.0, 0.0), 0.0, H)
+            obk = w.point_obstacle[k]
+        if te < math.inf and (te, obk, fk, k) < (t[i], ob[i] if ob[i] >= 0 else 1 << 40,
+                                                  kind[i], idx[i]):
+            t[i], ob[i], kind[i], idx[i] = te, obk, fk, k
+    out_t[todo], out_ob[todo], out_kind[todo], out_idx[todo] = t, ob, kind, idx
+
+
+def _slides_along(p, v, a, r, s, e, corner) -> bool:
+    """Exactly: the body moves along the line of segment s-e at distance exactly r for ever,
+    and ``corner`` lies on that closed segment."""
+    F = Fraction
+    ex, ey = F(e[0]) - F(s[0]), F(e[1]) - F(s[1])
+    if ex * (F(v[1])) - ey * F(v[0]) != 0 or ex * F(a[1]) - ey * F(a[0]) != 0:
+        return False
+    cx, cy = F(corner[0]) - F(s[0]), F(corner[1]) - F(s[1])
+    if ex * cy - ey * cx != 0 or not 0 <= ex * cx + ey * cy <= ex * ex + ey * ey:
+        return False
+    gx, gy = F(p[0]) - F(s[0]), F(p[1]) - F(s[1])
+    return (ex * gy - ey * gx) ** 2 == F(r) ** 2 * (ex * ex + ey * ey)
+
+
+def _corners_slid_past(P, V, A, R, index, todo, out_t, out_kind, out_idx) -> list:
+    """(row, point) pairs among ``todo`` whose winning corner contact only happens while the
+    body slides along a wall through that corner at exactly its radius.
+
+    The distance to the world then stays r before the corner and grows after it: never below
+    r, and not an isolated touch, so it is no contact (as sliding along the wall alone is
+    none).  The wall contains the corner, so it is listed in the corner's cell.
+    """
+    w = index.world
+    out = []
+    t = out_t[todo]
+    for b in todo[(out_kind[todo] == KIND_POINT) & (t > 0.0) & (t < math.inf)]:
+        k = out_idx[b]
+        c = w.points[k]
+        lo = np.array([c[0], c[1]])
+        i0, j0, i1, j1 = cell_range(lo, lo, index.x0, index.y0, 1.0 / index.h, index.nx,
+                                    index.ny)
+        cand = set()
+        for j in range(j0, j1 + 1):
+            for i in range(i0, i1 + 1):
+                cell = j * index.nx + i
+                cand.update(index.edge_items[index.edge_ptr[cell]:index.edge_ptr[cell + 1]]
+                            .tolist())
+        if any(_slides_along(P[b], V[b], A[b], R[b], w.starts[j], w.ends[j], c)
+               for j in sorted(cand)):
+            out.append((int(b), int(k)))
+    return out
+
+
+def time_to_static(p, v, a, r, index: StaticIndex, horizon: float = math.inf
+                   ) -> StaticContacts:
+    """First contact of each body with the indexed static world (2-D).
+
+    Parameters: ``p``, ``v``, ``a`` (N, 2) (or one row, broadcast) in m, m/s, m/s^2;
+    ``r`` (N,) or scalar, m; ``horizon`` s.  Guarantees: 0 and inf are exact decisions; a
+    finite time lies within one ulp of the exact first contact for the float64 geometry of
+    the world (the exact solvers round to nearest); ties between obstacles at the same time
+    go to the lowest (obstacle, kind, feature).  Rows with non-finite values or r < 0 give
+    NaN.  ``horizon`` must be >= 0 (ValueError otherwise).
+    """
+    H = float(horizon)
+    if not H >= 0.0:
+        raise ValueError(f"time_to_static: horizon must be >= 0, got {horizon!r}")
+    P = _rows(p, "p", None)
+    n = len(P)
+    V = _rows(v, "v", n)
+    A = _rows(a, "a", n)
+    R = np.ascontiguousarray(np.broadcast_to(np.asarray(r, dtype=np.float64), (n,)))
+    ok = (np.isfinite(P).all(axis=1) & np.isfinite(V).all(axis=1) & np.isfinite(A).all(axis=1)
+          & np.isfinite(R) & (R >= 0))
+    w = index.world
+    out_t = np.empty(n)
+    out_ob = np.empty(n, np.int32)
+    out_kind = np.empty(n, np.int8)
+    out_idx = np.empty(n, np.int64)
+    skip_ptr = np.zeros(n + 1, np.int64)
+    skip = np.empty(0, np.int64)
+    todo = np.arange(n)
+    while True:
+        _certified_then_exact(P, V, A, R, H, ok, index, todo, skip_ptr, skip,
+                              out_t, out_ob, out_kind, out_idx)
+        slid = _corners_slid_past(P, V, A, R, index, todo, out_t, out_kind, out_idx)
+        if not slid:
+            break
+        extra = {b: [k] for b, k in slid}
+        rows = [list(skip[skip_ptr[b]:skip_ptr[b + 1]]) + extra.get(b, []) for b in range(n)]
+        skip_ptr = np.concatenate([[0], np.cumsum([len(x) for x in rows])]).astype(np.int64)
+        skip = np.array([k for x in rows for k in x], np.int64)
+        todo = np.array(sorted(extra), np.int64)
+    # a centre inside a solid overlaps it, however far its boundary is
+    live = ok & (out_t != 0.0)
+    if live.any():
+        rows = np.nonzero(live)[0]
+        x, y = P[rows, 0], P[rows, 1]
+        inside_ob = np.full(len(rows), -1, np.int64)
+        for ob, first, count in w.polygons:
+            vs = w.starts[first:first + count]
+            hit = _inside_polygon(x, y, vs[:, 0], vs[:, 1]) & (inside_ob < 0)
+            inside_ob[hit] = ob
+        for ob, occ, frame in w.maps:
+            hit = cell_occupied_at(occ, frame, x, y) & (inside_ob < 0)
+            inside_ob[hit] = ob
+        hit = inside_ob >= 0
+        rows = rows[hit]
+        out_t[rows] = 0.0
+        out_ob[rows] = inside_ob[hit]
+        out_kind[rows] = KIND_INSIDE
+        out_idx[rows] = -1
+    point, normal, speed = _details(P, V, A, out_t, w, out_kind, out_idx)
+    return StaticContacts(out_t, out_ob, out_kind, out_idx, point, normal, speed)

@@ -1,0 +1,310 @@
+"""First contact with static worlds: hard cases decided, the exact reference, properties.
+
+Guarantees proved here (docs/static.md):
+
+* 0 and inf are exact decisions, including sliding along a wall at exactly the radius (no
+  contact, also at the wall's end), grazing a corner at exactly the radius (a contact),
+  touching at t = 0 and moving away, and a path through a vertex.
+* A finite time is within one ulp of the exact time: rows are compared with an exact
+  reference that uses no index and no certified kernel (every edge by ``exact_edge_contact``,
+  every corner by ``exact_first_contact``, solids by an exact rational inside test).
+* The answer does not depend on the order of edges, the index's cell size, an exact
+  translation, or whether a polygon's boundary is given as a polygon or as segments (for
+  bodies outside it).
+"""
+from __future__ import annotations
+
+import math
+from fractions import Fraction
+
+import numpy as np
+import pytest
+
+from circle_collision_ros.core.narrow.exact import exact_first_contact
+from circle_collision_ros.core.static import (
+    GridFrame,
+    OccupancyMap,
+    Polygon,
+    Segments,
+    StaticIndex,
+    StaticWorld,
+    time_to_static,
+)
+from circle_collision_ros.core.static.edge_exact import exact_edge_contact
+from circle_collision_ros.core.static.query import KIND_EDGE, KIND_INSIDE, KIND_POINT
+
+
+def _one(world, p, v, a, r, H=30.0):
+    c = time_to_static([p], [v], [a], r, StaticIndex.build(world), H)
+    return float(c.time[0]), int(c.kind[0])
+
+
+BOX = StaticWorld.build([Polygon("box", np.array([[-10.0, -1], [10, -1], [10, 0], [-10, 0]]))])
+WALL = StaticWorld.build([Segments("wall", np.array([[-10.0, 0]]), np.array([[10.0, 0]]))])
+TRIANGLE = StaticWorld.build([Polygon("tri", np.array([[9.0, -2], [11, -2], [10, 0]]))])
+
+
+# --- hard cases, each with its exact answer built by hand ------------------------------------
+
+@pytest.mark.parametrize("world", [BOX, WALL], ids=["box", "wall"])
+@pytest.mark.parametrize("a", [(0.0, 0.0), (0.25, 0.0), (-0.01, 0.0)])
+def test_sliding_along_a_wall_at_exactly_the_radius_is_no_contact(world, a):
+    # the distance stays r, then grows past the wall's end: never below r, and the touch of
+    # the end corner is not isolated (a per-feature answer would report the corner at t = 10)
+    assert _one(world, (0.0, 0.5), (1.0, 0.0), a, 0.5) == (math.inf, 0)
+
+
+def test_sliding_into_a_concave_corner_is_a_contact():
+    world = StaticWorld.build([Segments("L", np.array([[-10.0, 0], [10, 0]]),
+                                        np.array([[10.0, 0], [10, 5]]))])
+    assert _one(world, (0.0, 0.5), (1.0, 0.0), (0.0, 0.0), 0.5) == (9.5, KIND_EDGE)
+
+
+def test_grazing_a_corner_at_exactly_the_radius_is_a_contact():
+    assert _one(TRIANGLE, (0.0, 1.0), (1.0, 0.0), (0.0, 0.0), 1.0) == (10.0, KIND_POINT)
+    assert _one(TRIANGLE, (0.0, 1.0 + 2.0 ** -40), (1.0, 0.0), (0.0, 0.0), 1.0)[0] == math.inf
+    t, kind = _one(TRIANGLE, (0.0, 1.0 - 2.0 ** -40), (1.0, 0.0), (0.0, 0.0), 1.0)
+    assert kind == KIND_POINT and t < 10.0
+    # exact: 10 - sqrt(1 - (1 - 2^-40)^2) rounded to nearest
+    ref = exact_first_contact((0.0, 1.0 - 2.0 ** -40), (1.0, 0.0), (0.0, 0.0), 1.0,
+                              (10.0, 0.0), (0.0, 0.0), (0.0, 0.0), 0.0, 30.0)
+    assert abs(t - ref) <= math.ulp(ref)
+
+
+@pytest.mark.parametrize("v, a, expected", [
+    ((0.0, 1.0), (0.0, 0.0), math.inf),   # touching, moving away
+    ((0.0, -1.0), (0.0, 0.0), 0.0),       # touching, approaching
+    ((0.0, 1.0), (0.0, -1.0), 2.0),       # away, then back: the next contact
+    ((1.0, 0.0), (0.0, -0.5), 0.0),       # tangential, accelerating into the wall
+    ((1.0, 0.0), (0.0, 0.5), math.inf),   # tangential, accelerating away
+])
+def test_touching_at_t0(v, a, expected):
+    assert _one(WALL, (0.0, 0.5), v, a, 0.5)[0] == expected
+
+
+def test_a_path_exactly_through_a_vertex():
+    assert _one(BOX, (11.0, 1.0), (-1.0, -1.0), (0.0, 0.0), 0.0) == (1.0, KIND_POINT)
+    # a small body on the same path touches the corner earlier, by its radius
+    t, kind = _one(BOX, (11.0, 1.0), (-1.0, -1.0), (0.0, 0.0), 0.25)
+    assert kind == KIND_POINT and abs(t - (1.0 - 0.25 / math.sqrt(2))) < 1e-15
+
+
+def test_thin_wall_one_cell_wide_is_not_tunnelled():
+    occ = np.zeros((10, 10), bool)
+    occ[:, 5] = True
+    world = StaticWorld.build([OccupancyMap("map", occ, GridFrame(0.0625))])
+    # 1 km/s across a 6 cm wall: a 0.1 s fixed step would jump it
+    t, kind = _one(world, (0.0, 0.3), (1000.0, 0.0), (0.0, 0.0), 0.0078125, 1.0)
+    assert kind == KIND_EDGE and t == (5 * 0.0625 - 0.0078125) / 1000.0
+
+
+def test_map_sized_coordinates_with_millimetre_gaps():
+    world = StaticWorld.build([Segments("w", np.array([[10000.0, 5000.0]]),
+                                        np.array([[10010.0, 5000.0]]))])
+    # 1 mm above the wall at 1e4 m: the gap is exact in the relative state
+    t, _ = _one(world, (10005.0, 5000.1 + 0.001), (0.0, -1.0), (0.0, 0.0), 0.1)
+    ref = exact_edge_contact((10005.0, 5000.1 + 0.001), (0.0, -1.0), (0.0, 0.0), 0.1,
+                             (10000.0, 5000.0), (10010.0, 5000.0), 0, 30.0)
+    assert t == pytest.approx(ref, rel=0, abs=math.ulp(ref)) and 0.0009 < t < 0.0011
+    # passing 1 mm beyond the wall's end does not touch it
+    assert _one(world, (10010.101, 5001.0), (0.0, -1.0), (0.0, 0.0), 0.1, 3.0)[0] == math.inf
+
+
+def test_inside_a_solid_overlaps():
+    assert _one(BOX, (0.0, -0.5), (0.0, 0.0), (0.0, 0.0), 0.1) == (0.0, KIND_INSIDE)
+    assert _one(BOX, (0.0, -0.95), (0.0, 0.0), (0.0, 0.0), 0.1) == (0.0, KIND_EDGE)
+    occ = np.zeros((40, 40), bool)
+    occ[10:30, 10:30] = True
+    world = StaticWorld.build([OccupancyMap("map", occ, GridFrame(0.5))])
+    assert _one(world, (10.0, 10.0), (1.0, 0.0), (0.0, 0.0), 0.1) == (0.0, KIND_INSIDE)
+    big = StaticWorld.build([Polygon("big", np.array([[0.0, 0], [100, 0], [100, 100],
+                                                      [0, 100]]))])
+    assert _one(big, (50.0, 50.0), (0.0, 0.0), (0.0, 0.0), 0.5) == (0.0, KIND_INSIDE)
+
+
+# --- the exact reference ---------------------------------------------------------------------
+
+def _inside_exact(pt, loop) -> bool:
+    """Even-odd rule in rationals (the point is off the boundary whenever this matters)."""
+    x, y = Fraction(pt[0]), Fraction(pt[1])
+    inside = False
+    n = len(loop)
+    for i in range(n):
+        x1, y1 = map(Fraction, loop[i])
+        x2, y2 = map(Fraction, loop[(i + 1) % n])
+        if (y1 > y) != (y2 > y) and x < x1 + (y - y1) * (x2 - x1) / (y2 - y1):
+            inside = not inside
+    return inside
+
+
+def _slides(p, v, a, r, s, e, c) -> bool:
+    F = Fraction
+    ex, ey = F(e[0]) - F(s[0]), F(e[1]) - F(s[1])
+    cx, cy = F(c[0]) - F(s[0]), F(c[1]) - F(s[1])
+    gx, gy = F(p[0]) - F(s[0]), F(p[1]) - F(s[1])
+    return (ex * F(v[1]) == ey * F(v[0]) and ex * F(a[1]) == ey * F(a[0])
+            and ex * cy == ey * cx and 0 <= ex * cx + ey * cy <= ex * ex + ey * ey
+            and (ex * gy - ey * gx) ** 2 == F(r) ** 2 * (ex * ex + ey * ey))
+
+
+def reference(world: StaticWorld, p, v, a, r, H) -> float:
+    """The first contact by the exact solvers over every feature, no index, no kernels."""
+    best = math.inf
+    for k in range(len(world.starts)):
+        best = min(best, exact_edge_contact(p, v, a, r, world.starts[k], world.ends[k],
+                                            int(world.solid_side[k]), H))
+    for k, c in enumerate(world.points):
+        t = exact_first_contact(p, v, a, r, c, (0.0, 0.0), (0.0, 0.0), 0.0, H)
+        if t < best and not any(_slides(p, v, a, r, world.starts[j], world.ends[j], c)
+                                for j in range(len(world.starts))):
+            best = t
+    for _, first, count in world.polygons:
+        if _inside_exact(p, world.starts[first:first + count]):
+            return 0.0
+    for _, occ, frame in world.maps:
+        fx, fy = frame.map_to_cell(p[0], p[1])
+        ix, iy = math.floor(fx), math.floor(fy)
+        if 0 <= iy < occ.shape[0] and 0 <= ix < occ.shape[1] and occ[iy, ix]:
+            return 0.0
+    return best
+
+
+def _room() -> StaticWorld:
+    occ = np.zeros((48, 64), bool)
+    occ[0, :] = occ[-1, :] = occ[:, 0] = occ[:, -1] = True
+    occ[20:28, 30] = True
+    occ[5:9, 5:12] = True
+    return StaticWorld.build([
+        OccupancyMap("map", occ, GridFrame(0.0625, -2.0, -1.5)),
+        Polygon("crate", np.array([[0.5, 0.25], [1.25, 0.5], [0.75, 1.0], [0.25, 0.75]])),
+        Polygon("ell", np.array([[-1.0, 0.0], [-0.5, 0.0], [-0.5, 0.25], [-0.75, 0.25],
+                                 [-0.75, 0.75], [-1.0, 0.75]])),
+        Segments("rail", np.array([[-1.5, -1.0], [0.0, -1.0]]),
+                 np.array([[-0.25, -1.25], [1.0, -0.5]])),
+    ])
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_random_bodies_match_the_exact_reference(seed):
+    world = _room()
+    index = StaticIndex.build(world)
+    rng = np.random.default_rng(seed)
+    n = 150
+    P = rng.uniform([-1.9, -1.4], [1.9, 1.4], size=(n, 2))
+    V = rng.normal(size=(n, 2))
+    A = rng.normal(size=(n, 2)) * 0.5 * (np.arange(n) % 2)[:, None]
+    R = rng.uniform(0.0, 0.15, n)
+    H = 2.5
+    got = time_to_static(P, V, A, R, index, H)
+    contacts = 0
+    for b in range(n):
+        ref = reference(world, P[b], V[b], A[b], R[b], H)
+        t = got.time[b]
+        if ref in (0.0, math.inf):
+            assert t == ref, (b, t, ref)
+        else:
+            contacts += 1
+            assert abs(t - ref) <= math.ulp(ref), (b, t, ref)
+    assert contacts > n // 3
+
+
+def test_the_answer_does_not_depend_on_edge_order_cells_or_translation():
+    world = _room()
+    rng = np.random.default_rng(5)
+    n = 300
+    P = rng.uniform([-1.9, -1.4], [1.9, 1.4], size=(n, 2))
+    V = rng.normal(size=(n, 2))
+    A = rng.normal(size=(n, 2)) * 0.3
+    R = rng.uniform(0.0, 0.15, n)
+    base = time_to_static(P, V, A, R, StaticIndex.build(world), 2.0)
+    # permuted segments and reversed polygon vertices
+    perm = StaticWorld.build([
+        OccupancyMap("map", world.maps[0][1], world.maps[0][2]),
+        Polygon("crate", np.array([[0.5, 0.25], [1.25, 0.5], [0.75, 1.0], [0.25, 0.75]])[::-1]),
+        Polygon("ell", np.roll(np.array([[-1.0, 0.0], [-0.5, 0.0], [-0.5, 0.25], [-0.75, 0.25],
+                                         [-0.75, 0.75], [-1.0, 0.75]]), 2, axis=0)),
+        Segments("rail", np.array([[1.0, -0.5], [-1.5, -1.0]]),
+                 np.array([[0.0, -1.0], [-0.25, -1.25]])),
+    ])
+    got = time_to_static(P, V, A, R, StaticIndex.build(perm), 2.0)
+    np.testing.assert_array_equal(got.time, base.time)
+    np.testing.assert_array_equal(got.obstacle, base.obstacle)
+    # one cell: every feature is a candidate of every body
+    from circle_collision_ros.core.static import index as index_module
+    old = index_module.MAX_CELLS_PER_AXIS
+    try:
+        index_module.MAX_CELLS_PER_AXIS = 1
+        one_cell = StaticIndex.build(world)
+    finally:
+        index_module.MAX_CELLS_PER_AXIS = old
+    assert one_cell.nx == one_cell.ny == 1
+    np.testing.assert_array_equal(time_to_static(P, V, A, R, one_cell, 2.0).time, base.time)
+
+
+def _crate_and_rail(shift) -> StaticWorld:
+    return StaticWorld.build([
+        Polygon("crate", np.array([[0.5, 0.25], [1.25, 0.5], [0.75, 1.0], [0.25, 0.75]]) + shift),
+        Segments("rail", np.array([[-1.5, -1.0], [0.0, -1.0]]) + shift,
+                 np.array([[-0.25, -1.25], [1.0, -0.5]]) + shift),
+    ])
+
+
+def test_an_exact_translation_changes_nothing():
+    rng = np.random.default_rng(6)
+    n = 300
+    P = rng.uniform([-1.9, -1.4], [1.9, 1.4], size=(n, 2))
+    V = rng.normal(size=(n, 2))
+    A = rng.normal(size=(n, 2)) * 0.3
+    R = rng.uniform(0.0, 0.15, n)
+    P = np.round(P * 2.0 ** 30) / 2.0 ** 30  # 30 fraction bits: P + shift is exact
+    shift = np.array([1024.0, -2048.0])
+    a = time_to_static(P + shift, V, A, R, StaticIndex.build(_crate_and_rail(shift)), 2.0)
+    b = time_to_static(P, V, A, R, StaticIndex.build(_crate_and_rail(0.0)), 2.0)
+    np.testing.assert_array_equal(a.time, b.time)
+    assert np.isfinite(b.time).sum() > 20
+
+
+def test_a_polygon_and_its_boundary_as_segments_agree_outside_it():
+    verts = np.array([[0.5, 0.25], [1.25, 0.5], [0.75, 1.0], [1.0, 1.5], [0.25, 0.75]])
+    solid = StaticWorld.build([Polygon("p", verts)])
+    walls = StaticWorld.build([Segments("p", verts, np.roll(verts, -1, axis=0))])
+    rng = np.random.default_rng(9)
+    n = 400
+    P = rng.uniform(-1.0, 2.5, size=(n, 2))
+    V = rng.normal(size=(n, 2))
+    A = rng.normal(size=(n, 2)) * 0.3
+    R = rng.uniform(0.0, 0.1, n)
+    a = time_to_static(P, V, A, R, StaticIndex.build(solid), 3.0)
+    b = time_to_static(P, V, A, R, StaticIndex.build(walls), 3.0)
+    outside = a.kind != KIND_INSIDE
+    assert outside.sum() > n // 2
+    np.testing.assert_array_equal(a.time[outside], b.time[outside])
+
+
+def test_contact_details_point_normal_and_speed():
+    c = time_to_static([[0.0, 0.0]], [[1.0, 0.0]], [[0.0, 0.0]], 0.5,
+                       StaticIndex.build(StaticWorld.build([Segments(
+                           "w", np.array([[3.0, -5.0]]), np.array([[3.0, 5.0]]))])), 10.0)
+    assert c.time[0] == 2.5
+    np.testing.assert_allclose(c.point[0], [3.0, 0.0])
+    np.testing.assert_allclose(c.normal[0], [1.0, 0.0])
+    assert c.closing_speed[0] == pytest.approx(1.0)
+    assert c.obstacle[0] == 0
+
+
+def test_bad_input_rows_are_nan_and_bad_obstacles_are_refused():
+    idx = StaticIndex.build(WALL)
+    c = time_to_static([[0.0, 1.0], [math.nan, 0.0]], [[0.0, -1.0], [0.0, 0.0]],
+                       [[0.0, 0.0]], [0.5, 0.5], idx, 5.0)
+    assert c.time[0] == 0.5 and math.isnan(c.time[1]) and c.obstacle[1] == -1
+    with pytest.raises(ValueError, match="horizon"):
+        time_to_static([[0.0, 0.0]], [[0.0, 0.0]], [[0.0, 0.0]], 0.1, idx, -1.0)
+    with pytest.raises(ValueError, match="collinear"):
+        StaticWorld.build([Polygon("flat", np.array([[0.0, 0], [1, 0], [2, 0]]))])
+    with pytest.raises(ValueError, match="used twice"):
+        StaticWorld.build([WALL_SEGMENTS, WALL_SEGMENTS])
+    with pytest.raises(ValueError, match="non-finite"):
+        StaticWorld.build([Polygon("nan", np.array([[0.0, 0], [1, math.nan], [2, 1]]))])
+
+
+WALL_SEGMENTS = Segments("wall", np.array([[-10.0, 0]]), np.array([[10.0, 0]]))
