@@ -71,6 +71,7 @@ from circle_collision_ros.node.input_loss import InputLossMonitor
 from circle_collision_ros.node.activity import NodeActivity
 from circle_collision_ros.node.markers import MarkerPublisher
 from circle_collision_ros.node.probabilities import ProbabilityPublisher
+from circle_collision_ros.node.static_inputs import StaticInputs, StaticSettings
 from circle_collision_ros.pipeline.predictor import (RUNTIME_FIELDS, CollisionPredictor,
                                                      IntakeReport, PredictorConfig, predict_once)
 
@@ -262,6 +263,16 @@ class CollisionNode(Node):
         for topic, source in self._odometry_sources.items():
             self._subscribe(topic, Odometry, Qos.states(p("state_reliability")),
                             functools.partial(odometry_batch, source=source))
+        # Static geometry (maps, polygons): indexed off the prediction path (node/static_inputs)
+        settings = StaticSettings(p("map_topic"), p("map_occupied_threshold"),
+                                  p("map_unknown_is_occupied"), tuple(p("polygon_topics")),
+                                  p("static_polygons"))
+        if settings.used and p("dimensions") != 2:
+            raise ValueError("static inputs (map_topic, polygon_topics, static_polygons) need "
+                             f"dimensions = 2; this node predicts in {p('dimensions')}-D")
+        self.static = StaticInputs(self, settings, lambda: self.predictor.frame_id,
+                                   self._adopt_frame, self._on_static_world, self._warn,
+                                   self._record_static) if settings.used else None
         # Everything a callback may take in one go: what the input queues can hold.
         self._drain_limit = sum(s.subscription.qos_profile.depth for s in self._inputs) or 1
         self.create_service(PredictCollisions, "predict_collisions", self._on_predict_request,
@@ -287,6 +298,35 @@ class CollisionNode(Node):
             f" + {list(p('single_state_topics'))} + odometry {list(self._odometry_sources)}"
             f", horizon {p('horizon')} s"
         )
+
+    # -- static world ---------------------------------------------------------------------------
+    def _adopt_frame(self, frame_id: str) -> None:
+        """A static input arrived before any state: its frame becomes the scene's."""
+        self.predictor.frame_id = frame_id
+
+    def _on_static_world(self, index, version: int) -> None:
+        """A newly indexed static world (executor thread, between predictions): predict
+        against it from now on, record that it applies here, and publish."""
+        with self.activity.busy():
+            self.predictor.set_static(index)
+            now_ns = self._drain_clock()
+            if getattr(self, "_static_recording", False):
+                self._record_static_applied(version, now_ns)
+            if len(self.predictor):
+                self._publish(now_ns)
+
+    def _record_static_applied(self, version: int, log_ns: int) -> None:
+        data = serialize_message(String(data=json.dumps({"version": version})))
+        self._record(self._static_topic, data, log_ns)
+
+    def _record_static(self, topic: str, data: bytes) -> None:
+        if getattr(self, "_static_recording", False):
+            self._record(topic, data, self.get_clock().now().nanoseconds)
+
+    @property
+    def _static_topic(self) -> str:
+        # Recorded only: where each static world version starts to apply, for replay.
+        return f"{self.get_fully_qualified_name()}/static_applied"
 
     # -- inputs ---------------------------------------------------------------------------------
     def _subscribe(self, topic: str, msg_type: type, qos: QoSProfile,
@@ -491,6 +531,7 @@ class CollisionNode(Node):
                 self.predictor.config,
                 request.horizon,
                 request_time_ns=self.get_clock().now().nanoseconds,
+                static=self.predictor.static,
             )
             response.success, response.message = ok, message
             response.predictions = (
@@ -548,6 +589,10 @@ class CollisionNode(Node):
             "probabilities_superseded": self.probabilities.superseded,
             "probabilities_ms_last": f"{self.probabilities.last_compute_s * 1e3:.3f}",
             "probabilities_delay_ms_last": f"{self.probabilities.last_delay_s * 1e3:.3f}",
+            "static_world_version": self.static.applied_version if self.static else 0,
+            "static_inputs_rejected": self.static.rejected if self.static else 0,
+            "static_index_ms_last": f"{self.static.index_s_last * 1e3:.3f}" if self.static
+            else "0.000",
             "markers_drawn": self.markers.drawn,
             "marker_ms_last": f"{self.markers.last_cost_s * 1e3:.3f}",
             "errors": c.errors,
@@ -647,6 +692,12 @@ class CollisionNode(Node):
             self._recorder.add_topic(
                 self._config_topic, "std_msgs/msg/String", qos_profiles_yaml([Qos.predictions()])
             )
+            if self.static is not None:
+                for topic, msg_type in self.static.topics:
+                    self._recorder.add_topic(topic, _ros_type_name(msg_type),
+                                             self._offered_qos(topic))
+                self._recorder.add_topic(self._static_topic, "std_msgs/msg/String",
+                                         qos_profiles_yaml([Qos.predictions()]))
         except RecordingError as exc:
             raise ValueError(f"record_path: {exc}") from exc
         # Input publishers may appear after start: look for them off the message path.
@@ -655,6 +706,10 @@ class CollisionNode(Node):
             self.create_timer(1.0, self._record_offered_qos) if self._qos_unknown else None
         )
         self._record_config()
+        self._static_recording = self.static is not None
+        if self._static_recording and self.static.applied_version:  # the parameters' polygons
+            self._record_static_applied(self.static.applied_version,
+                                        self.get_clock().now().nanoseconds)
         self.get_logger().info(f"recording to {self._recorder.path}")
 
     def _offered_qos(self, topic: str) -> str:
@@ -688,7 +743,8 @@ class CollisionNode(Node):
         config = dict(asdict(self.predictor.config),
                       publish_rate=node_parameters.value_of(self, "publish_rate"),
                       probabilities_topic=self._probabilities_pub.topic_name,
-                      odometry={t: asdict(s) for t, s in self._odometry_sources.items()})
+                      odometry={t: asdict(s) for t, s in self._odometry_sources.items()},
+                      static=asdict(self.static.settings) if self.static is not None else None)
         data = serialize_message(String(data=json.dumps(config, sort_keys=True)))
         self._record(self._config_topic, data, self.get_clock().now().nanoseconds)
         try:  # also as bag metadata, for tools that look there rather than at topics
@@ -723,6 +779,8 @@ class CollisionNode(Node):
                 self._markers_pub.wait_for_all_acked(Duration(seconds=self.SHUTDOWN_ACK_S))
             except Exception as exc:  # e.g. the context was shut down from outside
                 self.get_logger().warning(f"final markers not acknowledged: {exc!r}")
+        if getattr(self, "static", None) is not None:
+            self.static.close()
         if getattr(self, "_recorder", None) is not None:
             try:
                 self._recorder.close()

@@ -321,13 +321,12 @@ class MarkerBuilder:
         body_ttc = np.full(n, np.inf)
         body_probability = np.zeros(n)
         if listed:
-            ends = np.array([index[row[k]] for row in listed for k in (0, 1)], dtype=np.int64)
-            np.minimum.at(
-                body_ttc, ends, np.repeat([row.plausible_time_to_collision for row in listed], 2)
-            )
-            np.maximum.at(
-                body_probability, ends, np.repeat([row.collision_probability for row in listed], 2)
-            )
+            # both ends of a pair are bodies; a contact with static geometry has one (id_b
+            # names the obstacle)
+            ends = [(index[row[k]], row) for row in listed for k in (0, 1) if row[k] in index]
+            at = np.array([j for j, _ in ends], dtype=np.int64)
+            np.minimum.at(body_ttc, at, [row.plausible_time_to_collision for _, row in ends])
+            np.maximum.at(body_probability, at, [row.collision_probability for _, row in ends])
         positions = np.zeros((n, 3))
         if n:
             d = min(snapshot.positions.shape[1], 3)

@@ -87,6 +87,20 @@ PARAMS: tuple[ParamSpec, ...] = (
         "Per-topic radii in m, one per odometry_topics entry; empty: odometry_radius for all.",
         read_only=True,
     ),
+    ParamSpec("map_topic", Parameter.Type.STRING, "",
+              "nav_msgs/OccupancyGrid topic (transient local) whose occupied cells are static "
+              "obstacles, id_b 'map'; empty: none. 2-D only.", read_only=True),
+    ParamSpec("map_occupied_threshold", Parameter.Type.INTEGER, 65,
+              "Occupancy value (0..100) from which a map cell is occupied.", read_only=True,
+              int_range=(0, 100)),
+    ParamSpec("map_unknown_is_occupied", Parameter.Type.BOOL, False,
+              "Treat unknown map cells (-1) as occupied.", read_only=True),
+    ParamSpec("polygon_topics", Parameter.Type.STRING_ARRAY, [],
+              "geometry_msgs/PolygonStamped topics, one solid obstacle each, named by the "
+              "topic's namespace; an empty polygon removes it. 2-D only.", read_only=True),
+    ParamSpec("static_polygons", Parameter.Type.STRING, "",
+              'Keep-out zones as JSON: {"name": [[x, y], [x, y], [x, y]], ...} in the scene '
+              "frame; solid polygons. 2-D only.", read_only=True),
     ParamSpec(
         "frame_id",
         Parameter.Type.STRING,
@@ -278,9 +292,17 @@ def validate(name: str, value: Any) -> str | None:
             return f"{name} must be a list of {kind}, got {value!r}"
     if name == "odometry_radii" and any(not math.isfinite(r) or r < 0.0 for r in value):
         return f"odometry_radii must be finite and >= 0, got {list(value)!r}"
-    if name in ("state_topics", "single_state_topics", "odometry_topics") and value is not None:
+    if (name in ("state_topics", "single_state_topics", "odometry_topics", "polygon_topics")
+            and value is not None):
         if any(not t or " " in t for t in value):
             return f"{name} has an empty or malformed topic name: {list(value)!r}"
+    if name == "static_polygons" and isinstance(value, str):
+        from circle_collision_ros.node.static_inputs import parse_static_polygons
+
+        try:
+            parse_static_polygons(value)
+        except ValueError as exc:
+            return str(exc)
     if name == "state_reliability" and value not in STATE_RELIABILITY:
         return f"state_reliability must be one of {', '.join(STATE_RELIABILITY)}, got {value!r}"
     if name == "dimensions" and value not in (2, 3):

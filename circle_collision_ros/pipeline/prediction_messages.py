@@ -19,7 +19,8 @@ probability + bound, the top of its interval; then NO_CONTACT if the mean
 paths miss). Rows of exact pairs carry probability 1.0, bound 0.0 and
 plausible time = time_to_collision (NO_CONTACT rows of report_all_pairs: 0.0,
 0.0, +inf). Order: contacts by (time, id_a, id_b) as the scene keeps them;
-then uncertain NO_CONTACT rows by (plausible time, id_a, id_b); then the
+then uncertain NO_CONTACT rows by (plausible time, id_a, id_b); then contacts
+with static geometry by (time, body id), id_b the obstacle's name; then the
 report_all_pairs rest in id order.
 """
 from __future__ import annotations
@@ -42,6 +43,7 @@ from circle_collision_ros.pipeline.prediction_codec import (
     encode_contact_rows,
     encode_prediction_array,
 )
+from circle_collision_ros.pipeline.static_scene import StaticRows
 
 _NS_PER_S = 1_000_000_000
 
@@ -104,6 +106,8 @@ class ScenePrediction:
     report_all_pairs: bool
     uncertainty: SceneUncertainty | None = None
     probability_threshold: float = 1.0
+    #: contacts with static geometry (pipeline.static_scene.static_rows), or None
+    static: StaticRows | None = None
 
     @property
     def deferred(self) -> bool:
@@ -177,6 +181,18 @@ class ScenePrediction:
             plausible[has] = u.plausible_ttc[found[has]]
             no_contact_rows(u.id_a[e].tolist(), u.id_b[e].tolist(), u.probability[e],
                             u.probability_bound[e], u.plausible_ttc[e])
+        st = self.static
+        if st is not None and len(st):
+            m = len(st)
+            id_a, id_b = id_a + st.id_a, id_b + st.id_b
+            for name, value in (("status", np.where(st.overlapping,
+                                                    CollisionPrediction.OVERLAPPING,
+                                                    CollisionPrediction.CONTACT).astype(np.uint8)),
+                                ("ttc", st.ttc), ("contact_ns", st.contact_ns),
+                                ("point", st.point), ("normal", st.normal),
+                                ("closing", st.closing_speed), ("probability", np.ones(m)),
+                                ("bound", np.zeros(m)), ("plausible", st.ttc)):
+                parts[name].append(value)
         if self._report_all_rows:
             ids = self.capture.ids()
             rank = {b: r for r, b in enumerate(ids)}
@@ -304,7 +320,8 @@ class ScenePrediction:
         uncertainty=False: the layout before the probability fields (replay of old recordings).
         """
         c, u = self.contacts, self.uncertainty
-        if uncertainty and not self._report_all_rows and c.id_utf8 is not None:
+        no_static = self.static is None or len(self.static) == 0
+        if uncertainty and not self._report_all_rows and c.id_utf8 is not None and no_static:
             # The node's cases in one compiled pass, bytes equal to the general path's
             # (tests/pipeline/test_prediction_codec.py): no columns built, no id strings touched.
             uncertain = u is not None and len(u) > 0

@@ -27,7 +27,9 @@ from circle_collision_ros.core.scene import Scene, SceneSnapshot
 from circle_collision_ros.core.warm_up import warm_large_frames, warm_scenes, warm_uncertain
 from circle_collision_ros.pipeline.state_codec import (decode_states, encode_state,
                                                        encode_state_array)
+from circle_collision_ros.core.static import StaticIndex
 from circle_collision_ros.pipeline.prediction_messages import ScenePrediction
+from circle_collision_ros.pipeline.static_scene import static_rows
 from circle_collision_ros.pipeline.state_batch import StateBatch
 from circle_collision_ros.pipeline.state_validation import Rejection, check_batch
 
@@ -111,7 +113,23 @@ class CollisionPredictor:
         # faster for whole tracker-array frames and for epoch moves, with the same output bytes
         # (bench/bench_node.py's density).
         self._scene = Scene(config.horizon, config.dimensions, max_bodies=config.max_bodies)
+        self._static: StaticIndex | None = None
         self.stats = PredictionStats()
+
+    @property
+    def static(self) -> StaticIndex | None:
+        """The static world predictions are made against (None: none)."""
+        return self._static
+
+    def set_static(self, index: StaticIndex | None) -> None:
+        """Predict against ``index`` from the next prediction on (None: no static geometry).
+
+        Built elsewhere (``static_scene.build_index``, off the prediction path); 2-D only.
+        """
+        if index is not None and self.config.dimensions != 2:
+            raise ValueError("static geometry needs dimensions = 2 (circles); this predictor "
+                             f"predicts in {self.config.dimensions}-D")
+        self._static = index
 
     @property
     def bodies(self) -> int:
@@ -296,9 +314,13 @@ class CollisionPredictor:
             self.config.probability_threshold, contacts, self.config.uncertain_pair_budget or None,
             self.config.probability_tolerance,
         )
-        prediction = ScenePrediction(contacts, self._scene.capture(), horizon, self.frame_id,
+        capture = self._scene.capture()
+        static = None
+        if self._static is not None and len(self._scene):
+            static = static_rows(capture.snapshot(), self._static, horizon)
+        prediction = ScenePrediction(contacts, capture, horizon, self.frame_id,
                                      self.config.report_all_pairs, uncertainty,
-                                     self.config.probability_threshold)
+                                     self.config.probability_threshold, static)
         self.stats = PredictionStats(bodies=len(self._scene), contacts=len(contacts),
                                      candidate_pairs=self._scene.evaluated_pairs,
                                      uncertain_deferred=uncertainty.deferred,
@@ -319,7 +341,8 @@ class HorizonLimits:
 
 def predict_once(states: Sequence[CircleState], config: PredictorConfig,
                  horizon: float | None = None,
-                 request_time_ns: int = 0) -> tuple[bool, str, ScenePrediction | None]:
+                 request_time_ns: int = 0,
+                 static: StaticIndex | None = None) -> tuple[bool, str, ScenePrediction | None]:
     """Stateless prediction for one set of states (the service).
 
     Rules (README, "Service"):
@@ -330,7 +353,8 @@ def predict_once(states: Sequence[CircleState], config: PredictorConfig,
     - a circle with a zero header.stamp is taken as stamped at `request_time_ns`
       (`ros2 service call` cannot fill in the time); if that is 0 too it is refused;
     - `remove: true` is refused (nothing persists between requests);
-    - times count from the newest stamp among them (the rule of core/scene.py).
+    - times count from the newest stamp among them (the rule of core/scene.py);
+    - ``static``: the node's current static world, answered against as well.
     Returns (success, message, prediction); a refusal names every bad circle
     with every reason ("circles[k] (id 'x'): reason; reason | circles[j] ...").
     """
@@ -357,6 +381,7 @@ def predict_once(states: Sequence[CircleState], config: PredictorConfig,
             batch, stamp_ns=np.where(unstamped, np.int64(request_time_ns), batch.stamp_ns)
         )
     predictor = CollisionPredictor(replace(config, max_bodies=len(states), horizon=horizon))
+    predictor.set_static(static)
     report = predictor.ingest(batch, now_ns=None)
     reasons: dict[int, list[str]] = {r.index: [r.reason] for r in report.rejected}
     for k, s in enumerate(states):
