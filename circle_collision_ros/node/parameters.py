@@ -297,7 +297,7 @@ def validate(name: str, value: Any) -> str | None:
         if any(not t or " " in t for t in value):
             return f"{name} has an empty or malformed topic name: {list(value)!r}"
     if name == "static_polygons" and isinstance(value, str):
-        from circle_collision_ros.node.static_inputs import parse_static_polygons
+        from circle_collision_ros.pipeline.static_scene import parse_static_polygons
 
         try:
             parse_static_polygons(value)

@@ -24,69 +24,25 @@ the same world at the same point.
 from __future__ import annotations
 
 import functools
-import json
 import threading
 import time
 from collections.abc import Callable
 from concurrent.futures import Future, ThreadPoolExecutor
-from dataclasses import dataclass
 
-import numpy as np
 from geometry_msgs.msg import PolygonStamped
 from nav_msgs.msg import OccupancyGrid
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
-from circle_collision_ros.core.static import GridFrame, StaticIndex, occupied_cells
-from circle_collision_ros.pipeline.cdr import CdrError
-from circle_collision_ros.pipeline.static_inputs import (
-    decode_occupancy_grid,
-    decode_polygon_stamped,
-    obstacle_name,
+from circle_collision_ros.core.static import StaticIndex
+from circle_collision_ros.pipeline.static_inputs import OCCUPANCY_GRID_TYPE, POLYGON_STAMPED_TYPE
+from circle_collision_ros.pipeline.static_scene import (
+    StaticObstacles,
+    StaticSettings,
+    build_index,
 )
-from circle_collision_ros.pipeline.static_scene import StaticObstacles, build_index
 
-__all__ = ["StaticInputs", "StaticSettings", "parse_static_polygons"]
-
-
-@dataclass(frozen=True)
-class StaticSettings:
-    """The static parameters of the node."""
-
-    map_topic: str = ""
-    map_occupied_threshold: int = 65
-    map_unknown_is_occupied: bool = False
-    polygon_topics: tuple = ()
-    static_polygons: str = ""
-
-    @property
-    def used(self) -> bool:
-        return bool(self.map_topic or self.polygon_topics or self.static_polygons.strip())
-
-
-def parse_static_polygons(text: str) -> dict:
-    """``{"name": [[x, y], ...], ...}`` (JSON) -> name -> (n, 2) array; ValueError naming
-    what is wrong.  Empty text: none."""
-    if not text.strip():
-        return {}
-    try:
-        value = json.loads(text)
-    except json.JSONDecodeError as exc:
-        raise ValueError(f"static_polygons is not JSON ({exc.msg} at character {exc.pos}); "
-                         'expected {"name": [[x, y], [x, y], [x, y]], ...}') from None
-    if not isinstance(value, dict):
-        raise ValueError("static_polygons must be a JSON object of name: [[x, y], ...]")
-    out = {}
-    for name, points in value.items():
-        try:
-            arr = np.array(points, dtype=np.float64)
-        except (TypeError, ValueError):
-            raise ValueError(f"static_polygons[{name!r}]: not a list of [x, y] numbers") from None
-        if arr.ndim != 2 or arr.shape[1] != 2:
-            raise ValueError(f"static_polygons[{name!r}]: expected [[x, y], ...], got shape "
-                             f"{arr.shape}")
-        out[name] = arr
-    return out
+__all__ = ["StaticInputs", "StaticSettings"]
 
 
 class StaticInputs:
@@ -110,12 +66,7 @@ class StaticInputs:
         self._apply = apply
         self._warn = warn
         self._record = record or (lambda topic, data: None)
-        self.obstacles = StaticObstacles()
-        for name, vertices in parse_static_polygons(settings.static_polygons).items():
-            try:
-                self.obstacles.set_polygon(name, vertices)
-            except ValueError as exc:
-                raise ValueError(f"static_polygons[{name!r}]: {exc}") from None
+        self.obstacles = StaticObstacles.from_settings(settings)
         self.rejected = 0
         self.applied_version = 0
         self.index_s_last = 0.0
@@ -141,49 +92,24 @@ class StaticInputs:
             self.applied_version = self.obstacles.version
 
     # -- inputs ---------------------------------------------------------------------------------
-    def _check_frame(self, topic: str, frame_id: str) -> bool:
-        scene = self._frame()
-        if not scene:
-            self._adopt_frame(frame_id)
-            return True
-        if frame_id != scene:
+    def _take(self, type_name: str, topic: str, data: bytes) -> bool:
+        """One map or polygon message (pipeline.static_scene's rules); False if rejected."""
+        taken = self.obstacles.take(type_name, topic, data, self.settings, self._frame())
+        if taken.reason:
             self.rejected += 1
-            self._warn(f"static_frame:{topic}",
-                       f"{topic}: frame '{frame_id}' is not the scene frame '{scene}' (no tf); "
-                       "message ignored")
+            self._warn(f"static:{topic}", taken.reason)
             return False
+        if not self._frame():
+            self._adopt_frame(taken.frame_id)
         return True
 
     def on_map_bytes(self, topic: str, data: bytes) -> bool:
         """Decode, check and take one map; False (with a warning) if rejected."""
-        try:
-            msg = decode_occupancy_grid(data)
-            occupied = occupied_cells(msg.data, msg.width, msg.height,
-                                      self.settings.map_occupied_threshold,
-                                      self.settings.map_unknown_is_occupied)
-            frame = GridFrame(msg.resolution, msg.origin_x, msg.origin_y, msg.yaw)
-        except (CdrError, ValueError) as exc:
-            self.rejected += 1
-            self._warn(f"static_map:{topic}", f"{topic}: map rejected: {exc}")
-            return False
-        if not self._check_frame(topic, msg.frame_id):
-            return False
-        self.obstacles.set_map(occupied, frame)
-        return True
+        return self._take(OCCUPANCY_GRID_TYPE, topic, data)
 
     def on_polygon_bytes(self, topic: str, data: bytes) -> bool:
         """Decode, check and take one polygon; False (with a warning) if rejected."""
-        name = obstacle_name(topic)
-        try:
-            msg = decode_polygon_stamped(data)
-            if not self._check_frame(topic, msg.frame_id):
-                return False
-            self.obstacles.set_polygon(name, msg.vertices)
-        except (CdrError, ValueError) as exc:
-            self.rejected += 1
-            self._warn(f"static_polygon:{topic}", f"{topic}: polygon rejected: {exc}")
-            return False
-        return True
+        return self._take(POLYGON_STAMPED_TYPE, topic, data)
 
     def _on_map(self, topic: str, data: bytes) -> None:
         self._record(topic, data)
@@ -199,8 +125,7 @@ class StaticInputs:
     # -- indexing off the prediction path ------------------------------------------------------
     def _rebuild(self) -> None:
         # the worker gets its own copy of the obstacles: callbacks keep changing them
-        snapshot = StaticObstacles(self.obstacles.occupancy, dict(self.obstacles.polygons),
-                                   self.obstacles.version)
+        snapshot = self.obstacles.copy()
         future = self._worker.submit(_timed_build, snapshot)
         future.add_done_callback(functools.partial(self._on_built, snapshot.version))
 

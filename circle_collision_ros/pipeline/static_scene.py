@@ -12,6 +12,7 @@ obstacle's name).  Bodies with covariance are evaluated on their mean state.
 """
 from __future__ import annotations
 
+import json
 from dataclasses import dataclass, field
 from typing import NamedTuple
 
@@ -24,14 +25,74 @@ from circle_collision_ros.core.static import (
     Polygon,
     StaticIndex,
     StaticWorld,
+    occupied_cells,
     time_to_static,
 )
 from circle_collision_ros.core.static.query import KIND_INSIDE
+from circle_collision_ros.pipeline.cdr import CdrError
+from circle_collision_ros.pipeline.static_inputs import (
+    OCCUPANCY_GRID_TYPE,
+    POLYGON_STAMPED_TYPE,
+    decode_occupancy_grid,
+    decode_polygon_stamped,
+    obstacle_name,
+)
 
-__all__ = ["MAP_NAME", "StaticObstacles", "StaticRows", "build_index", "static_rows"]
+__all__ = ["MAP_NAME", "StaticSettings", "parse_static_polygons", "StaticObstacles", "Taken",
+           "StaticRows", "build_index", "static_rows", "STATIC_TYPES"]
 
 #: id_b of contacts with the occupancy map.
 MAP_NAME = "map"
+#: The message types of static inputs (rosbag2 names).
+STATIC_TYPES = (OCCUPANCY_GRID_TYPE, POLYGON_STAMPED_TYPE)
+
+
+@dataclass(frozen=True)
+class StaticSettings:
+    """The node's static parameters (recorded with its configuration, for replay)."""
+
+    map_topic: str = ""
+    map_occupied_threshold: int = 65
+    map_unknown_is_occupied: bool = False
+    polygon_topics: tuple = ()
+    static_polygons: str = ""
+
+    @property
+    def used(self) -> bool:
+        return bool(self.map_topic or self.polygon_topics or self.static_polygons.strip())
+
+
+def parse_static_polygons(text: str) -> dict:
+    """``{"name": [[x, y], ...], ...}`` (JSON) -> name -> (n, 2) array; ValueError naming
+    what is wrong.  Empty text: none."""
+    if not text.strip():
+        return {}
+    try:
+        value = json.loads(text)
+    except json.JSONDecodeError as exc:
+        raise ValueError(f"static_polygons is not JSON ({exc.msg} at character {exc.pos}); "
+                         'expected {"name": [[x, y], [x, y], [x, y]], ...}') from None
+    if not isinstance(value, dict):
+        raise ValueError("static_polygons must be a JSON object of name: [[x, y], ...]")
+    out = {}
+    for name, points in value.items():
+        try:
+            arr = np.array(points, dtype=np.float64)
+        except (TypeError, ValueError):
+            raise ValueError(f"static_polygons[{name!r}]: not a list of [x, y] numbers") from None
+        if arr.ndim != 2 or arr.shape[1] != 2:
+            raise ValueError(f"static_polygons[{name!r}]: expected [[x, y], ...], got shape "
+                             f"{arr.shape}")
+        out[name] = arr
+    return out
+
+
+class Taken(NamedTuple):
+    """Outcome of one static message: ``reason`` is "" when accepted; ``frame_id`` is the
+    message's frame (the scene adopts it when it has none yet)."""
+
+    reason: str
+    frame_id: str
 
 
 @dataclass
@@ -58,6 +119,53 @@ class StaticObstacles:
             StaticWorld.build([Polygon(name, vertices)])  # validates, with its message
             self.polygons[name] = np.array(vertices, dtype=np.float64)
         self.version += 1
+
+    @classmethod
+    def from_settings(cls, settings: StaticSettings) -> "StaticObstacles":
+        """The keep-out zones of the parameters, one version each; ValueError naming a bad one."""
+        out = cls()
+        for name, vertices in parse_static_polygons(settings.static_polygons).items():
+            try:
+                out.set_polygon(name, vertices)
+            except ValueError as exc:
+                raise ValueError(f"static_polygons[{name!r}]: {exc}") from None
+        return out
+
+    def copy(self) -> "StaticObstacles":
+        """A copy that later changes leave alone (the map's arrays are never modified)."""
+        return StaticObstacles(self.occupancy, dict(self.polygons), self.version)
+
+    def take(self, type_name: str, topic: str, data: bytes, settings: StaticSettings,
+             scene_frame: str) -> Taken:
+        """Decode, check and apply one map or polygon message as received on ``topic``.
+
+        The node and replay share this, so both number the versions alike.  A message in
+        another frame than ``scene_frame`` (when set) or that cannot be used changes nothing.
+        """
+        try:
+            if type_name == OCCUPANCY_GRID_TYPE:
+                msg = decode_occupancy_grid(data)
+                occupied = occupied_cells(msg.data, msg.width, msg.height,
+                                          settings.map_occupied_threshold,
+                                          settings.map_unknown_is_occupied)
+                frame = GridFrame(msg.resolution, msg.origin_x, msg.origin_y, msg.yaw)
+            elif type_name == POLYGON_STAMPED_TYPE:
+                msg = decode_polygon_stamped(data)
+            else:
+                raise ValueError(f"not a static input type: {type_name}")
+        except (CdrError, ValueError) as exc:
+            return Taken(f"{topic}: rejected: {exc}", "")
+        if scene_frame and msg.frame_id != scene_frame:
+            return Taken(f"{topic}: frame '{msg.frame_id}' is not the scene frame "
+                         f"'{scene_frame}' (no tf); message ignored", msg.frame_id)
+        try:
+            if type_name == OCCUPANCY_GRID_TYPE:
+                self.set_map(occupied, frame)
+            else:
+                self.set_polygon(obstacle_name(topic), msg.vertices)
+        except ValueError as exc:
+            return Taken(f"{topic}: rejected: {exc}", msg.frame_id)
+        return Taken("", msg.frame_id)
 
     def world(self) -> StaticWorld:
         """The obstacles as one world: the map first, then polygons by name (a fixed order, so

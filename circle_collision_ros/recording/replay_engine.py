@@ -30,6 +30,8 @@ from circle_collision_ros.pipeline.prediction_codec import (PredictionArray,
 from circle_collision_ros.pipeline.prediction_messages import ScenePrediction
 from circle_collision_ros.pipeline.predictor import (RUNTIME_FIELDS, CollisionPredictor,
                                                      PredictorConfig)
+from circle_collision_ros.pipeline.static_scene import (STATIC_TYPES, StaticObstacles,
+                                                        StaticSettings, build_index)
 from circle_collision_ros.pipeline.state_batch import StateBatch
 from circle_collision_ros.pipeline.state_codec import decode_states
 from circle_collision_ros.pipeline.state_groups import ingest_single_states
@@ -110,6 +112,47 @@ def decode_input(record: BagRecord, odometry: dict[str, OdometrySource]) -> Stat
                              uncertainty=RecordedLayout.has_uncertainty(record.schema))
     except CdrError:
         return None  # the node rejected it the same way; nothing entered the scene
+
+
+def static_from_json(text: str) -> StaticSettings | None:
+    """The node's static settings from its recorded configuration (None: no static inputs)."""
+    values = json.loads(text).get("static")
+    if not values:
+        return None
+    values = dict(values, polygon_topics=tuple(values.get("polygon_topics", ())))
+    names = {f.name for f in fields(StaticSettings)}
+    return StaticSettings(**{k: v for k, v in values.items() if k in names})
+
+
+class StaticReplay:
+    """The static world as the node had it: every recorded map and polygon message taken by the
+    node's own rules (pipeline.static_scene), and each version applied where the node recorded
+    that it applied it (``<node>/static_applied``), whatever the indexing took live."""
+
+    MARKER_SUFFIX = "/static_applied"
+
+    def __init__(self, settings: StaticSettings) -> None:
+        self.settings = settings
+        self.obstacles = StaticObstacles.from_settings(settings)
+        self.versions = {self.obstacles.version: self.obstacles.copy()}
+
+    def take(self, record: BagRecord, predictor: CollisionPredictor) -> None:
+        taken = self.obstacles.take(record.type_name, record.topic, record.data, self.settings,
+                                    predictor.frame_id)
+        if not taken.reason:
+            if not predictor.frame_id:
+                predictor.frame_id = taken.frame_id
+            self.versions[self.obstacles.version] = self.obstacles.copy()
+
+    def apply(self, record: BagRecord, predictor: CollisionPredictor) -> str:
+        """Apply the recorded version; a reason if the recording names one never taken."""
+        version = json.loads(decode_string(record.data)).get("version")
+        world = self.versions.get(version)
+        if world is None:
+            return f"static world version {version!r} applied but never received"
+        predictor.set_static(build_index(world.world()))
+        self.versions = {v: w for v, w in self.versions.items() if v >= version}
+        return ""
 
 
 def config_from_json(text: str) -> PredictorConfig:
@@ -218,6 +261,7 @@ def replay_offline(
     run: list[bytes] = []  # consecutive CircleState records of one log time: one node drain
     run_time = -1
     run_layout = True
+    static: StaticReplay | None = None
 
     def flush() -> None:
         nonlocal run
@@ -228,11 +272,24 @@ def replay_offline(
     for record in records:
         if run and not (record.type_name == RecordedTypes.STATE and record.log_time_ns == run_time):
             flush()
+        if record.type_name == RecordedTypes.CONFIG and record.topic.endswith(
+                StaticReplay.MARKER_SUFFIX):
+            if static is None or predictor is None:
+                report.mismatches.append(f"{record.topic}: a static world applied without a "
+                                         "recorded static configuration")
+            else:
+                problem = static.apply(record, predictor)
+                if problem:
+                    report.mismatches.append(f"{record.topic}: {problem}")
+            continue
         if record.type_name == RecordedTypes.CONFIG:
             text = decode_string(record.data)
             recorded = config_from_json(text)
             odometry = odometry_from_json(text) or odometry
             probabilities_topic = json.loads(text).get("probabilities_topic", probabilities_topic)
+            settings = static_from_json(text)
+            if settings is not None and static is None:
+                static = StaticReplay(settings)
             if predictor is None:
                 predictor = CollisionPredictor(recorded)
             else:
@@ -240,6 +297,10 @@ def replay_offline(
             continue
         if predictor is None:
             predictor = CollisionPredictor(PredictorConfig())  # bag without a config record
+        if record.type_name in STATIC_TYPES:
+            if static is not None:
+                static.take(record, predictor)
+            continue
         if record.type_name == RecordedTypes.STATE:
             run.append(record.data)
             run_time = record.log_time_ns
@@ -290,7 +351,8 @@ def load_bag(
     path: str | os.PathLike[str], tolerant: bool = False
 ) -> tuple[BagContents, list[BagRecord]]:
     """Open a recording and read its records; BagError if it holds no circle states to replay."""
-    bag = open_bag(path, tolerant=tolerant, message_types=RECORDED_TYPES | {RecordedTypes.CONFIG})
+    bag = open_bag(path, tolerant=tolerant,
+                   message_types=RECORDED_TYPES | {RecordedTypes.CONFIG, *STATIC_TYPES})
     records = list(bag.records())
     if not any(r.type_name in RecordedTypes.INPUTS for r in records):
         # One line, also when truncated (tests/reliability/test_fuzz_replay.py).
