@@ -33,8 +33,10 @@ from geometry_msgs.msg import PolygonStamped
 from nav_msgs.msg import OccupancyGrid
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+from visualization_msgs.msg import MarkerArray
 
 from circle_collision_ros.core.static import StaticIndex
+from circle_collision_ros.node.static_markers import static_markers
 from circle_collision_ros.pipeline.static_inputs import OCCUPANCY_GRID_TYPE, POLYGON_STAMPED_TYPE
 from circle_collision_ros.pipeline.static_scene import (
     StaticObstacles,
@@ -74,6 +76,11 @@ class StaticInputs:
         self._pending: tuple | None = None  # (version, index or exception, seconds)
         self._worker = ThreadPoolExecutor(1, thread_name_prefix="static_index")
         self._guard = node.create_guard_condition(self._on_index_ready)
+        self._node = node
+        # transient local: a display that joins later gets the current world
+        self._markers_pub = node.create_publisher(MarkerArray, "~/static_markers", QoSProfile(
+            history=HistoryPolicy.KEEP_LAST, depth=1, reliability=ReliabilityPolicy.RELIABLE,
+            durability=DurabilityPolicy.TRANSIENT_LOCAL))
         self.topics: list[tuple[str, type]] = []
         if settings.map_topic:
             topic = node.resolve_topic_name(settings.map_topic)
@@ -88,7 +95,9 @@ class StaticInputs:
                                                 reliability=ReliabilityPolicy.RELIABLE), raw=True)
             self.topics.append((topic, PolygonStamped))
         if self.obstacles.version:  # the parameters' polygons: indexed before any input
-            self._apply(build_index(self.obstacles.world()), self.obstacles.version)
+            index, markers, _ = _timed_build(self.obstacles, self._frame(), node)
+            self._markers_pub.publish(markers)
+            self._apply(index, self.obstacles.version)
             self.applied_version = self.obstacles.version
 
     # -- inputs ---------------------------------------------------------------------------------
@@ -126,14 +135,14 @@ class StaticInputs:
     def _rebuild(self) -> None:
         # the worker gets its own copy of the obstacles: callbacks keep changing them
         snapshot = self.obstacles.copy()
-        future = self._worker.submit(_timed_build, snapshot)
+        future = self._worker.submit(_timed_build, snapshot, self._frame(), self._node)
         future.add_done_callback(functools.partial(self._on_built, snapshot.version))
 
     def _on_built(self, version: int, future: Future) -> None:
         try:
             result = future.result()
         except Exception as exc:  # noqa: BLE001 - reported, never fatal
-            result = (exc, 0.0)
+            result = (exc, None, 0.0)
         with self._lock:
             if self._pending is None or self._pending[0] < version:
                 self._pending = (version, *result)
@@ -144,12 +153,13 @@ class StaticInputs:
             pending, self._pending = self._pending, None
         if pending is None or pending[0] <= self.applied_version:
             return  # an older build finished after a newer one was applied
-        version, index, seconds = pending
+        version, index, markers, seconds = pending
         if isinstance(index, Exception):
             self._warn("static_index", f"indexing the static world failed: {index}")
             return
         self.applied_version = version
         self.index_s_last = seconds
+        self._markers_pub.publish(markers)
         self._apply(index, version)
 
     def wait_idle(self, timeout: float = 10.0) -> None:
@@ -160,7 +170,12 @@ class StaticInputs:
         self._worker.shutdown(wait=False, cancel_futures=True)
 
 
-def _timed_build(obstacles: StaticObstacles) -> tuple:
+def _timed_build(obstacles: StaticObstacles, frame_id: str, node: Node) -> tuple:
+    """(index, its markers, seconds): both built here, on the worker, so the executor only
+    swaps a reference and publishes."""
     started = time.perf_counter()
-    index = build_index(obstacles.world())
-    return index, time.perf_counter() - started
+    world = obstacles.world()
+    index = build_index(world)
+    markers = static_markers(world if not world.empty else None, frame_id,
+                             node.get_clock().now().to_msg())
+    return index, markers, time.perf_counter() - started

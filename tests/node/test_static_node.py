@@ -6,6 +6,7 @@ Guarantees proved here:
 - a polygon obstacle on a topic (named by its namespace) is added, answered, and removed
   by an empty polygon; keep-out zones from the parameters are answered from the start;
 - the service answers against the node's static world;
+- the static world is drawn on ~/static_markers (transient local, one LINE_LIST per obstacle);
 - bad maps (wrong frame, size not width*height, resolution <= 0, NaN origin) each get a
   warning naming the reason, never crash the node, and leave the world as it was;
 - static inputs in 3-D are refused at start-up.
@@ -122,6 +123,17 @@ def test_map_before_start_robots_polygons_and_service(ros_context, ros_node) -> 
         crate.publish(_polygon(now, []))
         assert spin_until(ros_node, lambda: ("a", "crate") not in _rows(predictions[-1])
                           and ("a", "map") in _rows(predictions[-1]), 20.0, (node,))
+        # the world is drawn, transient local: a display joining now gets it
+        from visualization_msgs.msg import Marker, MarkerArray
+
+        drawn: list = []
+        ros_node.create_subscription(MarkerArray, "/collision_node/static_markers", drawn.append,
+                                     LATCHED)
+        assert spin_until(ros_node, lambda: bool(drawn), 20.0, (node,))
+        lines = [m for m in drawn[-1].markers if m.type == Marker.LINE_LIST]
+        assert drawn[-1].markers[0].action == Marker.DELETEALL
+        assert sorted(m.text for m in lines) == ["keep_out", "map"]
+        assert all(len(m.points) % 2 == 0 and m.points for m in lines)
         # the service answers against the same world
         client = ros_node.create_client(PredictCollisions, "predict_collisions")
         assert client.wait_for_service(timeout_sec=20.0)
