@@ -4,7 +4,9 @@ N bodies move with constant accelerations inside a square area; a body that
 leaves the area is re-seeded (same id, new state) at a random point on the
 border heading inwards. The motion is a pure function of `seed` and the tick
 count, so the same parameters give the same scene; only the header stamps come
-from the clock. `bad_fraction` > 0 mixes in malformed states (for tests and
+from the clock. In 2-D the area sits in a room (`room`): walls on `map`
+(OccupancyGrid, transient local) a few metres outside it, and a crate on
+`crate/polygon` (PolygonStamped). `bad_fraction` > 0 mixes in malformed states (for tests and
 recordings of the node's input checks).
 """
 from __future__ import annotations
@@ -15,9 +17,10 @@ from typing import Any, NamedTuple
 
 import numpy as np
 from builtin_interfaces.msg import Time
-from geometry_msgs.msg import Point, Vector3
+from geometry_msgs.msg import Point, Point32, PolygonStamped, Vector3
+from nav_msgs.msg import OccupancyGrid
 from rclpy.node import Node
-from rclpy.qos import QoSProfile, ReliabilityPolicy
+from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from std_msgs.msg import Header
 
 from circle_collision_msgs.msg import CircleState, CircleStateArray
@@ -115,7 +118,46 @@ DEMO_PARAMS: tuple[DemoParam, ...] = (
     DemoParam(
         "bad_fraction", 0.0, "fraction of states made malformed (0..1), to exercise input checks"
     ),
+    DemoParam("room", True, "2-D: also publish the room (walls on 'map', a crate polygon)"),
 )
+
+
+class Room:
+    """The demo's static world around the area [0, size]^2 (2-D): an occupancy grid of border
+    walls ``MARGIN`` m outside it with a partition wall, and a crate polygon in the middle."""
+
+    RESOLUTION = 0.25  # m per cell (dyadic: cell corners are exact)
+    MARGIN = 4.0  # m from the area's edge to the inner face of the walls
+    THICKNESS = 1.0  # m
+
+    def __init__(self, size: float) -> None:
+        self.size = size
+
+    def grid(self, stamp: Time, frame_id: str) -> OccupancyGrid:
+        res, margin, wall = self.RESOLUTION, self.MARGIN, self.THICKNESS
+        n = int(math.ceil((self.size + 2.0 * (margin + wall)) / res))
+        k = int(round(wall / res))
+        data = np.zeros((n, n), np.int8)
+        data[:k, :] = data[-k:, :] = data[:, :k] = data[:, -k:] = 100
+        # a partition wall from the north wall, a third of the way across, two thirds long
+        col = n // 3
+        data[n - (2 * n) // 3:, col:col + k] = 100
+        msg = OccupancyGrid()
+        msg.header = Header(stamp=stamp, frame_id=frame_id)
+        msg.info.resolution = res
+        msg.info.width = msg.info.height = n
+        msg.info.origin.position.x = msg.info.origin.position.y = -(margin + wall)
+        msg.info.origin.orientation.w = 1.0
+        msg.data = data.ravel().tolist()
+        return msg
+
+    def crate(self, stamp: Time, frame_id: str) -> PolygonStamped:
+        c, h = 0.6 * self.size, 0.06 * self.size
+        msg = PolygonStamped()
+        msg.header = Header(stamp=stamp, frame_id=frame_id)
+        msg.polygon.points = [Point32(x=float(x), y=float(y), z=0.0) for x, y in
+                              ((c - h, c - h), (c + h, c - h), (c + h, c + h), (c - h, c + h))]
+        return msg
 
 
 def _help_epilog() -> str:
@@ -146,12 +188,29 @@ class DemoScenePublisher(Node):
         )
         self.ticks = 0
         self.create_timer(1.0 / self.rate, self._tick)
+        self.room = Room(g("area_size")) if g("room") and g("dimensions") == 2 else None
+        if self.room is not None:
+            # the map transient local, as map servers publish it; the crate resent each second
+            # (polygon subscriptions are volatile, so they match any publisher)
+            latched = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
+                                 durability=DurabilityPolicy.TRANSIENT_LOCAL)
+            self.map_publisher = self.create_publisher(OccupancyGrid, "map", latched)
+            self.map_publisher.publish(self.room.grid(self.get_clock().now().to_msg(),
+                                                      self.frame_id))
+            self.crate_publisher = self.create_publisher(
+                PolygonStamped, "crate/polygon",
+                QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE))
+            self.create_timer(1.0, self._publish_crate)
         # One line, so whoever started the demo knows what to subscribe to.
         self.get_logger().info(
             f"publishing {self.scene.count} {self.scene.dimensions}-D bodies as "
             "CircleStateArray on "
             f"{self.publisher.topic_name} (frame '{self.frame_id}') at {self.rate:g} Hz"
         )
+
+    def _publish_crate(self) -> None:
+        self.crate_publisher.publish(self.room.crate(self.get_clock().now().to_msg(),
+                                                     self.frame_id))
 
     def _tick(self) -> None:
         if self.ticks:

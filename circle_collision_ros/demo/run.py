@@ -20,7 +20,8 @@ from pathlib import Path
 import rclpy
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
-from rclpy.qos import QoSProfile, ReliabilityPolicy
+from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+from visualization_msgs.msg import MarkerArray
 
 from circle_collision_msgs.msg import (CircleStateArray, CollisionPrediction,
                                        CollisionPredictionArray)
@@ -46,6 +47,14 @@ class DemoListener(Node):
         self.create_subscription(
             CollisionPredictionArray, "collision_predictions", self._on_predictions, 10
         )
+        # the static world as the node has it (transient local: sent once per change)
+        self.walls: MarkerArray | None = None
+        self.create_subscription(MarkerArray, "/collision_node/static_markers", self._on_walls,
+                                 QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
+                                            durability=DurabilityPolicy.TRANSIENT_LOCAL))
+
+    def _on_walls(self, msg: MarkerArray) -> None:
+        self.walls = msg
 
     def _on_scene(self, msg: CircleStateArray) -> None:
         self.scene = msg
@@ -56,17 +65,22 @@ class DemoListener(Node):
 
 
 def format_table(predictions: CollisionPredictionArray | None, elapsed: float, duration: float,
-                 count: int, rows: int = 10) -> list[str]:
-    """The live view as lines of text."""
+                 count: int, rows: int = 10, bodies: set | None = None) -> list[str]:
+    """The live view as lines of text; ``bodies`` (the scene's ids) tells contacts with walls
+    and obstacles (id_b not a body) apart."""
     head = (
         f"circle_collision_ros demo  {elapsed:5.1f}/{duration:.0f} s  predictions received: {count}"
     )
     if predictions is None:
         return [head, "waiting for collision_predictions ..."]
     contacts = [p for p in predictions.predictions if p.status != CollisionPrediction.NO_CONTACT]
+    # pair rows come first, then contacts with static geometry: the soonest of both
+    contacts.sort(key=lambda p: p.time_to_collision)
+    walls = ("" if bodies is None else
+             f" ({sum(p.id_b not in bodies for p in contacts)} with walls or obstacles)")
     lines = [
         head,
-        f"{len(contacts)} contacts within {predictions.horizon:.1f} s; soonest:",
+        f"{len(contacts)} contacts within {predictions.horizon:.1f} s{walls}; soonest:",
         f"{'body a':>10} {'body b':>10} {'status':>8} {'ttc [s]':>8} "
         f"{'closing [m/s]':>13}  contact point [m]",
     ]
@@ -80,9 +94,11 @@ def format_table(predictions: CollisionPredictionArray | None, elapsed: float, d
 
 
 def draw_scene(
-    scene: CircleStateArray | None, predictions: CollisionPredictionArray | None, path: Path
+    scene: CircleStateArray | None, predictions: CollisionPredictionArray | None, path: Path,
+    walls: MarkerArray | None = None,
 ) -> None:
-    """PNG of the bodies, their velocities and the predicted contact points."""
+    """PNG of the bodies, their velocities, the static world and the predicted contact points
+    (wall contacts apart)."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -114,9 +130,22 @@ def draw_scene(
             ax.add_patch(Circle((c.position.x, c.position.y), c.radius, color=colour, alpha=0.5))
             ax.arrow(c.position.x, c.position.y, c.velocity.x, c.velocity.y, width=0.05,
                      head_width=0.4, color="k", alpha=0.6, length_includes_head=True)
-    if contacts:
-        ax.scatter([p.contact_point.x for p in contacts], [p.contact_point.y for p in contacts],
+    bodies = {c.id for c in scene.circles} if scene is not None else set()
+    for marker in walls.markers if walls is not None else []:
+        xs = [q.x for q in marker.points]
+        ys = [q.y for q in marker.points]
+        for k in range(0, len(xs) - 1, 2):
+            ax.plot(xs[k:k + 2], ys[k:k + 2], color="dimgrey", linewidth=1.5)
+    pairs = [p for p in contacts if p.id_b in bodies]
+    static = [p for p in contacts if p.id_b not in bodies]
+    if pairs:
+        ax.scatter([p.contact_point.x for p in pairs], [p.contact_point.y for p in pairs],
                    marker="x", color="crimson", s=60, zorder=3, label="predicted contact point")
+    if static:
+        ax.scatter([p.contact_point.x for p in static], [p.contact_point.y for p in static],
+                   marker="s", facecolors="none", edgecolors="purple", s=60, zorder=3,
+                   label="predicted wall/obstacle contact")
+    if contacts:
         ax.legend(loc="upper right")
     ax.set_aspect("equal")
     ax.autoscale_view()
@@ -184,6 +213,9 @@ def main(args: list[str] | None = None) -> int:
                  "--log-level", "error"]
     if not opts.no_record:
         node_args[:0] = ["-p", f"record_path:={bag}"]
+    if opts.dimensions == 2:  # the room of demo_scene: walls on 'map', a crate polygon
+        node_args[:0] = ["-p", "map_topic:=map", "-p", "polygon_topics:=[crate/polygon]",
+                         "-p", "frame_id:=map"]
     children = [
         _start("circle_collision_ros.node.collision_node", node_args),
         _start(
@@ -244,15 +276,17 @@ def main(args: list[str] | None = None) -> int:
         executor.shutdown()
         listener.destroy_node()
         rclpy.try_shutdown()
+    bodies = {c.id for c in listener.scene.circles} if listener.scene is not None else None
     print(
         "\n".join(
             format_table(
-                listener.predictions, opts.duration, opts.duration, listener.prediction_count
+                listener.predictions, opts.duration, opts.duration, listener.prediction_count,
+                bodies=bodies,
             )
         )
     )
     picture = run_dir / "scene.png"
-    draw_scene(listener.scene, listener.predictions, picture)
+    draw_scene(listener.scene, listener.predictions, picture, listener.walls)
     print(f"scene picture: {os.path.abspath(picture)}")
     if not opts.no_record:
         print(f"recording: {os.path.abspath(bag)}  (check it: replay {bag})")

@@ -2,7 +2,8 @@
 
 Guarantees proved here: `demo` starts collision_node and demo_scene as
 separate processes, receives predictions over DDS, prints the table (plain
-lines when stdout is not a terminal), writes a valid PNG and exits 0; the demo
+lines when stdout is not a terminal), with contacts with the room's walls and
+crate (2-D), writes a valid PNG and exits 0; the demo
 scene is reproducible from its seed; `demo_scene --help` lists demo_scene's own
 parameters, and while running it prints one line saying what it publishes,
 where and how fast.
@@ -30,6 +31,9 @@ def test_demo_runs_and_draws_the_scene(tmp_path) -> None:
     png = open(match.group(1), "rb").read()
     assert png[:8] == b"\x89PNG\r\n\x1a\n" and len(png) > 10_000
     assert "contacts within" in run.stdout and "predictions received:" in run.stdout
+    # the room: the last table counts contacts with its walls and crate (2-D default)
+    walls = re.findall(r"\((\d+) with walls or obstacles\)", run.stdout)
+    assert walls and int(walls[-1]) > 0, run.stdout
     assert "\x1b[" not in run.stdout  # not a terminal: no cursor control codes
 
 
