@@ -29,7 +29,7 @@ from circle_collision_ros.pipeline.state_codec import (decode_states, encode_sta
                                                        encode_state_array)
 from circle_collision_ros.core.static import StaticIndex
 from circle_collision_ros.pipeline.prediction_messages import ScenePrediction
-from circle_collision_ros.pipeline.static_scene import static_rows
+from circle_collision_ros.pipeline.static_scene import StaticCache
 from circle_collision_ros.pipeline.state_batch import StateBatch
 from circle_collision_ros.pipeline.state_validation import Rejection, check_batch
 
@@ -114,6 +114,7 @@ class CollisionPredictor:
         # (bench/bench_node.py's density).
         self._scene = Scene(config.horizon, config.dimensions, max_bodies=config.max_bodies)
         self._static: StaticIndex | None = None
+        self._static_cache = StaticCache()
         self.stats = PredictionStats()
 
     @property
@@ -317,7 +318,9 @@ class CollisionPredictor:
         capture = self._scene.capture()
         static = None
         if self._static is not None and len(self._scene):
-            static = static_rows(capture.snapshot(), self._static, horizon)
+            static = self._static_cache.rows(self._scene.stored_states(),
+                                             self._scene.reference_ns, self._scene.epoch_ns,
+                                             self._scene.slack, horizon, self._static)
         prediction = ScenePrediction(contacts, capture, horizon, self.frame_id,
                                      self.config.report_all_pairs, uncertainty,
                                      self.config.probability_threshold, static)

@@ -6,9 +6,10 @@ from topics, keep-out zones from parameters) and numbers each change (``version`
 part (a 4000 x 4000 map: its boundary and grid), so the node runs it off the prediction
 path and hands the finished index to ``CollisionPredictor.set_static`` between predictions.
 
-``static_rows`` answers every body of a snapshot against an index: the rows of
-``collision_predictions`` for contacts with static geometry (id_a the body, id_b the
-obstacle's name).  Bodies with covariance are evaluated on their mean state.
+``StaticCache.rows`` answers every body of a scene against an index, evaluating only the
+bodies that changed: the rows of ``collision_predictions`` for contacts with static
+geometry (id_a the body, id_b the obstacle's name).  Bodies with covariance are evaluated
+on their mean state.
 """
 from __future__ import annotations
 
@@ -18,7 +19,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from circle_collision_ros.core.scene import SceneSnapshot
+from circle_collision_ros.core.scene.store import propagate_ns
 from circle_collision_ros.core.static import (
     GridFrame,
     OccupancyMap,
@@ -39,7 +40,7 @@ from circle_collision_ros.pipeline.static_inputs import (
 )
 
 __all__ = ["MAP_NAME", "StaticSettings", "parse_static_polygons", "StaticObstacles", "Taken",
-           "StaticRows", "build_index", "static_rows", "STATIC_TYPES"]
+           "StaticRows", "StaticCache", "build_index", "STATIC_TYPES"]
 
 #: id_b of contacts with the occupancy map.
 MAP_NAME = "map"
@@ -196,37 +197,112 @@ class StaticRows(NamedTuple):
         return len(self.id_a)
 
 
-def static_rows(snapshot: SceneSnapshot, index: StaticIndex, horizon: float) -> StaticRows:
-    """Every body of ``snapshot`` (2-D) against ``index`` over [0, horizon].
+class StaticCache:
+    """Static rows of a scene, recomputed only for the bodies that changed.
 
-    A centre that starts inside a solid has no single contact point: its row carries the
-    centre as the point and a zero normal and closing speed (documented in the interface
-    table), never NaN.
+    The rule is the scene's pair rule for one body (docs/scene.md, "The prediction rule"):
+    a body's stored state at its stamp ``T`` is evaluated at its body time
+    ``t_b = max(E, T)`` (E the epoch of the reference time R, S the slack), propagated by
+    the scene's formula, over ``H + S``, giving ``tau``.  With ``d = R - t_b`` it reports
+    ``ttc = tau - d`` when ``tau > d`` (``tau`` itself when ``t_b == R``); a contact that
+    began before R (``tau <= d``) is evaluated again at R over H.  So a body's answer is a
+    pure function of its stored state, R, H, S and the world: a body whose state, body time
+    and world are unchanged keeps its ``tau``, and incremental, full and replayed
+    predictions agree bit for bit.
     """
-    n = len(snapshot.ids)
-    if n == 0:
-        return _empty_rows()
-    p = np.ascontiguousarray(snapshot.positions[:, :2])
-    v = np.ascontiguousarray(snapshot.velocities[:, :2])
-    a = np.ascontiguousarray(snapshot.accelerations[:, :2])
-    c = time_to_static(p, v, a, snapshot.radii, index, horizon)
-    hit = np.flatnonzero(c.time <= horizon)  # NaN and inf rows are no contact
-    if hit.size == 0:
-        return _empty_rows()
-    ids = snapshot.ids
-    # the snapshot is in id order, so a stable sort on the time orders by (time, id)
-    k = hit[np.argsort(c.time[hit], kind="stable")]
-    ttc = c.time[k]
-    inside = c.kind[k] == KIND_INSIDE
-    point = np.zeros((len(k), 3))
-    normal = np.zeros((len(k), 3))
-    point[:, :2] = np.where(inside[:, None], p[k], c.point[k])
-    normal[:, :2] = np.where(inside[:, None], 0.0, c.normal[k])
-    closing = np.where(inside, 0.0, c.closing_speed[k])
-    names = index.world.names
-    contact_ns = snapshot.reference_ns + np.round(ttc * 1e9).astype(np.int64)
-    return StaticRows([ids[j] for j in k.tolist()], [names[o] for o in c.obstacle[k].tolist()],
-                      ttc == 0.0, ttc, contact_ns, point, normal, closing)
+
+    def __init__(self) -> None:
+        self._ids = np.empty(0, dtype=object)
+        self._key: tuple | None = None  # (index, H + S): a change of either recomputes all
+        self._state = np.empty((0, 8))  # T, t_b, p(2), v(2), a(2)... as float64 for compare
+        self._radius = np.empty(0)
+        self._tau = np.empty(0)
+        self._ob = np.empty(0, np.int32)
+        self._kind = np.empty(0, np.int8)
+        self._point = np.empty((0, 2))
+        self._normal = np.empty((0, 2))
+        self._speed = np.empty(0)
+        self.evaluated = 0  # bodies evaluated by the last call (diagnostics, tests)
+
+    def rows(self, states: tuple, reference_ns: int, epoch_ns: int, slack_s: float,
+             horizon: float, index: StaticIndex) -> StaticRows:
+        """``states`` = ``Scene.stored_states()`` (ids sorted); rows by (time, body id)."""
+        ids, P, V, A, Rad, T = states
+        n = len(ids)
+        if n == 0:
+            self.__init__()
+            return _empty_rows()
+        tb = np.maximum(np.int64(epoch_ns), T)
+        state = np.empty((n, 8))
+        state[:, 0] = T
+        state[:, 1] = tb
+        state[:, 2:4], state[:, 4:6], state[:, 6:8] = P[:, :2], V[:, :2], A[:, :2]
+        key = (id(index), horizon + slack_s)
+        ids_arr = np.array(ids, dtype=object)
+        dirty = np.ones(n, bool)
+        keep = np.zeros(n, np.int64)
+        if key == self._key and len(self._ids):
+            pos = np.searchsorted(self._ids, ids_arr)
+            pos = np.minimum(pos, len(self._ids) - 1)
+            same = ((self._ids[pos] == ids_arr) & (self._state[pos] == state).all(axis=1)
+                    & (self._radius[pos] == Rad))
+            dirty = ~same
+            keep = pos
+        tau = np.empty(n)
+        ob = np.empty(n, np.int32)
+        kind = np.empty(n, np.int8)
+        point = np.empty((n, 2))
+        normal = np.empty((n, 2))
+        speed = np.empty(n)
+        old = ~dirty
+        if old.any():
+            k = keep[old]
+            tau[old], ob[old], kind[old] = self._tau[k], self._ob[k], self._kind[k]
+            point[old], normal[old], speed[old] = self._point[k], self._normal[k], self._speed[k]
+        rows = np.flatnonzero(dirty)
+        self.evaluated = len(rows)
+        if len(rows):
+            p, v = propagate_ns(P[rows, :2], V[rows, :2], A[rows, :2], tb[rows] - T[rows])
+            c = time_to_static(p, v, A[rows, :2], Rad[rows], index, horizon + slack_s)
+            tau[rows], ob[rows], kind[rows] = c.time, c.obstacle, c.kind
+            point[rows], normal[rows], speed[rows] = c.point, c.normal, c.closing_speed
+            # an inside row's point is the centre at its body time
+            inside = c.kind == KIND_INSIDE
+            point[rows[inside]] = p[inside]
+        self._ids, self._key, self._state, self._radius = ids_arr, key, state, Rad.copy()
+        self._tau, self._ob, self._kind = tau, ob, kind
+        self._point, self._normal, self._speed = point, normal, speed
+
+        d = (reference_ns - tb).astype(np.float64) * 1e-9
+        ttc = np.where(tb == reference_ns, tau, tau - d)
+        contact_ns = tb + np.round(np.where(np.isfinite(tau), tau, 0.0) * 1e9).astype(np.int64)
+        kind_r, ob_r = kind.copy(), ob.copy()
+        point_r, normal_r, speed_r = point.copy(), normal.copy(), speed.copy()
+        past = np.flatnonzero((tb != reference_ns) & (tau <= d))
+        if len(past):  # contacts that began before R: evaluated at R over H
+            p, v = propagate_ns(P[past, :2], V[past, :2], A[past, :2], reference_ns - T[past])
+            c = time_to_static(p, v, A[past, :2], Rad[past], index, horizon)
+            ttc[past], ob_r[past], kind_r[past] = c.time, c.obstacle, c.kind
+            point_r[past], normal_r[past], speed_r[past] = c.point, c.normal, c.closing_speed
+            inside = c.kind == KIND_INSIDE
+            point_r[past[inside]] = p[inside]
+            contact_ns[past] = reference_ns + np.round(
+                np.where(np.isfinite(c.time), c.time, 0.0) * 1e9).astype(np.int64)
+        hit = np.flatnonzero(ttc <= horizon)  # NaN and inf rows are no contact
+        if hit.size == 0:
+            return _empty_rows()
+        # ids are sorted, so a stable sort on the time orders by (time, id)
+        k = hit[np.argsort(ttc[hit], kind="stable")]
+        inside = kind_r[k] == KIND_INSIDE
+        m = len(k)
+        out_point = np.zeros((m, 3))
+        out_normal = np.zeros((m, 3))
+        out_point[:, :2] = point_r[k]
+        out_normal[:, :2] = np.where(inside[:, None], 0.0, normal_r[k])
+        closing = np.where(inside, 0.0, speed_r[k])
+        names = index.world.names
+        return StaticRows([ids[j] for j in k.tolist()], [names[o] for o in ob_r[k].tolist()],
+                          ttc[k] == 0.0, ttc[k], contact_ns[k], out_point, out_normal, closing)
 
 
 def _empty_rows() -> StaticRows:
