@@ -25,7 +25,7 @@ import numpy as np
 from numba import njit
 
 from circle_collision_ros.core.narrow.batch import certified_pair2
-from circle_collision_ros.core.narrow.evaluate import UNDECIDED
+from circle_collision_ros.core.narrow.evaluate import EPS, UNDECIDED
 from circle_collision_ros.core.narrow.exact import exact_first_contact
 from circle_collision_ros.core.static.edge import F_BOUND, edge_contact
 from circle_collision_ros.core.static.edge_exact import exact_edge_contact
@@ -176,18 +176,83 @@ def _rows(x, name: str, n: int | None) -> np.ndarray:
     return np.ascontiguousarray(a)
 
 
+def _strictly_inside_exact(px: float, py: float, vx: np.ndarray, vy: np.ndarray) -> bool:
+    """In rationals: the point lies in the polygon's interior (on the boundary: False)."""
+    F = Fraction
+    x, y = F(px), F(py)
+    n = len(vx)
+    inside = False
+    for i in range(n):
+        x1, y1, x2, y2 = F(vx[i]), F(vy[i]), F(vx[(i + 1) % n]), F(vy[(i + 1) % n])
+        o = (x2 - x1) * (y - y1) - (y2 - y1) * (x - x1)
+        if o == 0 and min(x1, x2) <= x <= max(x1, x2) and min(y1, y2) <= y <= max(y1, y2):
+            return False  # on an edge
+        if (y1 > y) != (y2 > y) and (o > 0) == (y2 > y1):
+            inside = not inside
+    return inside
+
+
 def _inside_polygon(x: np.ndarray, y: np.ndarray, vx: np.ndarray, vy: np.ndarray) -> np.ndarray:
-    """Even-odd crossing test of points against one polygon (vertices vx, vy).  Only decides
-    rows whose centre lies farther than r from the boundary (closer rows overlap through an
-    edge or corner feature anyway), so the float crossing test suffices there."""
+    """Whether each point lies strictly inside one polygon (vertices vx, vy), exactly.
+
+    Even-odd crossings with the orientation ``o`` of the point against each crossing edge in
+    float64; a row where some ``|o|`` is within its rounding bound (the point within rounding
+    of an edge's line and box: on the boundary, or nearly) is decided in rationals, where a
+    point on the boundary is not inside (a body touching a solid is decided by its edges and
+    corners, t = 0 rules included)."""
     inside = np.zeros(x.shape, bool)
+    unsure = np.zeros(x.shape, bool)
     n = len(vx)
     for i in range(n):
         x1, y1, x2, y2 = vx[i], vy[i], vx[(i + 1) % n], vy[(i + 1) % n]
+        o = (x2 - x1) * (y - y1) - (y2 - y1) * (x - x1)
+        # each difference is rounded relative to its operands, each product and the sum once
+        err = 8.0 * EPS * ((abs(x2) + abs(x1)) * (np.abs(y) + abs(y1))
+                           + (abs(y2) + abs(y1)) * (np.abs(x) + abs(x1)))
+        near = ((np.abs(o) <= err) & (x >= min(x1, x2) - err) & (x <= max(x1, x2) + err)
+                & (y >= min(y1, y2) - err) & (y <= max(y1, y2) + err))
+        unsure |= near
         crosses = (y1 > y) != (y2 > y)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            xc = x1 + (y - y1) * (x2 - x1) / (y2 - y1)
-        inside ^= crosses & (x < xc)
+        inside ^= crosses & ((o > 0) == (y2 > y1))
+    for k in np.flatnonzero(unsure):
+        inside[k] = _strictly_inside_exact(float(x[k]), float(y[k]), vx, vy)
+    return inside
+
+
+def _inside_map(occ: np.ndarray, frame, x: np.ndarray, y: np.ndarray) -> np.ndarray:
+    """Whether each point lies strictly inside the occupied cells (a point on a boundary
+    between occupied and free cells is not inside).
+
+    With yaw 0 the cell lines are ``origin + i * resolution`` rounded once, exactly the map's
+    edges, so locating a point between them, and on one, is exact.  A rotated map is looked
+    up in float64 (``occupancy.cell_occupied_at``): a point within rounding (~1e-15 of a cell)
+    of a cell side may land in either neighbouring cell, which only matters for a point body
+    (r below that) sitting on the boundary."""
+    if frame.yaw != 0.0:
+        return cell_occupied_at(occ, frame, x, y)
+    h, w = occ.shape
+
+    def locate(c, origin, n):
+        line = lambda i: origin + i.astype(np.float64) * frame.resolution  # noqa: E731
+        i = np.floor((c - origin) / frame.resolution).astype(np.int64)
+        for _ in range(2):  # the estimate is off by at most one line
+            i = np.where(line(i) > c, i - 1, i)
+            i = np.where(line(i + 1) <= c, i + 1, i)
+        return i, line(i) == c
+
+    i, on_x = locate(x, frame.origin_x, w)
+    j, on_y = locate(y, frame.origin_y, h)
+
+    def occupied(ii, jj):
+        ok = (ii >= 0) & (ii < w) & (jj >= 0) & (jj < h)
+        out = np.zeros(ii.shape, bool)
+        out[ok] = occ[jj[ok], ii[ok]]
+        return out
+
+    inside = occupied(i, j)
+    inside &= np.where(on_x, occupied(i - 1, j), True)
+    inside &= np.where(on_y, occupied(i, j - 1), True)
+    inside &= np.where(on_x & on_y, occupied(i - 1, j - 1), True)
     return inside
 
 
@@ -364,7 +429,7 @@ def time_to_static(p, v, a, r, index: StaticIndex, horizon: float = math.inf
             hit = _inside_polygon(x, y, vs[:, 0], vs[:, 1]) & (inside_ob < 0)
             inside_ob[hit] = ob
         for ob, occ, frame in w.maps:
-            hit = cell_occupied_at(occ, frame, x, y) & (inside_ob < 0)
+            hit = _inside_map(occ, frame, x, y) & (inside_ob < 0)
             inside_ob[hit] = ob
         hit = inside_ob >= 0
         rows = rows[hit]

@@ -308,3 +308,23 @@ def test_bad_input_rows_are_nan_and_bad_obstacles_are_refused():
 
 
 WALL_SEGMENTS = Segments("wall", np.array([[-10.0, 0]]), np.array([[10.0, 0]]))
+
+
+@pytest.mark.parametrize("v, expected", [((0.0, 1.0), 0.0), ((0.0, -1.0), math.inf),
+                                         ((1.0, 0.0), math.inf)])
+def test_a_point_on_a_solid_boundary_is_decided_by_its_motion(v, expected):
+    """r = 0 on the boundary with the solid above it: touching, not inside; moving in is a
+    contact at 0, moving out or along is none. (A half-open inside test puts these points
+    inside: time 0 for every row.)"""
+    # the box's bottom edge, y = -1
+    assert _one(BOX, (0.0, -1.0), v, (0.0, 0.0), 0.0, 5.0)[0] == expected
+    occ = np.zeros((8, 8), bool)
+    occ[4:, :] = True  # solid above y = 0 (res 0.0625 from origin -0.25)
+    grid = StaticWorld.build([OccupancyMap("map", occ, GridFrame(0.0625, -0.25, -0.25))])
+    assert _one(grid, (0.0, 0.0), v, (0.0, 0.0), 0.0, 5.0)[0] == expected
+
+
+def test_a_point_a_rounding_error_inside_a_polygon_overlaps():
+    # 2^-60 below the box's top edge, r tiny: inside, so overlapping at 0
+    p = (0.0, -(2.0 ** -60))
+    assert _one(BOX, p, (0.0, 1.0), (0.0, 0.0), 1e-30, 5.0) == (0.0, KIND_INSIDE)
