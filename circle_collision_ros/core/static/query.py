@@ -68,21 +68,29 @@ def _better(t, ob, kind, idx, bt, bob, bkind, bidx):
 
 
 @njit(cache=True)
-def _swept_box(px, py, vx, vy, ax, ay, r, H, lo, hi):
-    """The centre's axis ranges over [0, H], widened by r and a rounding margin."""
+def _swept_box(px, py, vx, vy, ax, ay, r, t0, t1, lo, hi):
+    """The centre's axis ranges over [t0, t1] (0 <= t0 < t1), widened by r and a margin that
+    covers the rounding of these few operations (16 ulps of the coordinate's scale, twice)."""
     for d, (c0, c1, c2) in enumerate(((px, vx, ax), (py, vy, ay))):
-        end = c0 + H * (c1 + 0.5 * H * c2)
-        a = min(c0, end)
-        b = max(c0, end)
+        start = c0 + t0 * (c1 + 0.5 * t0 * c2)
+        end = c0 + t1 * (c1 + 0.5 * t1 * c2)
+        a = min(start, end)
+        b = max(start, end)
         if c2 != 0.0:
             tv = -c1 / c2
-            if 0.0 < tv < H:
+            if t0 < tv < t1:
                 cv = c0 + tv * (c1 + 0.5 * tv * c2)
                 a = min(a, cv)
                 b = max(b, cv)
-        m = F_BOUND * (abs(c0) + H * abs(c1) + H * H * abs(c2) + r) + r
+        m = 2.0 * F_BOUND * (abs(c0) + t1 * abs(c1) + t1 * t1 * abs(c2) + r) + r
         lo[d] = a - m
         hi[d] = b + m
+
+
+# A swept box over all of [0, H] holds every feature near the box's diagonal for a diagonal
+# path; up to this many boxes over equal parts of [0, H] follow the path (~1/3 of the
+# candidates of a long diagonal path in the benchmark rooms), at one cell range each.
+PIECES = 8
 
 
 @njit(cache=True)
@@ -107,57 +115,61 @@ def _query(P, V, A, R, H, ok, starts, ends, side, points, eob, pob, x0, y0, inv_
             continue
         px, py, vx, vy, ax, ay, r = P[b, 0], P[b, 1], V[b, 0], V[b, 1], A[b, 0], A[b, 1], R[b]
         bt, bob, bk, bi = math.inf, -1, 0, -1
-        if H < math.inf:
-            _swept_box(px, py, vx, vy, ax, ay, r, H, lo, hi)
+        full = not (H < math.inf)
+        pieces = 1
+        if not full:
+            _swept_box(px, py, vx, vy, ax, ay, r, 0.0, H, lo, hi)
             i0, j0, i1, j1 = cell_range(lo, hi, x0, y0, inv_h, nx, ny)
-            full = hi[0] < lo[0]  # never: the flag below covers unbounded boxes
-        else:
-            i0, j0, i1, j1 = 0, 0, nx - 1, ny - 1
-            full = True
-        if not (lo[0] - lo[0] == 0.0 and hi[0] - hi[0] == 0.0 and lo[1] - lo[1] == 0.0
-                and hi[1] - hi[1] == 0.0):
-            full = True  # an overflowing box: visit everything rather than trust it
-        n_cells = (i1 - i0 + 1) * (j1 - j0 + 1)
-        if n_cells > ne + npt:
-            full = True
-        if full:
-            i0, j0, i1, j1 = 0, 0, 0, 0
-        for j in range(j0, j1 + 1):
-            for i in range(i0, i1 + 1):
-                c = j * nx + i
-                n_e = ne if full else eptr[c + 1] - eptr[c]
-                for q in range(n_e):
-                    k = q if full else eitems[eptr[c] + q]
-                    if seen_e[k] == b:
-                        continue
-                    seen_e[k] = b
-                    t = edge_contact(px, py, vx, vy, ax, ay, r, starts[k, 0], starts[k, 1],
-                                     ends[k, 0], ends[k, 1], side[k], H)
-                    if t == UNDECIDED:
-                        if n_und < und.shape[0]:
-                            und[n_und, 0], und[n_und, 1], und[n_und, 2] = b, 1, k
-                        n_und += 1
-                    elif _better(t, eob[k], 1, k, bt, bob, bk, bi):
-                        bt, bob, bk, bi = t, eob[k], 1, k
-                n_p = npt if full else pptr[c + 1] - pptr[c]
-                for q in range(n_p):
-                    k = q if full else pitems[pptr[c] + q]
-                    if seen_p[k] == b:
-                        continue
-                    seen_p[k] = b
-                    skipped = False
-                    for q2 in range(skip_ptr[b], skip_ptr[b + 1]):
-                        skipped |= skip[q2] == k
-                    if skipped:
-                        continue
-                    t = certified_pair2(px, py, vx, vy, ax, ay, r, points[k, 0], points[k, 1],
-                                        0.0, 0.0, 0.0, 0.0, 0.0, H)
-                    if t == UNDECIDED:
-                        if n_und < und.shape[0]:
-                            und[n_und, 0], und[n_und, 1], und[n_und, 2] = b, 2, k
-                        n_und += 1
-                    elif _better(t, pob[k], 2, k, bt, bob, bk, bi):
-                        bt, bob, bk, bi = t, pob[k], 2, k
+            if not (lo[0] - lo[0] == 0.0 and hi[0] - hi[0] == 0.0 and lo[1] - lo[1] == 0.0
+                    and hi[1] - hi[1] == 0.0):
+                full = True  # an overflowing box: visit everything rather than trust it
+            elif (i1 - i0 + 1) * (j1 - j0 + 1) > ne + npt:
+                full = True
+            elif (i1 - i0) + (j1 - j0) > 4:  # a long path: follow it with smaller boxes
+                pieces = PIECES
+        for piece in range(pieces):
+            if full:
+                i0, j0, i1, j1 = 0, 0, 0, 0
+            elif pieces > 1:
+                _swept_box(px, py, vx, vy, ax, ay, r, H * piece / pieces,
+                           H * (piece + 1) / pieces, lo, hi)
+                i0, j0, i1, j1 = cell_range(lo, hi, x0, y0, inv_h, nx, ny)
+            for j in range(j0, j1 + 1):
+                for i in range(i0, i1 + 1):
+                    c = j * nx + i
+                    n_e = ne if full else eptr[c + 1] - eptr[c]
+                    for q in range(n_e):
+                        k = q if full else eitems[eptr[c] + q]
+                        if seen_e[k] == b:
+                            continue
+                        seen_e[k] = b
+                        t = edge_contact(px, py, vx, vy, ax, ay, r, starts[k, 0], starts[k, 1],
+                                         ends[k, 0], ends[k, 1], side[k], H)
+                        if t == UNDECIDED:
+                            if n_und < und.shape[0]:
+                                und[n_und, 0], und[n_und, 1], und[n_und, 2] = b, 1, k
+                            n_und += 1
+                        elif _better(t, eob[k], 1, k, bt, bob, bk, bi):
+                            bt, bob, bk, bi = t, eob[k], 1, k
+                    n_p = npt if full else pptr[c + 1] - pptr[c]
+                    for q in range(n_p):
+                        k = q if full else pitems[pptr[c] + q]
+                        if seen_p[k] == b:
+                            continue
+                        seen_p[k] = b
+                        skipped = False
+                        for q2 in range(skip_ptr[b], skip_ptr[b + 1]):
+                            skipped |= skip[q2] == k
+                        if skipped:
+                            continue
+                        t = certified_pair2(px, py, vx, vy, ax, ay, r, points[k, 0], points[k, 1],
+                                            0.0, 0.0, 0.0, 0.0, 0.0, H)
+                        if t == UNDECIDED:
+                            if n_und < und.shape[0]:
+                                und[n_und, 0], und[n_und, 1], und[n_und, 2] = b, 2, k
+                            n_und += 1
+                        elif _better(t, pob[k], 2, k, bt, bob, bk, bi):
+                            bt, bob, bk, bi = t, pob[k], 2, k
         out_t[b], out_ob[b], out_kind[b], out_idx[b] = bt, bob, bk, bi
     return n_und if n_und <= und.shape[0] else -n_und
 
@@ -338,6 +350,13 @@ def _certified_then_exact(P, V, A, R, H, ok, index, todo, skip_ptr, skip, out_t,
 def _slides_along(p, v, a, r, s, e, corner) -> bool:
     """Exactly: the body moves along the line of segment s-e at distance exactly r for ever,
     and ``corner`` lies on that closed segment."""
+    # float filter: a 2 x 2 determinant clearly away from 0 is not 0 (each product and the
+    # difference rounded once, the differences of coordinates once: 8 eps of the sizes)
+    ex, ey = e[0] - s[0], e[1] - s[1]
+    size = (abs(e[0]) + abs(s[0])) + (abs(e[1]) + abs(s[1]))
+    for x, y in ((v[0], v[1]), (a[0], a[1]), (corner[0] - s[0], corner[1] - s[1])):
+        if abs(ex * y - ey * x) > 8.0 * EPS * size * (abs(x) + abs(y)) + 1e-300:
+            return False
     F = Fraction
     ex, ey = F(e[0]) - F(s[0]), F(e[1]) - F(s[1])
     if ex * (F(v[1])) - ey * F(v[0]) != 0 or ex * F(a[1]) - ey * F(a[0]) != 0:
@@ -360,7 +379,17 @@ def _corners_slid_past(P, V, A, R, index, todo, out_t, out_kind, out_idx) -> lis
     w = index.world
     out = []
     t = out_t[todo]
-    for b in todo[(out_kind[todo] == KIND_POINT) & (t > 0.0) & (t < math.inf)]:
+    rows = todo[(out_kind[todo] == KIND_POINT) & (t > 0.0) & (t < math.inf)]
+    if len(rows):
+        # only a touch with the body moving square to the corner can be a slide past it
+        # (g . g' = 0 at the contact); anything clearly away from that is a real contact
+        tc = out_t[rows][:, None]
+        g = (P[rows] - w.points[out_idx[rows]]) + tc * (V[rows] + 0.5 * tc * A[rows])
+        gd = V[rows] + tc * A[rows]
+        dot = np.abs(np.einsum("ij,ij->i", g, gd))
+        size = np.hypot(g[:, 0], g[:, 1]) * np.hypot(gd[:, 0], gd[:, 1])
+        rows = rows[~(dot > 1e-6 * size)]
+    for b in rows:
         k = out_idx[b]
         c = w.points[k]
         lo = np.array([c[0], c[1]])
