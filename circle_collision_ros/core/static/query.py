@@ -388,7 +388,10 @@ def _corners_slid_past(P, V, A, R, index, todo, out_t, out_kind, out_idx) -> lis
         gd = V[rows] + tc * A[rows]
         dot = np.abs(np.einsum("ij,ij->i", g, gd))
         size = np.hypot(g[:, 0], g[:, 1]) * np.hypot(gd[:, 0], gd[:, 1])
-        rows = rows[~(dot > 1e-6 * size)]
+        # g is the radius vector at the touch; for a body near rounding size (a point) its
+        # direction is rounding residue and says nothing: those rows are always checked
+        scale = np.abs(P[rows]).sum(axis=1) + np.abs(w.points[out_idx[rows]]).sum(axis=1)
+        rows = rows[~((dot > 1e-6 * size) & (R[rows] > 1e-9 * scale))]
     for b in rows:
         k = out_idx[b]
         c = w.points[k]

@@ -328,3 +328,15 @@ def test_a_point_a_rounding_error_inside_a_polygon_overlaps():
     # 2^-60 below the box's top edge, r tiny: inside, so overlapping at 0
     p = (0.0, -(2.0 ** -60))
     assert _one(BOX, p, (0.0, 1.0), (0.0, 0.0), 1e-30, 5.0) == (0.0, KIND_INSIDE)
+
+
+def test_a_point_body_sliding_along_a_map_wall_past_its_corner_is_no_contact():
+    """Found by bench_static: r = 0 sliding along a block's side past its corner got the
+    corner as a contact (the slide filter read the direction of a rounding-size vector)."""
+    occ = np.zeros((6, 6), bool)
+    occ[1:3, 1:4] = True
+    occ[4, 4] = True
+    world = StaticWorld.build([OccupancyMap("map", occ, GridFrame(0.125, 10.0, -1.0))])
+    p = (float.fromhex("0x1.315p+3"), float.fromhex("-0x1.cp-1"))
+    v = (float.fromhex("0x1.7p+0"), 0.0)
+    assert _one(world, p, v, (0.0, 0.0), 0.0, 5.0)[0] == math.inf
