@@ -9,6 +9,20 @@ at `publish_rate`, and with covariance on each prediction completed on
 (stateless); publishes `~/markers` for RViz/Foxglove and a DiagnosticArray on
 `/diagnostics` (1 Hz).
 
+A managed (lifecycle) node, as nav2's servers are (docs/node.md, "Lifecycle"):
+- configure: parameters validated, the predictor built, record_path opened, the kernels
+  ready (kernels.prepare), the (lifecycle) publishers, the service and the static world
+  created; no subscription, no timer.
+- activate: publishers enabled; inputs (states, single states, odometry, map and polygons)
+  subscribed; publish, expiry and diagnostics timers, marker and completion threads started.
+- deactivate: the reverse of activate (pending completions and a clearing marker array are
+  published first); the scene is kept, and bodies gone stale meanwhile expire on the first
+  expiry tick after the next activation. The service refuses while inactive.
+- cleanup: everything configure created is dropped, the bag closed; shutdown (any state)
+  releases whatever exists. Failures of configure return FAILURE with the reason logged.
+- autostart (default true): configure and activate in the constructor, so a plain
+  `ros2 run` behaves as an unmanaged node; a refused configuration raises its reason.
+
 The path of a message: raw bytes (recorded as received) -> decode ->
 CollisionPredictor.receive_batch -> CollisionPredictor.predict -> CDR bytes ->
 publish (and record the same bytes).
@@ -46,8 +60,8 @@ from nav_msgs.msg import Odometry
 from rcl_interfaces.msg import SetParametersResult
 from rclpy.clock import ClockChange, JumpThreshold
 from rclpy.duration import Duration
-from rclpy.exceptions import InvalidHandle
-from rclpy.node import Node
+from rclpy.exceptions import InvalidHandle, NameValidationException, ParameterException
+from rclpy.lifecycle import LifecycleNode, LifecycleState, TransitionCallbackReturn
 from rclpy.qos import (DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy,
                        qos_profile_system_default)
 from rclpy.qos_overriding_options import QoSOverridingOptions
@@ -151,12 +165,15 @@ class Counters:
 
 @dataclass
 class InputTopic:
-    """One input subscription: resolved topic, message type, its decoder, the rclpy subscription."""
+    """One input: resolved topic, message type, its decoder, its QoS (a fresh profile per call:
+    rclpy applies QoS overrides by changing the profile it is given), and the rclpy subscription
+    while the node is active."""
 
     topic: str
     msg_type: type
     decode: Callable[[bytes], StateBatch]
     subscription: object = None
+    qos: Callable[[], QoSProfile] | None = None
 
 
 @dataclass
@@ -175,25 +192,202 @@ class Unanswered:
         self.changed = self.changed or changed
 
 
-class CollisionNode(Node):
-    """The ROS face of CollisionPredictor; see the module docstring."""
+class CollisionNode(LifecycleNode):
+    """The ROS face of CollisionPredictor, a managed (lifecycle) node; see the module docstring."""
 
     WARN_THROTTLE_S = 2.0
     LATENCY_WINDOW = 1000
     EXPIRY_PERIOD_S = 0.05
+    #: How long a deactivation or shutdown waits for subscribers to acknowledge the final
+    #: markers (DELETEALL), s.
+    SHUTDOWN_ACK_S = 1.0
 
     def __init__(self, **kwargs) -> None:
         super().__init__("collision_node", **kwargs)
+        self._forget_configuration()
+        self._active = False
+        self._quiet = False  # autostart and destroy_node: transitions not logged one by one
+        self._transition_error: BaseException | None = None
+        self._bags_opened = 0
+        #: Set on the executable's node (main, _started_node): a configuration requested later
+        #: through the lifecycle services freezes what it created, as start-up does.
+        self.freeze_gc_after_configure = False
         node_parameters.declare_all(self)
-        for spec in node_parameters.PARAMS:
-            reason = node_parameters.validate(spec.name, node_parameters.value_of(self, spec.name))
-            if reason:
-                raise ValueError(f"parameter {reason}")
         self.add_pre_set_parameters_callback(node_parameters.coerce_integers)
         self.add_on_set_parameters_callback(self._validate_parameters)
         self.add_post_set_parameters_callback(self._apply_parameters)
-        p = lambda name: node_parameters.value_of(self, name)  # noqa: E731
+        # What Fast DDS loaded at rclpy.init (cli.use_large_scene_transport sets it before).
+        self._transport_profile = (
+            os.environ.get(TransportProfile.ENV)
+            or os.environ.get(TransportProfile.DEPRECATED_ENV)
+            or ""
+        )
+        if node_parameters.value_of(self, "autostart"):
+            self._autostart()
 
+    def _forget_configuration(self) -> None:
+        """Everything configure creates, absent (unconfigured)."""
+        self.predictor: CollisionPredictor | None = None
+        self._recorder: BagRecorder | None = None
+        self._recording_error = ""
+        self._static_recording = False
+        self._qos_unknown: set[str] = set()
+        self.counters = Counters()
+        # Receive (rmw timestamp of the oldest input answered) to publish, s.
+        self.latencies_s: deque[float] = deque(maxlen=self.LATENCY_WINDOW)
+        self._unanswered = Unanswered()
+        self._last_drain_ns = 0
+        self.input_loss = InputLossMonitor()
+        self._unmatched_publishers: list[str] = []
+        # (count, read at, kinds)
+        self._publisher_info: dict[str, tuple[int, float, dict[str, int]]] = {}
+        self._last_warning: dict[str, float] = {}
+        self._predictions_pub = self._probabilities_pub = None
+        self._markers_pub = self._diagnostics_pub = None
+        # the prediction path's busy flag: markers and completions step aside meanwhile
+        self.activity = NodeActivity()
+        self.markers: MarkerPublisher | None = None
+        self.probabilities: ProbabilityPublisher | None = None
+        # Counts of the side threads of earlier activations (diagnostics report totals).
+        self._side_totals = {"markers_drawn": 0, "probabilities_published": 0,
+                             "probabilities_superseded": 0}
+        self._inputs: list[InputTopic] = []
+        self._odometry_sources: dict = {}
+        self.static: StaticInputs | None = None
+        self._drain_limit = 1
+        self._service = None
+        self._clock_jump_handle = None
+        self._publish_timer = None
+        self._expiry_timer = None
+        self._diagnostics_timer = None
+        self._qos_timer = None
+
+    # -- lifecycle (docs/node.md, "Lifecycle") --------------------------------------------------
+    def _autostart(self) -> None:
+        """autostart: configure and activate now; a failure raises what configure met (the
+        start-up refuses with the same one-line reason as before the node was managed)."""
+        self._quiet = True
+        try:
+            if self.trigger_configure() != TransitionCallbackReturn.SUCCESS:
+                raise self._transition_error or RuntimeError("configure failed")
+            if self.trigger_activate() != TransitionCallbackReturn.SUCCESS:
+                raise self._transition_error or RuntimeError("activate failed")
+        finally:
+            self._quiet = False
+
+    @property
+    def lifecycle_state(self) -> str:
+        """The lifecycle state's label: unconfigured, inactive, active, finalized, or a
+        transition state (configuring, ...)."""
+        machine = getattr(self, "_state_machine", None)
+        return machine.current_state[1] if machine is not None else "unconfigured"
+
+    def on_configure(self, state: LifecycleState) -> TransitionCallbackReturn:
+        """Parameters read and validated, the predictor built, the bag opened, the kernels
+        ready, publishers, service and static world created; no subscription yet."""
+        self._transition_error = None
+        try:
+            self._configure()
+        except Exception as exc:  # refused with the reason: FAILURE, back to unconfigured
+            self._transition_error = exc
+            if not self._quiet:
+                self.get_logger().error(f"configure failed: {_reason(exc)}")
+            self._cleanup()
+            return TransitionCallbackReturn.FAILURE
+        if self.freeze_gc_after_configure:
+            gc.collect()
+            gc.freeze()
+        return super().on_configure(state)
+
+    def on_activate(self, state: LifecycleState) -> TransitionCallbackReturn:
+        """Publishers enabled, then inputs subscribed and timers started."""
+        self._transition_error = None
+        result = super().on_activate(state)  # the lifecycle publishers publish from now on
+        if result != TransitionCallbackReturn.SUCCESS:
+            return result
+        try:
+            self._activate()
+        except Exception as exc:
+            self._transition_error = exc
+            self.get_logger().error(f"activate failed: {_reason(exc)}")
+            self._deactivate()
+            super().on_deactivate(state)
+            return TransitionCallbackReturn.FAILURE
+        self._note("active")
+        return result
+
+    def on_deactivate(self, state: LifecycleState) -> TransitionCallbackReturn:
+        """Inputs unsubscribed, timers stopped, pending completions and a clearing marker array
+        published; then the publishers are disabled. The scene is kept."""
+        self._deactivate()
+        result = super().on_deactivate(state)
+        self._note(f"inactive: {len(self.predictor)} bodies kept")
+        return result
+
+    def on_cleanup(self, state: LifecycleState) -> TransitionCallbackReturn:
+        """The scene, publishers, service and static world dropped; the bag closed."""
+        self._cleanup()
+        self._note("cleaned up: unconfigured")
+        return super().on_cleanup(state)
+
+    def on_shutdown(self, state: LifecycleState) -> TransitionCallbackReturn:
+        """From any primary state: whatever exists is released; the bag is closed."""
+        self._release(state)
+        self._note("shut down: finalized")
+        return super().on_shutdown(state)
+
+    def on_error(self, state: LifecycleState) -> TransitionCallbackReturn:
+        """A transition raised: release everything and go back to unconfigured."""
+        self.get_logger().error(f"lifecycle transition from '{state.label}' failed; "
+                                "releasing everything (unconfigured)")
+        self._release(state)
+        return super().on_error(state)
+
+    def _release(self, state: LifecycleState | None = None) -> None:
+        """Deactivate (if active) and clean up: a node in any state ends with nothing held."""
+        if self._active:
+            self._deactivate()
+            try:
+                LifecycleNode.on_deactivate(self, state or LifecycleState("active", 3))
+            except Exception:  # noqa: BLE001 - publishers already gone
+                pass
+        self._cleanup()
+
+    def _note(self, text: str) -> None:
+        if not self._quiet:
+            self.get_logger().info(text)
+
+    def _configure(self) -> None:
+        """configure's work; raises (ValueError, OSError, rclpy's name and parameter errors)
+        with the reason. Cheap checks come first: nothing is opened or compiled for a
+        configuration that is refused."""
+        p = lambda name: node_parameters.value_of(self, name)  # noqa: E731
+        for spec in node_parameters.PARAMS:
+            reason = node_parameters.validate(spec.name, p(spec.name))
+            if reason:
+                raise ValueError(f"parameter {reason}")
+        settings = StaticSettings(p("map_topic"), p("map_occupied_threshold"),
+                                  p("map_unknown_is_occupied"), tuple(p("polygon_topics")),
+                                  p("static_polygons"))
+        if settings.used and p("dimensions") != 2:
+            raise ValueError("static inputs (map_topic, polygon_topics, static_polygons) need "
+                             f"dimensions = 2; this node predicts in {p('dimensions')}-D")
+        reliability = p("state_reliability")
+        inputs = [InputTopic(self.resolve_topic_name(t), CircleStateArray,
+                             functools.partial(decode_states, msg_type=CircleStateArray),
+                             qos=functools.partial(Qos.states, reliability))
+                  for t in p("state_topics")]
+        inputs += [InputTopic(self.resolve_topic_name(t), CircleState,
+                              functools.partial(decode_states, msg_type=CircleState),
+                              qos=functools.partial(Qos.single_states, reliability))
+                   for t in p("single_state_topics")]
+        odometry = odometry_sources([self.resolve_topic_name(t) for t in p("odometry_topics")],
+                                    p("odometry_radius"), p("odometry_radii"))
+        inputs += [InputTopic(topic, Odometry, functools.partial(odometry_batch, source=source),
+                              qos=functools.partial(Qos.states, reliability))
+                   for topic, source in odometry.items()]
+
+        self._forget_configuration()
         self.predictor = CollisionPredictor(
             PredictorConfig(horizon=p("horizon"), dimensions=p("dimensions"),
                             frame_id=p("frame_id"), stale_timeout=p("stale_timeout"),
@@ -203,80 +397,37 @@ class CollisionNode(Node):
                             probability_tolerance=p("probability_tolerance"),
                             use_covariance=p("use_covariance"))
         )
-        # An unusable record_path refuses the start before a first start's compile, not after
-        self._recorder: BagRecorder | None = None
-        self._recording_error = ""
+        # An unusable record_path refuses the configuration before a first start's compile
         if p("record_path"):
-            self._recorder = self._open_bag(p("record_path"))
+            self._recorder = self._open_bag(self._bag_path(p("record_path")))
+            self._bags_opened += 1
         # numba's compile (first start) or cache load, before the first message can arrive
         kernels.prepare(self.predictor, log=self.get_logger().info)
-        self.counters = Counters()
-        # Receive (rmw timestamp of the oldest input answered) to publish, s.
-        self.latencies_s: deque[float] = deque(maxlen=self.LATENCY_WINDOW)
-        self._unanswered = Unanswered()
-        self._last_drain_ns = 0
-        self.input_loss = InputLossMonitor()
-        # What Fast DDS loaded at rclpy.init (cli.use_large_scene_transport sets it before).
-        self._transport_profile = (
-            os.environ.get(TransportProfile.ENV)
-            or os.environ.get(TransportProfile.DEPRECATED_ENV)
-            or ""
-        )
-        self._unmatched_publishers: list[str] = []
-        # (count, read at, kinds)
-        self._publisher_info: dict[str, tuple[int, float, dict[str, int]]] = {}
-        self._last_warning: dict[str, float] = {}
 
         overrides = QoSOverridingOptions.with_default_policies()
-        self._predictions_pub = self.create_publisher(CollisionPredictionArray,
-                                                      "collision_predictions", Qos.predictions(),
-                                                      qos_overriding_options=overrides)
-        self._probabilities_pub = self.create_publisher(
+        self._predictions_pub = self.create_lifecycle_publisher(
+            CollisionPredictionArray, "collision_predictions", Qos.predictions(),
+            qos_overriding_options=overrides)
+        self._probabilities_pub = self.create_lifecycle_publisher(
             CollisionPredictionArray, "collision_probabilities", Qos.predictions(),
             qos_overriding_options=overrides)
-        self._markers_pub = self.create_publisher(MarkerArray, "~/markers", Qos.markers())
-        # the prediction path's busy flag: markers and completions step aside meanwhile
-        self.activity = NodeActivity()
-        self.markers = MarkerPublisher(p("dimensions"), p("marker_rate"), self._markers_pub.publish,
-                                       on_error=lambda text: self._warn("markers", text),
-                                       activity=self.activity)
-        # With covariance on, each prediction is completed on its own thread: every deferred
-        # uncertain pair evaluated in full (node/probabilities.py)
-        self.probabilities = ProbabilityPublisher(
-            self._probabilities_pub.publish,
-            lambda data, log_ns: self._record(self._probabilities_pub.topic_name, data, log_ns),
-            on_error=lambda text: self._warn("probabilities", text), activity=self.activity,
-        )
-        self._diagnostics_pub = self.create_publisher(
+        self._markers_pub = self.create_lifecycle_publisher(MarkerArray, "~/markers",
+                                                            Qos.markers())
+        self._diagnostics_pub = self.create_lifecycle_publisher(
             DiagnosticArray, "/diagnostics", qos_profile_system_default
         )
-        self._inputs: list[InputTopic] = []
-        for topic in p("state_topics"):
-            self._subscribe(topic, CircleStateArray, Qos.states(p("state_reliability")))
-        for topic in p("single_state_topics"):
-            self._subscribe(topic, CircleState, Qos.single_states(p("state_reliability")))
-        self._odometry_sources = odometry_sources(
-            [self.resolve_topic_name(t) for t in p("odometry_topics")],
-            p("odometry_radius"),
-            p("odometry_radii"),
-        )
-        for topic, source in self._odometry_sources.items():
-            self._subscribe(topic, Odometry, Qos.states(p("state_reliability")),
-                            functools.partial(odometry_batch, source=source))
-        # Static geometry (maps, polygons): indexed off the prediction path (node/static_inputs)
-        settings = StaticSettings(p("map_topic"), p("map_occupied_threshold"),
-                                  p("map_unknown_is_occupied"), tuple(p("polygon_topics")),
-                                  p("static_polygons"))
-        if settings.used and p("dimensions") != 2:
-            raise ValueError("static inputs (map_topic, polygon_topics, static_polygons) need "
-                             f"dimensions = 2; this node predicts in {p('dimensions')}-D")
-        self.static = StaticInputs(self, settings, lambda: self.predictor.frame_id,
-                                   self._adopt_frame, self._on_static_world, self._warn,
-                                   self._record_static) if settings.used else None
-        # Everything a callback may take in one go: what the input queues can hold.
-        self._drain_limit = sum(s.subscription.qos_profile.depth for s in self._inputs) or 1
-        self.create_service(PredictCollisions, "predict_collisions", self._on_predict_request,
-                            qos_profile=Qos.services())
+        self._inputs = inputs
+        self._odometry_sources = odometry
+        # Static geometry (maps, polygons): indexed off the prediction path
+        # (node/static_inputs). Its world lives from configure to cleanup, its subscriptions
+        # while active.
+        if settings.used:
+            self.static = StaticInputs(self, settings, lambda: self.predictor.frame_id,
+                                       self._adopt_frame, self._on_static_world, self._warn,
+                                       self._record_static)
+        # While inactive the service refuses (see _on_predict_request).
+        self._service = self.create_service(PredictCollisions, "predict_collisions",
+                                            self._on_predict_request, qos_profile=Qos.services())
         # A clock that jumps back (use_sim_time with a looping bag, a restarted simulator)
         # would leave bodies "received in the future" that never expire and make every
         # new state look late: the scene is cleared instead (docs/reliability.md).
@@ -288,16 +439,99 @@ class CollisionNode(Node):
         )
         if self._recorder is not None:
             self._start_recording()
-
-        self._publish_timer = None
-        self._set_publish_rate(p("publish_rate"))
-        self.create_timer(self.EXPIRY_PERIOD_S, self._on_expiry_timer)
-        self.create_timer(1.0, self._publish_diagnostics)
         self.get_logger().info(
             f"predicting for {p('dimensions')}-D bodies on {list(p('state_topics'))}"
             f" + {list(p('single_state_topics'))} + odometry {list(self._odometry_sources)}"
             f", horizon {p('horizon')} s"
         )
+
+    def _bag_path(self, record_path: str) -> str:
+        """record_path for the first bag this node opens; <record_path>_<n> for its n-th (a
+        configuration after a cleanup: record_path is read-only and the first bag is kept)."""
+        return record_path if self._bags_opened == 0 else f"{record_path}_{self._bags_opened + 1}"
+
+    def _activate(self) -> None:
+        p = lambda name: node_parameters.value_of(self, name)  # noqa: E731
+        # A publisher's samples sent while inactive were never meant for this node: its
+        # sequence numbers start a new count (node/input_loss.py).
+        for stats in self.input_loss.topics.values():
+            stats.publishers.clear()
+        self._unanswered = Unanswered()
+        self.markers = MarkerPublisher(p("dimensions"), p("marker_rate"), self._markers_pub.publish,
+                                       on_error=lambda text: self._warn("markers", text),
+                                       activity=self.activity)
+        # With covariance on, each prediction is completed on its own thread: every deferred
+        # uncertain pair evaluated in full (node/probabilities.py)
+        self.probabilities = ProbabilityPublisher(
+            self._probabilities_pub.publish,
+            lambda data, log_ns: self._record(self._probabilities_pub.topic_name, data, log_ns),
+            on_error=lambda text: self._warn("probabilities", text), activity=self.activity,
+        )
+        self._active = True
+        for source in self._inputs:
+            self._subscribe(source)
+        # Everything a callback may take in one go: what the input queues can hold.
+        self._drain_limit = sum(s.subscription.qos_profile.depth for s in self._inputs) or 1
+        if self.static is not None:
+            self.static.subscribe()
+        self._set_publish_rate(p("publish_rate"))
+        self._expiry_timer = self.create_timer(self.EXPIRY_PERIOD_S, self._on_expiry_timer)
+        self._diagnostics_timer = self.create_timer(1.0, self._publish_diagnostics)
+        # Input publishers may appear after start: look for their QoS off the message path.
+        if self._recorder is not None and self._qos_unknown:
+            self._qos_timer = self.create_timer(1.0, self._record_offered_qos)
+
+    def _deactivate(self) -> None:
+        """Stop taking inputs and publishing; publish what is owed (completions, a clearing
+        marker array) while the publishers are still enabled. Idempotent."""
+        self._active = False
+        for source in self._inputs:
+            if source.subscription is not None:
+                self.destroy_subscription(source.subscription)
+                source.subscription = None
+        if self.static is not None:
+            self.static.unsubscribe()
+        for name in ("_publish_timer", "_expiry_timer", "_diagnostics_timer", "_qos_timer"):
+            timer = getattr(self, name, None)
+            if timer is not None:
+                self.destroy_timer(timer)
+                setattr(self, name, None)
+        if self.probabilities is not None:
+            self.probabilities.close()  # publishes and records what it was given
+            self._side_totals["probabilities_published"] += self.probabilities.published
+            self._side_totals["probabilities_superseded"] += self.probabilities.superseded
+            self.probabilities = None
+        if self.markers is not None:
+            self.markers.close()  # clears the display while the publisher is enabled
+            self._side_totals["markers_drawn"] += self.markers.drawn
+            self.markers = None
+            try:  # ... and delivered: the process may exit right after
+                self._markers_pub.wait_for_all_acked(Duration(seconds=self.SHUTDOWN_ACK_S))
+            except Exception as exc:  # e.g. the context was shut down from outside
+                self.get_logger().warning(f"final markers not acknowledged: {exc!r}")
+
+    def _cleanup(self) -> None:
+        """Drop everything configure created; close the bag. Idempotent; also after a
+        configuration that stopped half-way."""
+        if self._active:
+            self._deactivate()
+        if self.static is not None:
+            self.static.close()  # waits for an index being built: it signals a guard condition
+            self.static = None
+        if self._clock_jump_handle is not None:
+            self._clock_jump_handle.unregister()
+        if self._service is not None:
+            self.destroy_service(self._service)
+        for pub in (self._predictions_pub, self._probabilities_pub, self._markers_pub,
+                    self._diagnostics_pub):
+            if pub is not None:
+                self.destroy_lifecycle_publisher(pub)
+        if self._recorder is not None:
+            try:
+                self._recorder.close()
+            except RecordingError as exc:
+                self.get_logger().error(f"closing the recording failed: {exc}")
+        self._forget_configuration()
 
     # -- static world ---------------------------------------------------------------------------
     def _adopt_frame(self, frame_id: str) -> None:
@@ -310,9 +544,9 @@ class CollisionNode(Node):
         with self.activity.busy():
             self.predictor.set_static(index)
             now_ns = self._drain_clock()
-            if getattr(self, "_static_recording", False):
+            if self._static_recording:
                 self._record_static_applied(version, now_ns)
-            if len(self.predictor):
+            if self._active and len(self.predictor):
                 self._publish(now_ns)
 
     def _record_static_applied(self, version: int, log_ns: int) -> None:
@@ -320,7 +554,7 @@ class CollisionNode(Node):
         self._record(self._static_topic, data, log_ns)
 
     def _record_static(self, topic: str, data: bytes) -> None:
-        if getattr(self, "_static_recording", False):
+        if self._static_recording:
             self._record(topic, data, self.get_clock().now().nanoseconds)
 
     @property
@@ -329,28 +563,24 @@ class CollisionNode(Node):
         return f"{self.get_fully_qualified_name()}/static_applied"
 
     # -- inputs ---------------------------------------------------------------------------------
-    def _subscribe(self, topic: str, msg_type: type, qos: QoSProfile,
-                   decode: Callable[[bytes], StateBatch] | None = None) -> None:
-        """Subscribe to raw bytes of `msg_type`; `decode` turns them into a StateBatch
-        (default: the CircleState/CircleStateArray decoder)."""
-        resolved = self.resolve_topic_name(topic)  # one name for warnings, recording, replay
-        source = InputTopic(
-            resolved, msg_type, decode or functools.partial(decode_states, msg_type=msg_type)
-        )
+    def _subscribe(self, source: InputTopic) -> None:
+        """Subscribe to raw bytes of `source` (its topic is resolved: one name for warnings,
+        recording and replay)."""
         # raw=True: the exact received bytes are what a recording must keep; the two-argument
         # callback receives the rmw MessageInfo (receive timestamp, writer sequence number).
         source.subscription = self.create_subscription(
-            msg_type,
-            resolved,
+            source.msg_type,
+            source.topic,
             functools.partial(self._on_input, source),
-            qos,
+            source.qos(),
             raw=True,
             qos_overriding_options=QoSOverridingOptions.with_default_policies(),
         )
-        self._inputs.append(source)
 
     def _on_input(self, source: InputTopic, data: bytes, info: dict) -> None:
         """Ingest this input and every input already waiting, then publish once (on-change mode)."""
+        if not self._active:  # taken by the executor just before a deactivation
+            return
         with self.activity.busy():
             now_ns = self._drain_clock()
             taken = [(source, data, info)]
@@ -375,6 +605,8 @@ class CollisionNode(Node):
         while budget > 0:
             before = len(taken)
             for source in self._inputs:
+                if source.subscription is None:  # deactivated
+                    return
                 handle = source.subscription.handle
                 room = budget - (len(taken) - before)
                 try:
@@ -525,6 +757,11 @@ class CollisionNode(Node):
     def _on_predict_request(
         self, request: PredictCollisions.Request, response: PredictCollisions.Response
     ) -> PredictCollisions.Response:
+        if not self._active:  # the service exists from configure on, and answers when active
+            response.success = False
+            response.message = (f"{self.get_name()} is {self.lifecycle_state}: "
+                                "predict_collisions answers only while the node is active")
+            return response
         try:
             ok, message, prediction = predict_once(
                 request.circles,
@@ -550,6 +787,8 @@ class CollisionNode(Node):
             ClockChange.ROS_TIME_DEACTIVATED,
         ):
             return
+        if self.predictor is None:  # unconfigured
+            return
         bodies = self.predictor.bodies
         self.predictor.clear()
         self._last_drain_ns = 0
@@ -561,7 +800,7 @@ class CollisionNode(Node):
             )
 
     def _publish_diagnostics(self) -> None:
-        c, s = self.counters, self.predictor.stats
+        c, s, totals = self.counters, self.predictor.stats, self._side_totals
         lat = np.array(self.latencies_s) if self.latencies_s else np.zeros(1)
         level = DiagnosticStatus.OK if c.errors == 0 else DiagnosticStatus.WARN
         values = {
@@ -585,15 +824,17 @@ class CollisionNode(Node):
             "latency_ms_p50": f"{np.percentile(lat, 50) * 1e3:.3f}",
             "latency_ms_p99": f"{np.percentile(lat, 99) * 1e3:.3f}",
             "latency_ms_max": f"{lat.max() * 1e3:.3f}",
-            "probabilities_published": self.probabilities.published,
-            "probabilities_superseded": self.probabilities.superseded,
+            "probabilities_published": totals["probabilities_published"]
+            + self.probabilities.published,
+            "probabilities_superseded": totals["probabilities_superseded"]
+            + self.probabilities.superseded,
             "probabilities_ms_last": f"{self.probabilities.last_compute_s * 1e3:.3f}",
             "probabilities_delay_ms_last": f"{self.probabilities.last_delay_s * 1e3:.3f}",
             "static_world_version": self.static.applied_version if self.static else 0,
             "static_inputs_rejected": self.static.rejected if self.static else 0,
             "static_index_ms_last": f"{self.static.index_s_last * 1e3:.3f}" if self.static
             else "0.000",
-            "markers_drawn": self.markers.drawn,
+            "markers_drawn": totals["markers_drawn"] + self.markers.drawn,
             "marker_ms_last": f"{self.markers.last_cost_s * 1e3:.3f}",
             "errors": c.errors,
             "clock_jumps_back": c.clock_jumps_back,
@@ -700,11 +941,8 @@ class CollisionNode(Node):
                                          qos_profiles_yaml([Qos.predictions()]))
         except RecordingError as exc:
             raise ValueError(f"record_path: {exc}") from exc
-        # Input publishers may appear after start: look for them off the message path.
+        # Input publishers may appear later: looked for while active (_record_offered_qos).
         self._qos_unknown = {s.topic for s in self._inputs if not self._offered_qos(s.topic)}
-        self._qos_timer = (
-            self.create_timer(1.0, self._record_offered_qos) if self._qos_unknown else None
-        )
         self._record_config()
         self._static_recording = self.static is not None
         if self._static_recording and self.static.applied_version:  # the parameters' polygons
@@ -764,29 +1002,25 @@ class CollisionNode(Node):
             self._recording_error = str(exc)
             self.get_logger().error(f"recording stopped, predictions continue: {exc}")
 
-    #: How long shutdown waits for subscribers to acknowledge the final markers (DELETEALL), s.
-    SHUTDOWN_ACK_S = 1.0
-
     def destroy_node(self) -> None:
-        # Also called on a node whose __init__ did not finish (Ctrl-C during the warm-up,
-        # a start-up error): rclpy's shutdown destroys every node of the context, so only
-        # what exists is closed.
-        if hasattr(self, "probabilities"):
-            self.probabilities.close()  # publishes and records what it was given
-        if hasattr(self, "markers"):
-            self.markers.close()  # clears the display while the publisher still exists
-            try:  # ... and delivered: the process may exit right after
-                self._markers_pub.wait_for_all_acked(Duration(seconds=self.SHUTDOWN_ACK_S))
-            except Exception as exc:  # e.g. the context was shut down from outside
-                self.get_logger().warning(f"final markers not acknowledged: {exc!r}")
-        if getattr(self, "static", None) is not None:
-            self.static.close()
-        if getattr(self, "_recorder", None) is not None:
-            try:
-                self._recorder.close()
-            except RecordingError as exc:
-                self.get_logger().error(f"closing the recording failed: {exc}")
+        """The shutdown transition (from a primary state), then the node.
+
+        Also called on a node whose __init__ did not finish (Ctrl-C during the warm-up, a
+        start-up error: rclpy's shutdown destroys every node of the context), possibly in the
+        middle of a transition: then only what exists is released.
+        """
+        if hasattr(self, "_active"):
+            self._quiet = True
+            if self.lifecycle_state in ("unconfigured", "inactive", "active"):
+                try:
+                    self.trigger_shutdown()
+                except Exception as exc:  # noqa: BLE001 - released below either way
+                    self.get_logger().warning(f"shutdown transition failed: {exc!r}")
+            self._release()
+        machine = getattr(self, "_state_machine", None)
         super().destroy_node()
+        if machine is not None:
+            machine.destroy_when_not_in_use()
 
     # -- parameters -----------------------------------------------------------------------------
     def _validate_parameters(self, params) -> SetParametersResult:
@@ -797,13 +1031,17 @@ class CollisionNode(Node):
         return SetParametersResult(successful=True)
 
     def _apply_parameters(self, params) -> None:
+        """Unconfigured, a change is only stored (configure reads it); inactive, it reaches the
+        predictor; the timers and marker thread exist only while active."""
+        if self.predictor is None:
+            return
         changes = {p.name: p.value for p in params if p.name in RUNTIME_FIELDS}
         if changes:
             self.predictor.reconfigure(**changes)
         for param in params:
-            if param.name == "publish_rate":
+            if param.name == "publish_rate" and self._active:
                 self._set_publish_rate(param.value)
-            elif param.name == "marker_rate":
+            elif param.name == "marker_rate" and self.markers is not None:
                 self.markers.set_rate(param.value)
         if changes or any(p.name == "publish_rate" for p in params):
             self._record_config()  # replay must know what was in force from here on
@@ -835,7 +1073,14 @@ def _started_node() -> CollisionNode:
     node = CollisionNode()
     gc.collect()
     gc.freeze()
+    node.freeze_gc_after_configure = True  # autostart:=false: each later configure does too
     return node
+
+
+def _reason(exc: BaseException) -> str:
+    """The one-line reason of a refused transition (the message of an expected error)."""
+    expected = (ValueError, OSError, RecordingError, ParameterException, NameValidationException)
+    return str(exc) if isinstance(exc, expected) else repr(exc)
 
 
 def _ros_type_name(msg_type: type) -> str:

@@ -183,6 +183,15 @@ PARAMS: tuple[ParamSpec, ...] = (
         "Bag directory to record inputs and predictions to (MCAP, rosbag2 layout); empty: off.",
         read_only=True,
     ),
+    ParamSpec(
+        "autostart",
+        Parameter.Type.BOOL,
+        True,
+        "Configure and activate at start (the node runs as an unmanaged one would); false: "
+        "start unconfigured and wait for the lifecycle transitions (ros2 lifecycle set, a "
+        "lifecycle manager).",
+        read_only=True,
+    ),
 )
 SPECS = {spec.name: spec for spec in PARAMS}
 STATE_RELIABILITY = ("best_effort", "reliable")

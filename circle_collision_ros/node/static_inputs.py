@@ -81,22 +81,23 @@ class StaticInputs:
         self._markers_pub = node.create_publisher(MarkerArray, "~/static_markers", QoSProfile(
             history=HistoryPolicy.KEEP_LAST, depth=1, reliability=ReliabilityPolicy.RELIABLE,
             durability=DurabilityPolicy.TRANSIENT_LOCAL))
-        self.topics: list[tuple[str, type]] = []
+        # (topic, type, callback, QoS) of each input; subscribed while the node is active
+        self._inputs: list[tuple] = []
         if settings.map_topic:
             topic = node.resolve_topic_name(settings.map_topic)
-            node.create_subscription(OccupancyGrid, topic, functools.partial(self._on_map, topic),
-                                     self.MAP_QOS, raw=True)
-            self.topics.append((topic, OccupancyGrid))
+            self._inputs.append((topic, OccupancyGrid, functools.partial(self._on_map, topic),
+                                 self.MAP_QOS))
         for t in settings.polygon_topics:
             topic = node.resolve_topic_name(t)
-            node.create_subscription(PolygonStamped, topic,
-                                     functools.partial(self._on_polygon, topic),
-                                     QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=10,
-                                                reliability=ReliabilityPolicy.RELIABLE), raw=True)
-            self.topics.append((topic, PolygonStamped))
+            self._inputs.append((topic, PolygonStamped,
+                                 functools.partial(self._on_polygon, topic),
+                                 QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=10,
+                                            reliability=ReliabilityPolicy.RELIABLE)))
+        self.topics = [(topic, msg_type) for topic, msg_type, _, _ in self._inputs]
+        self._subscriptions: list = []
+        self._markers: MarkerArray | None = None  # of the applied world, sent on activation
         if self.obstacles.version:  # the parameters' polygons: indexed before any input
-            index, markers, _ = _timed_build(self.obstacles, self._frame(), node)
-            self._markers_pub.publish(markers)
+            index, self._markers, _ = _timed_build(self.obstacles, self._frame(), node)
             self._apply(index, self.obstacles.version)
             self.applied_version = self.obstacles.version
 
@@ -159,15 +160,37 @@ class StaticInputs:
             return
         self.applied_version = version
         self.index_s_last = seconds
+        self._markers = markers
         self._markers_pub.publish(markers)
         self._apply(index, version)
+
+    def subscribe(self) -> None:
+        """Take inputs (the node's activation); a map server's transient-local map arrives
+        again, and is indexed again."""
+        if self._markers is not None:  # the display gets the world the node keeps
+            self._markers_pub.publish(self._markers)
+        if not self._subscriptions:
+            self._subscriptions = [
+                self._node.create_subscription(msg_type, topic, callback, qos, raw=True)
+                for topic, msg_type, callback, qos in self._inputs]
+
+    def unsubscribe(self) -> None:
+        """Stop taking inputs (deactivation); the world stays."""
+        for sub in self._subscriptions:
+            self._node.destroy_subscription(sub)
+        self._subscriptions = []
 
     def wait_idle(self, timeout: float = 10.0) -> None:
         """Tests: wait until every submitted build finished (not until applied)."""
         self._worker.submit(lambda: None).result(timeout)
 
     def close(self) -> None:
-        self._worker.shutdown(wait=False, cancel_futures=True)
+        """Unsubscribe, let a build in progress finish (its guard must still exist when it
+        signals), then release the guard and the marker publisher (the node's cleanup)."""
+        self.unsubscribe()
+        self._worker.shutdown(wait=True, cancel_futures=True)
+        self._node.destroy_guard_condition(self._guard)
+        self._node.destroy_publisher(self._markers_pub)
 
 
 def _timed_build(obstacles: StaticObstacles, frame_id: str, node: Node) -> tuple:

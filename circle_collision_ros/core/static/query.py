@@ -142,6 +142,14 @@ def _query(P, V, A, R, H, ok, starts, ends, side, points, eob, pob, x0, y0, inv_
                         k = q if full else eitems[eptr[c] + q]
                         if seen_e[k] == b:
                             continue
+                        # outside this part's box (which holds the disc over that part of
+                        # [0, H]): no contact during it; another part may still list it
+                        if not full and (
+                                min(starts[k, 0], ends[k, 0]) > hi[0]
+                                or max(starts[k, 0], ends[k, 0]) < lo[0]
+                                or min(starts[k, 1], ends[k, 1]) > hi[1]
+                                or max(starts[k, 1], ends[k, 1]) < lo[1]):
+                            continue
                         seen_e[k] = b
                         t = edge_contact(px, py, vx, vy, ax, ay, r, starts[k, 0], starts[k, 1],
                                          ends[k, 0], ends[k, 1], side[k], H)
@@ -155,6 +163,9 @@ def _query(P, V, A, R, H, ok, starts, ends, side, points, eob, pob, x0, y0, inv_
                     for q in range(n_p):
                         k = q if full else pitems[pptr[c] + q]
                         if seen_p[k] == b:
+                            continue
+                        if not full and (points[k, 0] > hi[0] or points[k, 0] < lo[0]
+                                         or points[k, 1] > hi[1] or points[k, 1] < lo[1]):
                             continue
                         seen_p[k] = b
                         skipped = False
