@@ -24,7 +24,7 @@ import numpy as np
 from numba import njit
 from numba.extending import overload
 
-from circle_collision_ros.core.broad import cell_keys, rel_keep, swept_bound_row
+from circle_collision_ros.core.broad import cell_keys, ego_box_keys, rel_keep, swept_bound_row
 from circle_collision_ros.core.narrow.contact import contact_row
 from circle_collision_ros.core.narrow.batch import ttc_scalar, ttc_scalar2
 
@@ -34,7 +34,7 @@ _contact_row_inlined = njit(inline="always", error_model="numpy")(contact_row.py
 
 __all__ = ["evaluate_rows", "order_rows", "split_past", "record_keys", "assemble",
            "swept_bound_rows", "link_records", "kill_records", "split_and_order", "reported_rows",
-           "incremental_pairs", "evaluate_and_store", "ordered_query"]
+           "incremental_pairs", "ego_pairs", "evaluate_and_store", "ordered_query"]
 
 #: Overlap decided without the narrow phase: only for values well inside the
 #: narrow phase's input range, so no rounding bound below can fail.
@@ -497,6 +497,51 @@ def incremental_pairs(dirty, alive, P, V, A, Rad, T, Tf, lo, hi, E, slack_ns, H,
             Bo[u] = b
             u += 1
     return Ao[:u], Bo[:u], n_moved
+
+
+@njit(cache=True, error_model="numpy")
+def ego_pairs(bounds_of, query, alive, ego, ego_members, P, V, A, Rad, T, Tf, lo, hi, E, slack_ns,
+              H, t_end, rank, cap):
+    """The candidate pairs of an ego-centred scene (Scene.set_ego), in one pass.
+
+    Sets Tf and the swept bounds of the live slots `bounds_of` (Scene._bounds' window, as
+    incremental_pairs), lists the pairs of the slots `query` with at least one ego body whose
+    bounds overlap (broad.ego_box_keys: an ego body's box against every box, another body's
+    against the ego boxes only), oriented so that the first body's rank is smaller, and applies
+    the broad phase's relative test over [0, t_end] (as incremental_pairs).  Returns (A, B,
+    box tests), the pairs in the order of min slot * cap + max slot.
+
+    The pairs are exactly those of the whole-scene broad phase (Scene._pairs_full without an
+    ego set: the same boxes, the same closed-interval test and relative test) that contain an
+    ego body and a body of `query`.
+    """
+    D = P.shape[1]
+    for x in range(bounds_of.shape[0]):
+        s = bounds_of[x]
+        if alive[s]:
+            Tf[s] = np.float64(T[s] - E) * 1e-9
+            ta = np.float64(max(E, T[s]) - T[s]) * 1e-9
+            tb = np.float64(E + slack_ns - T[s]) * 1e-9 + H
+            swept_bound_row(P, V, A, Rad, s, ta, tb, lo, hi, s)
+    keys, tests = ego_box_keys(query, alive, ego, ego_members, lo, hi, cap)
+    m = keys.shape[0]
+    Ao = np.empty(m, dtype=np.int64)
+    Bo = np.empty(m, dtype=np.int64)
+    u = 0
+    for k in range(m):
+        a = keys[k] // cap
+        b = keys[k] % cap
+        if rank[a] > rank[b]:
+            a, b = b, a
+        if D == 2:
+            keep = rel_keep(P, V, A, Rad, Tf, a, b, 0.0, t_end, 2)
+        else:
+            keep = rel_keep(P, V, A, Rad, Tf, a, b, 0.0, t_end, 3)
+        if keep:
+            Ao[u] = a
+            Bo[u] = b
+            u += 1
+    return Ao[:u], Bo[:u], tests
 
 
 @njit(cache=True, error_model="numpy")

@@ -72,6 +72,7 @@ class OrderingMixin:
         at R); see _ordered_rows.
         """
         self.evaluated_pairs = 0
+        self.box_tests = 0
         if self._cache is not None and self._cache[0] == self._version:
             return self._cache[1]
         self._flush()
@@ -87,7 +88,19 @@ class OrderingMixin:
     def compile_ordering(self) -> None:
         """Compile (or load) the kernels that order and merge the rows, on this scene's record
         arrays, without evaluating a pair: they never call the solver, so a set-up can compile
-        them beside it (``core.warm_up``); ``predictions`` then finds them compiled."""
+        them beside it (``core.warm_up``); ``predictions`` then finds them compiled.  Also the
+        ego broad phase (kernels.ego_pairs, see set_ego) and merge's store of many states
+        (stream._store_states), on no row: neither calls the solver either."""
+        from circle_collision_ros.core.scene.stream import _store_states
+
+        D, f64 = self._dim, np.float64
+        _store_states(self._P, self._V, self._A, self._R, self._T, self._recv, EMPTY_I, EMPTY_I,
+                      np.zeros((0, D)), np.zeros((0, D)), np.zeros((0, D)), np.zeros(0),
+                      np.zeros(0, dtype=np.int64), 0)
+        _sk.ego_pairs(EMPTY_I, EMPTY_I, self._alive, self._ego, self._ego_members(), self._P,
+                      self._V, self._A, self._R, self._T, self._Tf, self._lo, self._hi, 0,
+                      self._slack_ns, self._h, f64(self._slack_ns * 1e-9 + self._h), self._rank,
+                      np.int64(self._R.shape[0]))
         live = self._rlive
         _sk.split_and_order(EMPTY_I, np.flatnonzero(live[:self._rn]), EMPTY_I, live, self._rkey,
                             self._rtp, self._rtau, 0, 1024)

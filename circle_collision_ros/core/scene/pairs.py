@@ -82,8 +82,26 @@ class PairsMixin:
         return self._evaluate(A, B, t_p, self._h_eval, compiled)
 
     def _pairs_full(self):
-        """All candidate slot pairs (a before b by id), from scratch; sets bounds."""
+        """All candidate slot pairs (a before b by id), from scratch; sets bounds.
+
+        With an ego set (set_ego), only the pairs with an ego body: each ego body's bounds
+        against every body's (kernels.ego_pairs, no sweep), the same pairs as the sweep's
+        that contain an ego body."""
         slots = self._sorted_slots()
+        if self._ego_ids:
+            if slots.size < 2:  # (bounds of a lone body: as below)
+                if slots.size:
+                    self._Tf[slots] = (self._T[slots] - self._epoch).astype(np.float64) * 1e-9
+                    self._set_bounds(slots)
+                return slots, EMPTY_I, EMPTY_I
+            ego = self._ego_members()
+            A, B, tests = _sk.ego_pairs(slots, ego, self._alive, self._ego, ego, self._P,
+                                        self._V, self._A, self._R, self._T, self._Tf, self._lo,
+                                        self._hi, self._epoch, self._slack_ns, self._h,
+                                        self._slack_ns * 1e-9 + self._h, self._rank,
+                                        np.int64(self._R.shape[0]))
+            self.box_tests += tests
+            return slots, A, B
         if slots.size:
             self._Tf[slots] = (self._T[slots] - self._epoch).astype(np.float64) * 1e-9
             self._set_bounds(slots)
@@ -213,6 +231,18 @@ class PairsMixin:
         dirty.sort()
         self._dirty.clear()
         self._kill_rows(dirty)
+        if self._ego_ids:
+            # only the pairs with an ego body: a changed ego body's bounds against every body's,
+            # another changed body's against the ego bodies' (no grid)
+            self._ensure_rank()
+            A, B, tests = _sk.ego_pairs(dirty, dirty, self._alive, self._ego, self._ego_members(),
+                                        self._P, self._V, self._A, self._R, self._T, self._Tf,
+                                        self._lo, self._hi, self._epoch, self._slack_ns, self._h,
+                                        self._slack_ns * 1e-9 + self._h, self._rank,
+                                        np.int64(self._R.shape[0]))
+            self.box_tests += tests
+            self._store_pairs(A, B)
+            return
         if not self._grid_built or self._n_moved + dirty.size > max(
             64, len(self._slot) // self._MOVED_FRACTION
         ):
@@ -228,6 +258,10 @@ class PairsMixin:
                                                     self._gslot, self._gstale, self._gbig,
                                                     self._moved, self._n_moved, self._inmoved,
                                                     self._rank, np.int64(self._R.shape[0]))
+        self._store_pairs(A, B)
+
+    def _store_pairs(self, A: np.ndarray, B: np.ndarray) -> None:
+        """Evaluate the new candidate pairs (A, B) of an incremental update and store the hits."""
         if A.size == 0:
             return
         if A.size >= self.COMPILED_ROWS:

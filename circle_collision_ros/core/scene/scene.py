@@ -63,12 +63,17 @@ can differ from propagating everything to ``R`` in the last bits.
 
 Swept bounds cover ``[max(E, T), E + S + H]``, which contains every reportable
 contact until the epoch moves.
+
+Ego set (``set_ego``): when set, only the pairs with at least one ego body are listed by
+the broad phase (each ego body's bounds against every body's, another body's against the
+ego bodies' only: ``broad.ego``), evaluated and reported; the rows are those of the same
+scene without an ego set that have an ego body, bit for bit and in the same order.
 """
 from __future__ import annotations
 
 import math
 import weakref
-from typing import Hashable
+from typing import Hashable, Iterable
 
 import numpy as np
 
@@ -95,6 +100,7 @@ class Scene(StoreMixin, StreamMixin, PairsMixin, OrderingMixin, UncertainMixin, 
     method : broad phase of full rebuilds ("sweep" or "grid").
     full_rebuild_fraction : above this fraction of changed bodies, one
         vectorised rebuild replaces per-body updates.
+    ego_ids : the ego set (see set_ego); None: every pair.
 
     The class combines parts with one responsibility each: the slot store
     (store.py), the stream rules (stream.py), the pair records (pairs.py), the
@@ -105,7 +111,8 @@ class Scene(StoreMixin, StreamMixin, PairsMixin, OrderingMixin, UncertainMixin, 
 
     def __init__(self, horizon: float, dim: int = 2, *, slack: float | None = None,
                  max_bodies: int | None = None, method: str = "sweep",
-                 full_rebuild_fraction: float = 0.05) -> None:
+                 full_rebuild_fraction: float = 0.05,
+                 ego_ids: Iterable[Hashable] | None = None) -> None:
         if dim not in (2, 3):
             raise ValueError(f"dim must be 2 or 3, got {dim}")
         if method not in ("sweep", "grid"):
@@ -117,7 +124,9 @@ class Scene(StoreMixin, StreamMixin, PairsMixin, OrderingMixin, UncertainMixin, 
         self.max_bodies = max_bodies
         self._slack_arg = slack
         self._set_horizon(horizon)
+        self._ego_ids: frozenset = frozenset()  # configuration: kept by clear()
         self.clear()
+        self.set_ego(ego_ids)
 
     def _set_horizon(self, horizon: float) -> None:
         self._h = check_horizon(horizon)
@@ -133,6 +142,54 @@ class Scene(StoreMixin, StreamMixin, PairsMixin, OrderingMixin, UncertainMixin, 
             self._set_horizon(horizon)
             self._need_full = True
             self._version += 1
+
+    def set_ego(self, ids: Iterable[Hashable] | None) -> None:
+        """Evaluate and report only the pairs with at least one body of ``ids`` (the ego set).
+
+        None or empty: every pair (the default).  With an ego set, ``predictions()`` and
+        ``uncertain_pairs()`` report exactly the rows of the same scene without it that have an
+        ego body, bit for bit and in the same order (each pair's result is a function of its
+        two states, R, H and S alone), and the broad phase lists no other pair: each ego body's
+        box is tested against every box and another body's against the ego boxes only
+        (``broad.ego``), so an update of a non-ego body costs a test per ego body.  Ids may
+        name bodies not (yet) in the scene: they count from their first state on.  The ego set
+        is configuration: ``clear()`` keeps it.  A change rebuilds the pairs at the next query.
+        """
+        new = frozenset(() if ids is None else ids)
+        if new == self._ego_ids:
+            return
+        self._ego_ids = new
+        self._ego[:] = False
+        for bid in new:
+            slot = self._slot.get(bid)
+            if slot is not None:
+                self._ego[slot] = True
+        self._ego_slots = None
+        self._need_full = True
+        self._listing = None  # the uncertain listing holds the pairs of the old set
+        self._version += 1
+
+    @property
+    def ego_ids(self) -> frozenset:
+        """The ego set (empty: every pair is evaluated)."""
+        return self._ego_ids
+
+    def _ego_members(self) -> np.ndarray:
+        """The slots of the ego bodies in the scene, ascending (cached until one comes or
+        goes)."""
+        if self._ego_slots is None:
+            self._ego_slots = np.flatnonzero(self._ego)
+        return self._ego_slots
+
+    def _take_id(self, bid, s: int) -> None:
+        """Slot s takes the new body bid (its ego flag from the ego set)."""
+        self._slot[bid] = s
+        self._writable_ids()[s] = bid
+        self._alive[s] = True
+        self._members_serial += 1
+        if self._ego_ids and bid in self._ego_ids:
+            self._ego[s] = True
+            self._ego_slots = None
 
     # ------------------------------------------------------------------ basics
     def clear(self) -> None:
@@ -152,6 +209,8 @@ class Scene(StoreMixin, StreamMixin, PairsMixin, OrderingMixin, UncertainMixin, 
         self._lo = np.zeros((cap, D))
         self._hi = np.zeros((cap, D))
         self._alive = np.zeros(cap, dtype=bool)
+        self._ego = np.zeros(cap, dtype=bool)         # alive and in the ego set (set_ego)
+        self._ego_slots = EMPTY_I                     # _ego's slots (None: to be listed again)
         self._ids = np.full(cap, None, dtype=object)
         self._ids_published = False  # a SceneContacts reads _ids: copy it before a change
         self._rank = np.full(cap, -1, dtype=np.int64)
@@ -171,6 +230,10 @@ class Scene(StoreMixin, StreamMixin, PairsMixin, OrderingMixin, UncertainMixin, 
         self._rkey_basis = None  # (_rank_serial, slot capacity, _utf8_serial) of _rkey, _rids
         self._order = None  # alive slots in id order (cached until membership changes)
         self._slot: dict = {}
+        # bumped whenever a body comes or goes (_take_id, _drop): merge's id look-ups of the
+        # last message (_last_named: its ids, their slots, this serial) hold while it is unchanged
+        self._members_serial = getattr(self, "_members_serial", 0) + 1
+        self._last_named = None
         self._free: list[int] = list(range(cap - 1, -1, -1))
         self._removals: dict = {}  # id -> (removal stamp ns, received ns)
         self._dirty: set[int] = set()
@@ -189,6 +252,9 @@ class Scene(StoreMixin, StreamMixin, PairsMixin, OrderingMixin, UncertainMixin, 
         self._version = getattr(self, "_version", 0) + 1
         self._cache = None
         self.evaluated_pairs = 0  # narrow-phase pair evaluations of the last predictions() call
+        # box tests of the ego broad phase (broad.ego) in the last predictions() call (0
+        # without an ego set: the sweep, the grid or the hashed grid list the pairs)
+        self.box_tests = 0
         self._captures = weakref.WeakSet()  # live captures sharing the state arrays
         self._uncertain_cache = None
         self._uncertain_serial = 0     # uncertain_pairs evaluations so far (the budget's clock)

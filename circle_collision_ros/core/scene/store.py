@@ -55,7 +55,8 @@ class StoreMixin:
             grown[:old] = self._C
             self._C = grown
             for name, dt in (("_R", np.float64), ("_T", np.int64), ("_Tf", np.float64),
-                             ("_recv", np.int64), ("_alive", bool), ("_rank", np.int64),
+                             ("_recv", np.int64), ("_alive", bool), ("_ego", bool),
+                             ("_rank", np.int64),
                              ("_id_start", np.int64), ("_id_len", np.int64), ("_U", bool),
                              ("_sv", np.int64), ("_born", np.int64)):
                 grown = np.full(new, -1 if name == "_rank" else 0, dtype=dt)

@@ -4,6 +4,7 @@ A part of ``Scene``; the rules are stated in scene.py's module docstring.
 """
 from __future__ import annotations
 
+from itertools import repeat
 from typing import Hashable, Sequence
 
 import numpy as np
@@ -31,6 +32,25 @@ def _store_covariances(C, slots, cov, rows, nonzero):
                     any_ = True
         nonzero[j] = any_
 
+
+@njit(cache=True)
+def _store_states(P, V, A, Rad, T, recv, slots, rows, p, v, a, r, stamps, received):
+    """Rows `rows` of the message (p, v, a: (k, >= D), r, stamps) into the slots `slots`, and
+    the receive time: the copies of merge's numpy assignments, in one pass."""
+    D = P.shape[1]
+    for j in range(slots.shape[0]):
+        s, x = slots[j], rows[j]
+        for d in range(D):
+            P[s, d] = p[x, d]
+            V[s, d] = v[x, d]
+            A[s, d] = a[x, d]
+        Rad[s] = r[x]
+        T[s] = stamps[x]
+        recv[s] = received
+
+
+#: From this many accepted states merge copies them by _store_states (numpy below).
+_COMPILED_STORE = 64
 
 NEVER = 1 << 62  # later than any receive time, ns
 _FIRST_ROW = np.zeros(1, dtype=np.int64)
@@ -76,9 +96,16 @@ class StreamMixin:
         rows = np.flatnonzero(~remove)
         D = self._dim
         get = self._slot.get
-        slots = np.fromiter(
-            (get(ids[k], -1) for k in rows.tolist()), dtype=np.int64, count=rows.size
-        )
+        named = ids if rows.size == len(ids) else [ids[k] for k in rows.tolist()]
+        last = self._last_named
+        if (last is not None and last[2] == self._members_serial and type(named) is list
+                and named == last[0]):
+            # the ids of the last message, in its order, and no body came or went since (a
+            # tracker array's frames): the slots it looked up (a list comparison costs a
+            # fraction of the look-ups)
+            slots = last[1].copy()
+        else:
+            slots = np.fromiter(map(get, named, repeat(-1)), dtype=np.int64, count=rows.size)
         st = stamps[rows]
         known = slots >= 0
         newer = np.ones(rows.size, dtype=bool)
@@ -99,23 +126,39 @@ class StreamMixin:
         for x in fresh.tolist():
             s = self._alloc()
             self._preserve((s,))
-            bid = ids[rows[x]]
-            self._slot[bid] = s
-            self._writable_ids()[s] = bid
-            self._alive[s] = True
+            self._take_id(ids[rows[x]], s)
             self._rank_insert(s)
             slots[x] = s
         if fresh.size:
             self._add_utf8(slots[fresh])
+        if type(named) is list and rows.size >= _COMPILED_STORE:
+            self._last_named = (list(named), slots.copy(), self._members_serial)
         take = newer.copy()
         take[full] = False
         sl, src = slots[take], rows[take]
         if src.size:
             self._preserve(sl)
-            self._P[sl] = np.asarray(positions)[src, :D]
-            self._V[sl] = np.asarray(velocities)[src, :D]
-            self._A[sl] = np.asarray(accelerations)[src, :D]
-            self._R[sl] = np.asarray(radii)[src]
+            big = src.size >= _COMPILED_STORE
+            if big:
+                # one kind of array for the kernel (C order, writeable: no specialisation per
+                # input layout; a copy only of inputs that are not so)
+                f64 = np.float64
+                pva = [np.require(x, f64, "CW") for x in (positions, velocities, accelerations)]
+                r = np.require(radii, f64, "CW")
+                n_rows = stamps.shape[0]
+                big = r.shape == (n_rows,) and all(
+                    x.ndim == 2 and x.shape[0] == n_rows and x.shape[1] >= D for x in pva
+                )  # else numpy's assignments below (which raise on bad shapes)
+            if big:
+                _store_states(self._P, self._V, self._A, self._R, self._T, self._recv, sl, src,
+                              *pva, r, np.require(stamps, np.int64, "CW"), received_ns)
+            else:
+                self._P[sl] = np.asarray(positions)[src, :D]
+                self._V[sl] = np.asarray(velocities)[src, :D]
+                self._A[sl] = np.asarray(accelerations)[src, :D]
+                self._R[sl] = np.asarray(radii)[src]
+                self._T[sl] = stamps[src]
+                self._recv[sl] = received_ns
             if covariances is None:
                 self._set_uncertain(sl, False)
             else:
@@ -124,10 +167,13 @@ class StreamMixin:
                     self._C, sl, np.ascontiguousarray(covariances, dtype=np.float64), src, nonzero
                 )
                 self._set_uncertain(sl, nonzero)
-            self._T[sl] = stamps[src]
-            self._recv[sl] = received_ns
             self._recv_floor = min(self._recv_floor, received_ns)
-            self._dirty.update(sl.tolist())
+            if self._need_full or sl.size > max(8, self._full_frac * len(self._slot)):
+                # the next query rebuilds every pair (as _flush would decide from the dirty
+                # count): no need to list the changed bodies (a tracker array's frame)
+                self._need_full = True
+            else:
+                self._dirty.update(sl.tolist())
             newest = int(stamps[src].max())
             if self.reference_ns is None or newest > self.reference_ns:
                 self.reference_ns = newest
@@ -154,9 +200,7 @@ class StreamMixin:
                 return MergeResult(EMPTY_I, EMPTY_I, _FIRST_ROW, EMPTY_I, EMPTY_I)
             s = self._alloc()
             self._preserve((s,))
-            self._slot[bid] = s
-            self._writable_ids()[s] = bid
-            self._alive[s] = True
+            self._take_id(bid, s)
             self._n_new = 1
             self._rank_insert(s)
             self._add_utf8(np.array([s], dtype=np.int64))
@@ -231,9 +275,13 @@ class StreamMixin:
     def _drop(self, s: int) -> None:
         self._preserve((s,))
         del self._slot[self._ids[s]]
+        self._members_serial += 1
         self._rank_remove(s)
         self._writable_ids()[s] = None
         self._alive[s] = False
+        if self._ego[s]:
+            self._ego[s] = False
+            self._ego_slots = None
         self._set_uncertain(s, False)
         self._dirty.add(s)
         self._free.append(s)

@@ -130,14 +130,13 @@ class UncertainMixin:
         # heavy kernels: loaded on first use
         from circle_collision_ros.core import uncertainty as unc
         slots = self._sorted_slots()
-        I, J, at_R, contact_rows = self._uncertain_listed(slots, R, contacts, unc)
+        I, J, at_R, (LA, LB), contact_rows = self._uncertain_listed(slots, R, contacts, unc)
         if I.size == 0:
             self._uncertain_waiting = NO_WAITING
             self._pair_answers = None
             return SceneUncertainty(R, _NO_IDS, _NO_IDS, _NO_VALUES, _NO_VALUES, _NO_VALUES)
-        ids = self._ids[slots]
-        ida, idb = ids[I], ids[J]
         sa, sb = slots[I], slots[J]
+        ida, idb = self._ids[sa], self._ids[sb]
         tp = self._uncertain_pair_times(sa, sb, R)
         key = (sa << 32) | sb
         prob, bound, tau = np.empty(I.size), np.empty(I.size), np.empty(I.size)
@@ -169,7 +168,7 @@ class UncertainMixin:
         answered = hit.copy()
         pending = None
         if todo.size:
-            deferred = self._evaluate_uncertain(unc, sa[todo], sb[todo], I[todo], J[todo], at_R,
+            deferred = self._evaluate_uncertain(unc, sa[todo], sb[todo], LA[todo], LB[todo], at_R,
                                                 tp[todo], key[todo], threshold, max_evaluated,
                                                 screened_first[todo],
                                                 (known[0][todo], known[1][todo]), tolerance)
@@ -205,14 +204,12 @@ class UncertainMixin:
         )
 
     def _uncertain_listed(self, slots: np.ndarray, R: int, contacts: SceneContacts | None, unc):
-        """``(I, J, at_R, contact_rows)``: local index pairs (I < J, into `slots`, id order) with
-        an uncertain body listed by the inflated broad phase (``_inflated_pairs``), plus the
-        uncertain pairs of `contacts`; at_R = (P, V, A, radius, C) of `slots`, propagated to R
-        (C zero for exact bodies); contact_rows: each pair's row in `contacts`, -1 if none
-        (None without contacts)."""
-        P, V, C = self._states_at(slots, np.full(slots.size, R, dtype=np.int64))
-        A, Rad = self._A[slots], self._R[slots]
-        u = self._U[slots]
+        """``(I, J, at_R, (LA, LB), contact_rows)``: local index pairs (I < J, into `slots`, id
+        order) with an uncertain body listed by the inflated broad phase (``_inflated_pairs``),
+        plus the uncertain pairs of `contacts` (with an ego body, under an ego set); at_R =
+        (P, V, A, radius, C) of the bodies of those pairs, propagated to R (C zero for exact
+        bodies; the same bits as of every body: row by row), LA, LB the pairs' rows in it;
+        contact_rows: each pair's row in `contacts`, -1 if none (None without contacts)."""
         sa, sb = self._inflated_pairs(slots, R, unc)
         # slot -> local index through an array (no dict of every body per call)
         local = np.empty(self._ids.shape[0], dtype=np.int64)
@@ -225,7 +222,11 @@ class UncertainMixin:
                 slot = self._slot.__getitem__
                 ca = local[np.fromiter(map(slot, contacts.id_a.tolist()), np.int64, len(contacts))]
                 cb = local[np.fromiter(map(slot, contacts.id_b.tolist()), np.int64, len(contacts))]
+            u = self._U[slots]
             m = u[ca] | u[cb]
+            if self._ego_ids:  # only the pairs with an ego body (set_ego)
+                e = self._ego[slots]
+                m &= e[ca] | e[cb]
             I, J = np.concatenate([I, ca[m]]), np.concatenate([J, cb[m]])
         # local order is id order: (min, max) puts the id that sorts first in front
         n = np.int64(slots.size)
@@ -242,7 +243,17 @@ class UncertainMixin:
                 at = np.minimum(np.searchsorted(ckey[order], key), order.size - 1)
                 same = ckey[order[at]] == key
                 rows[same] = order[at[same]]
-        return key // n, key % n, (P, V, A, Rad, C), rows
+        I, J = key // n, key % n
+        # the listed pairs' bodies at R (not every body's: an ego set lists few)
+        used = np.zeros(slots.size, dtype=bool)
+        used[I] = True
+        used[J] = True
+        used = np.flatnonzero(used)
+        at = slots[used]
+        P, V, C = self._states_at(at, np.full(at.size, R, dtype=np.int64))
+        row = np.empty(slots.size, dtype=np.int64)
+        row[used] = np.arange(used.size)
+        return I, J, (P, V, self._A[at], self._R[at], C), (row[I], row[J]), rows
 
     #: The inflated broad phase is rebuilt whole when more than this many bodies changed
     #: since it was last brought up to date (below, only theirs are looked up): each looked-up
@@ -261,7 +272,8 @@ class UncertainMixin:
         date by looking up only the bodies whose state changed since (one body's update: its
         box against every box, O(N) comparisons, no sweep), rebuilt whole when R0 or H moves
         or more than LISTING_REBUILD_BODIES changed.  Both ways give the same set (the same
-        predicate on every pair)."""
+        predicate on every pair).  Under an ego set (set_ego) only the pairs with an ego body
+        are listed, by ``broad.ego_box_keys`` (the same box test), both ways."""
         lag = self.UNCERTAIN_LAG_NS
         R0 = R - R % lag
         span = self._h + lag * 1e-9
@@ -278,8 +290,14 @@ class UncertainMixin:
                            np.zeros((cap, self._dim)), np.zeros((cap, self._dim)),
                            np.zeros((cap, self._dim)), np.zeros(cap), EMPTY_I)
             self._listing_boxes(lst, slots, R0, unc)
-            I, J, _ = _broad.candidate_pairs(lst.lo[slots], lst.hi[slots], method="sweep")
-            I, J = slots[I], slots[J]
+            if self._ego_ids:  # the ego bodies' boxes against every box (no sweep)
+                ego = self._ego_members()
+                key, _ = _broad.ego_box_keys(ego, self._alive, self._ego, ego, lst.lo, lst.hi,
+                                             np.int64(cap))
+                I, J = key // cap, key % cap
+            else:
+                I, J, _ = _broad.candidate_pairs(lst.lo[slots], lst.hi[slots], method="sweep")
+                I, J = slots[I], slots[J]
         else:
             lst = old
             gone = np.zeros(cap, dtype=bool)
@@ -288,7 +306,12 @@ class UncertainMixin:
             ka, kb = lst.key >> 32, lst.key & 0xFFFFFFFF
             lst = lst._replace(key=lst.key[~(gone[ka] | gone[kb])])
             self._listing_boxes(lst, changed, R0, unc)
-            I, J = _box_neighbours(lst.lo, lst.hi, changed, slots)
+            if self._ego_ids:  # a changed ego body against every box, another against the ego's
+                key, _ = _broad.ego_box_keys(changed, self._alive, self._ego,
+                                             self._ego_members(), lst.lo, lst.hi, np.int64(cap))
+                I, J = key // cap, key % cap
+            else:
+                I, J = _box_neighbours(lst.lo, lst.hi, changed, slots)
         a, b = np.minimum(I, J), np.maximum(I, J)
         keep = self._U[a] | self._U[b]
         a, b = a[keep], b[keep]
