@@ -3,8 +3,9 @@
 Guarantees proved here (pipeline/static_scene.py, StaticCache):
 - on a stream of per-body updates with older stamps, removals and epoch changes, the rows
   of an incremental predictor equal a recomputation from the same stored states (a cache
-  that has seen nothing), bit for bit, and equal the rule applied by hand (evaluate at t_b = max(E, T) over H + S,
-  shift by R - t_b, re-evaluate at R a contact that began before it);
+  that has seen nothing), bit for bit, and equal the rule applied by hand (evaluate at
+  t_b = max(E, T) over H + S, shift by R - t_b, re-evaluate at R a contact that began
+  before it);
 - a one-body update evaluates that body alone; a tracker frame evaluates every body.
 """
 from __future__ import annotations

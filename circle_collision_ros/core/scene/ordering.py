@@ -90,11 +90,11 @@ class OrderingMixin:
         arrays, without evaluating a pair: they never call the solver, so a set-up can compile
         them beside it (``core.warm_up``); ``predictions`` then finds them compiled.  Also the
         ego broad phase (kernels.ego_pairs, see set_ego) and merge's store of many states
-        (stream._store_states), on no row: neither calls the solver either."""
-        from circle_collision_ros.core.scene.stream import _store_states
+        (stream.store_states), on no row: neither calls the solver either."""
+        from circle_collision_ros.core.scene.stream import store_states
 
         D, f64 = self._dim, np.float64
-        _store_states(self._P, self._V, self._A, self._R, self._T, self._recv, EMPTY_I, EMPTY_I,
+        store_states(self._P, self._V, self._A, self._R, self._T, self._recv, EMPTY_I, EMPTY_I,
                       np.zeros((0, D)), np.zeros((0, D)), np.zeros((0, D)), np.zeros(0),
                       np.zeros(0, dtype=np.int64), 0)
         _sk.ego_pairs(EMPTY_I, EMPTY_I, self._alive, self._ego, self._ego_members(), self._P,

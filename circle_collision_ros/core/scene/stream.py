@@ -34,7 +34,7 @@ def _store_covariances(C, slots, cov, rows, nonzero):
 
 
 @njit(cache=True)
-def _store_states(P, V, A, Rad, T, recv, slots, rows, p, v, a, r, stamps, received):
+def store_states(P, V, A, Rad, T, recv, slots, rows, p, v, a, r, stamps, received):
     """Rows `rows` of the message (p, v, a: (k, >= D), r, stamps) into the slots `slots`, and
     the receive time: the copies of merge's numpy assignments, in one pass."""
     D = P.shape[1]
@@ -49,7 +49,7 @@ def _store_states(P, V, A, Rad, T, recv, slots, rows, p, v, a, r, stamps, receiv
         recv[s] = received
 
 
-#: From this many accepted states merge copies them by _store_states (numpy below).
+#: From this many accepted states merge copies them by store_states (numpy below).
 _COMPILED_STORE = 64
 
 NEVER = 1 << 62  # later than any receive time, ns
@@ -150,7 +150,7 @@ class StreamMixin:
                     x.ndim == 2 and x.shape[0] == n_rows and x.shape[1] >= D for x in pva
                 )  # else numpy's assignments below (which raise on bad shapes)
             if big:
-                _store_states(self._P, self._V, self._A, self._R, self._T, self._recv, sl, src,
+                store_states(self._P, self._V, self._A, self._R, self._T, self._recv, sl, src,
                               *pva, r, np.require(stamps, np.int64, "CW"), received_ns)
             else:
                 self._P[sl] = np.asarray(positions)[src, :D]
