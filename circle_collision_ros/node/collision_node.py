@@ -395,7 +395,8 @@ class CollisionNode(LifecycleNode):
                             probability_threshold=p("probability_threshold"),
                             uncertain_pair_budget=p("uncertain_pair_budget"),
                             probability_tolerance=p("probability_tolerance"),
-                            use_covariance=p("use_covariance"))
+                            use_covariance=p("use_covariance"),
+                            ego_ids=tuple(p("ego_ids")))
         )
         # An unusable record_path refuses the configuration before a first start's compile
         if p("record_path"):
@@ -769,6 +770,7 @@ class CollisionNode(LifecycleNode):
                 request.horizon,
                 request_time_ns=self.get_clock().now().nanoseconds,
                 static=self.predictor.static,
+                ego_ids=tuple(request.ego_ids),
             )
             response.success, response.message = ok, message
             response.predictions = (

@@ -87,6 +87,10 @@ PARAMS: tuple[ParamSpec, ...] = (
         "Per-topic radii in m, one per odometry_topics entry; empty: odometry_radius for all.",
         read_only=True,
     ),
+    ParamSpec("ego_ids", Parameter.Type.STRING_ARRAY, [],
+              "Ego body ids: only pairs with at least one of them are evaluated and published "
+              "(the broad phase skips the others), and only they against static geometry; "
+              "empty: every pair.", read_only=True),
     ParamSpec("map_topic", Parameter.Type.STRING, "",
               "nav_msgs/OccupancyGrid topic (transient local) whose occupied cells are static "
               "obstacles, id_b 'map'; empty: none. 2-D only.", read_only=True),

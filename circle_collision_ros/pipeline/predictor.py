@@ -53,6 +53,9 @@ class PredictorConfig:
     start compiles fewer). probability_tolerance : in [0, 0.1]; the stated bound a full
     evaluation may reach where that saves work (core.uncertainty.uncertain_pairs(tolerance=...));
     0 (here, and for recordings made before it existed): every pair at the per-pair accuracy.
+    ego_ids : ids of the ego bodies; when given, only pairs with at least one of them are
+    evaluated and reported (core.Scene's ego rule: the broad phase skips the others), and only
+    they are answered against static geometry; empty: every pair and every body.
     """
 
     horizon: float = 5.0
@@ -65,6 +68,7 @@ class PredictorConfig:
     uncertain_pair_budget: int = 0
     use_covariance: bool = True
     probability_tolerance: float = 0.0
+    ego_ids: tuple = ()
 
 
 #: The PredictorConfig fields that may change while running (node parameters
@@ -112,7 +116,8 @@ class CollisionPredictor:
         # The sweep broad phase (the Scene's default; the grid finds the same pairs): measured
         # faster for whole tracker-array frames and for epoch moves, with the same output bytes
         # (bench/bench_node.py's density).
-        self._scene = Scene(config.horizon, config.dimensions, max_bodies=config.max_bodies)
+        self._scene = Scene(config.horizon, config.dimensions, max_bodies=config.max_bodies,
+                            ego_ids=tuple(config.ego_ids) or None)
         self._static: StaticIndex | None = None
         self._static_cache = StaticCache()
         self.stats = PredictionStats()
@@ -121,6 +126,16 @@ class CollisionPredictor:
     def static(self) -> StaticIndex | None:
         """The static world predictions are made against (None: none)."""
         return self._static
+
+    def _static_bodies(self) -> tuple:
+        """The stored states answered against static geometry: the ego bodies, or all."""
+        states = self._scene.stored_states()
+        if not self.config.ego_ids:
+            return states
+        ego = set(self.config.ego_ids)
+        keep = np.array([i in ego for i in states[0]], dtype=bool)
+        ids = [i for i in states[0] if i in ego]
+        return (ids, *(x[keep] for x in states[1:]))
 
     def set_static(self, index: StaticIndex | None) -> None:
         """Predict against ``index`` from the next prediction on (None: no static geometry).
@@ -318,7 +333,7 @@ class CollisionPredictor:
         capture = self._scene.capture()
         static = None
         if self._static is not None and len(self._scene):
-            static = self._static_cache.rows(self._scene.stored_states(),
+            static = self._static_cache.rows(self._static_bodies(),
                                              self._scene.reference_ns, self._scene.epoch_ns,
                                              self._scene.slack, horizon, self._static)
         prediction = ScenePrediction(contacts, capture, horizon, self.frame_id,
@@ -345,7 +360,8 @@ class HorizonLimits:
 def predict_once(states: Sequence[CircleState], config: PredictorConfig,
                  horizon: float | None = None,
                  request_time_ns: int = 0,
-                 static: StaticIndex | None = None) -> tuple[bool, str, ScenePrediction | None]:
+                 static: StaticIndex | None = None,
+                 ego_ids: Sequence[str] = ()) -> tuple[bool, str, ScenePrediction | None]:
     """Stateless prediction for one set of states (the service).
 
     Rules (README, "Service"):
@@ -357,7 +373,9 @@ def predict_once(states: Sequence[CircleState], config: PredictorConfig,
       (`ros2 service call` cannot fill in the time); if that is 0 too it is refused;
     - `remove: true` is refused (nothing persists between requests);
     - times count from the newest stamp among them (the rule of core/scene.py);
-    - ``static``: the node's current static world, answered against as well.
+    - ``static``: the node's current static world, answered against as well;
+    - ``ego_ids``: only pairs with one of these bodies, and only they against static geometry
+      (empty: every pair and body; an id not among the circles is refused).
     Returns (success, message, prediction); a refusal names every bad circle
     with every reason ("circles[k] (id 'x'): reason; reason | circles[j] ...").
     """
@@ -383,7 +401,11 @@ def predict_once(states: Sequence[CircleState], config: PredictorConfig,
         batch = replace(
             batch, stamp_ns=np.where(unstamped, np.int64(request_time_ns), batch.stamp_ns)
         )
-    predictor = CollisionPredictor(replace(config, max_bodies=len(states), horizon=horizon))
+    missing = sorted(set(ego_ids) - {s.id for s in states})
+    if missing:
+        return False, f"ego_ids not among the circles: {', '.join(map(repr, missing))}", None
+    predictor = CollisionPredictor(replace(config, max_bodies=len(states), horizon=horizon,
+                                           ego_ids=tuple(ego_ids)))
     predictor.set_static(static)
     report = predictor.ingest(batch, now_ns=None)
     reasons: dict[int, list[str]] = {r.index: [r.reason] for r in report.rejected}

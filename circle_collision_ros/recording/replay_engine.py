@@ -159,6 +159,8 @@ def config_from_json(text: str) -> PredictorConfig:
     """PredictorConfig from the node's recorded configuration (unknown keys ignored)."""
     values = json.loads(text)
     names = {f.name for f in fields(PredictorConfig)}
+    if "ego_ids" in values:
+        values["ego_ids"] = tuple(values["ego_ids"])
     return PredictorConfig(**{k: v for k, v in values.items() if k in names})
 
 
