@@ -1,6 +1,6 @@
 """Ego-centred prediction: the node's work per frame with one ego body against all pairs.
 
-    .venv/bin/python bench/bench_ego.py [--bodies 10000] [--frames 60] [--quick]
+    .venv/bin/python bench/bench_ego.py [--bodies 10000] [--frames 60] [--quick] [--out DIR]
 
 One process, the same frames for both: N bodies (bench_scene.make_scene: uniform in a square
 of side sqrt(N) * 10 m, |v| <= 3 m/s, |a| <= 0.5 m/s^2) moving every frame at 30 Hz, as
@@ -18,6 +18,7 @@ import argparse
 import math
 import time
 from dataclasses import replace
+from pathlib import Path
 
 import numpy as np
 
@@ -66,6 +67,7 @@ def main() -> int:
     parser.add_argument("--bodies", type=int, default=10_000)
     parser.add_argument("--frames", type=int, default=60)
     parser.add_argument("--quick", action="store_true", help="20 frames")
+    parser.add_argument("--out", default=str(HERE / "results"), help="results directory")
     opts = parser.parse_args()
     count = 20 if opts.quick else opts.frames
     info = machine.collect()
@@ -111,7 +113,8 @@ def main() -> int:
             "; the ego rows equal the all-pairs rows with the ego body.\n\n## Machine\n\n")
     info = machine.finish(info, time.perf_counter() - started, {})
     text += machine.table(info)
-    out = HERE / "results" / "ego.md"
+    out = Path(opts.out) / "ego.md"
+    out.parent.mkdir(parents=True, exist_ok=True)
     out.write_text(text)
     print(text)
     print(f"wrote {out}")

@@ -189,6 +189,43 @@ SECTIONS: tuple[Section, ...] = (
         quick_note="100 bodies only, 3 s instead of 10 s",
     ),
     Section(
+        "static",
+        "Static geometry",
+        "first contact with maps, polygons and walls against an exact reference on the hard "
+        "cases, against Box2D's b2TimeOfImpact and a nav2-style fixed step, and the edge "
+        "kernel's ns per pair beside the circle-circle kernels",
+        ("static.md",),
+        script="bench_static.py",
+        runs=(("--out", "{out}"),),
+        quick_runs=(("--out", "{out}", "--quick"),),
+        quick_note="300 rows per family, 20,000 kernel pairs",
+        own_md=True,
+    ),
+    Section(
+        "static_node",
+        "Node with a large map",
+        "1,000 bodies in a 4,000 x 4,000-cell map through DDS against the same without the "
+        "map; a new map indexed while the stream runs",
+        ("static_node.md",),
+        script="bench_static_node.py",
+        runs=(("--out", "{out}"),),
+        quick_runs=(("--out", "{out}", "--quick"),),
+        quick_note="5 s streams instead of 20 s",
+        own_md=True,
+    ),
+    Section(
+        "ego",
+        "Ego-centred prediction",
+        "node work per frame (decode, merge, predict, encode) with one ego body against all "
+        "pairs on the same 10,000-body frames",
+        ("ego.md",),
+        script="bench_ego.py",
+        runs=(("--out", "{out}"),),
+        quick_runs=(("--out", "{out}", "--quick"),),
+        quick_note="20 frames instead of 60",
+        own_md=True,
+    ),
+    Section(
         "transport",
         "Large-frame delivery",
         "delivery of large frames between two processes with and "

@@ -7,6 +7,8 @@
 set -euo pipefail
 ROOT=$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)
 "$ROOT/scripts/bootstrap.sh"
+# benchmark-only dependencies (Box2D for bench_static's comparison), pinned
+"$ROOT/.venv/bin/python" -m pip install --quiet -r "$ROOT/requirements-bench.txt"
 export ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST  # DDS stays on this machine (no multicast)
 export MPLBACKEND=Agg
 cd "$ROOT"

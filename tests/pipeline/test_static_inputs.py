@@ -344,7 +344,10 @@ def _small_messages() -> list[tuple[bytes, object]]:
             (serialize_message(polygon((), frame="")), decode_polygon_stamped)]
 
 
-@pytest.mark.parametrize("data, decode", _small_messages())
+# ids by position: serialized bytes carry padding that differs between processes, and
+# pytest-xdist's workers must collect the same test ids
+@pytest.mark.parametrize("data, decode", _small_messages(),
+                         ids=[f"message{k}" for k in range(len(_small_messages()))])
 def test_every_truncation_is_a_cdr_error(data, decode) -> None:
     # Fast DDS may pad the payload to a multiple of 4: those trailing bytes are not read.
     decode(data)
