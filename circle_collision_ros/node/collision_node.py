@@ -403,7 +403,7 @@ class CollisionNode(LifecycleNode):
             self._recorder = self._open_bag(self._bag_path(p("record_path")))
             self._bags_opened += 1
         # numba's compile (first start) or cache load, before the first message can arrive
-        kernels.prepare(self.predictor, log=self.get_logger().info)
+        kernels.prepare(self.predictor, log=self.get_logger().info, static=settings.used)
 
         overrides = QoSOverridingOptions.with_default_policies()
         self._predictions_pub = self.create_lifecycle_publisher(
@@ -1009,8 +1009,12 @@ class CollisionNode(LifecycleNode):
 
         Also called on a node whose __init__ did not finish (Ctrl-C during the warm-up, a
         start-up error: rclpy's shutdown destroys every node of the context), possibly in the
-        middle of a transition: then only what exists is released.
+        middle of a transition: then only what exists is released. A second call does
+        nothing (the state machine is gone after the first).
         """
+        if getattr(self, "_destroyed", False):
+            return
+        self._destroyed = True
         if hasattr(self, "_active"):
             self._quiet = True
             if self.lifecycle_state in ("unconfigured", "inactive", "active"):

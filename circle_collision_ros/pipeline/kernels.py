@@ -6,7 +6,10 @@ every path its configuration lets a message reach, and only those:
 * ``exact`` and ``messages`` always (the scene's serial kernels, decoding and encoding);
 * ``large`` when ``max_bodies`` lets a frame have ``Scene.COMPILED_ROWS`` pairs or more;
 * ``threads`` when ``max_bodies`` lets a frame reach the parallel policy's thresholds;
-* ``uncertain`` (and ``uncertain_threads`` with threads) unless ``use_covariance`` is off.
+* ``uncertain`` (and ``uncertain_threads`` with threads) unless ``use_covariance`` is off;
+* ``static`` when the node has static inputs (a map, polygons): the static index, the query
+  and its rows in a message, so neither the first map nor the first prediction against it
+  meets a compile.
 
 The core's jobs (``core.warm_up``: ``narrow``, ``parts``, ``rows``, ``batch``,
 ``exact``, ``large``, ``threads``, ``uncertain``) need no ROS, so a set-up step can compile
@@ -40,6 +43,37 @@ def _predictor_path(path: str) -> Callable[[int, float], None]:
     return run
 
 
+def _static(dimensions: int, horizon: float) -> None:
+    """Index a tiny world (a map, a polygon, a wall) and predict against it (2-D only)."""
+    if dimensions != 2:
+        return
+    import numpy as np
+
+    from circle_collision_ros.core.static import (GridFrame, OccupancyMap, Polygon, Segments,
+                                                  StaticIndex, StaticWorld)
+    from circle_collision_ros.pipeline.state_batch import StateBatch
+
+    occupied = np.zeros((8, 8), bool)
+    occupied[0, :] = occupied[3:5, 3] = True
+    world = StaticWorld.build([
+        OccupancyMap("map", occupied, GridFrame(0.5)),
+        Polygon("box", np.array([[10.0, 0.0], [11.0, 0.0], [11.0, 1.0]])),
+        Segments("wall", np.array([[-3.0, -3.0]]), np.array([[-3.0, 3.0]]))])
+    predictor = CollisionPredictor(PredictorConfig(dimensions=2, horizon=horizon,
+                                                   frame_id="map", use_covariance=False))
+    predictor.set_static(StaticIndex.build(world))
+    n, t = 4, 1_000_000_000
+    position = np.array([[1.0, 2.0, 0.0], [9.0, 0.5, 0.0], [-2.0, 0.0, 0.0], [2.0, 2.0, 0.0]])
+    velocity = np.array([[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [-1.0, 0.0, 0.0], [0.0, 0.0, 0.0]])
+    acceleration = np.zeros((n, 3))
+    acceleration[0, 0] = 0.1  # the accelerating path of the edge kernel
+    predictor.receive_batch(StateBatch(
+        ids=["a", "b", "c", "d"], frames=["map"] * n, stamp_ns=np.full(n, t, np.int64),
+        radius=np.full(n, 0.25), position=position, velocity=velocity,
+        acceleration=acceleration, remove=np.zeros(n, bool)), t)
+    predictor.predict().to_cdr()
+
+
 def _codec(dimensions: int, horizon: float) -> None:
     predictor = CollisionPredictor(PredictorConfig(dimensions=dimensions, horizon=horizon))
     predictor.warm_up_codec()
@@ -56,6 +90,7 @@ JOBS: dict[str, Job] = {
     "uncertain": Job(_predictor_path("uncertain"), ("exact", "messages"), _MODULE),
     "uncertain_threads": Job(_predictor_path("uncertain_threads"), ("uncertain", "threads"),
                              _MODULE),
+    "static": Job(_static, ("messages",), _MODULE),
 }
 
 
@@ -70,14 +105,18 @@ def paths_for(config: PredictorConfig) -> tuple[str, ...]:
 
 
 def prepare(predictor: CollisionPredictor, log: Callable[[str], None] | None = None,
-            processes: int | None = None) -> tuple[str, ...]:
+            processes: int | None = None, static: bool = False) -> tuple[str, ...]:
     """Make the paths ``predictor``'s configuration reaches ready in this process: compile
     those not yet in numba's cache in parallel processes (saying so through ``log``), then
-    run ``predictor.warm_up`` here, which loads them.  Returns the paths."""
+    run ``predictor.warm_up`` here, which loads them (``static``: the static geometry path
+    too).  Returns the paths."""
     paths = paths_for(predictor.config)
-    compile_jobs(paths, (predictor.config.dimensions,), JOBS, processes, log)
+    extra = ("static",) if static and predictor.config.dimensions == 2 else ()
+    compile_jobs(paths + extra, (predictor.config.dimensions,), JOBS, processes, log)
     predictor.warm_up(paths)
-    return paths
+    if extra:
+        _static(predictor.config.dimensions, predictor.config.horizon)
+    return paths + extra
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -22,7 +22,7 @@ __all__ = ["StaticIndex"]
 MAX_CELLS_PER_AXIS = 2048
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def cell_range(lo, hi, x0, y0, inv_h, nx, ny):
     """Inclusive cell range of a box, widened by one cell and clipped to the grid."""
     i0 = int(math.floor((lo[0] - x0) * inv_h)) - 1
@@ -32,7 +32,8 @@ def cell_range(lo, hi, x0, y0, inv_h, nx, ny):
     return max(i0, 0), max(j0, 0), min(i1, nx - 1), min(j1, ny - 1)
 
 
-@njit(cache=True)
+# nogil: the node builds an index on a worker thread while its executor predicts
+@njit(cache=True, nogil=True)
 def _fill(lo, hi, x0, y0, inv_h, nx, ny):
     """CSR rows (ptr, items) listing item k in every cell its box [lo[k], hi[k]] touches."""
     n = lo.shape[0]
