@@ -27,6 +27,7 @@ import sys
 from collections.abc import Callable
 
 from circle_collision_ros.core import warm_up as _core
+from circle_collision_ros.core.parallel_policy import threads_forced
 from circle_collision_ros.core.warm_up import (Job, compile_jobs, large_frames_reachable,
                                                threads_reachable)
 from circle_collision_ros.pipeline.predictor import CollisionPredictor, PredictorConfig
@@ -51,7 +52,6 @@ def _static(dimensions: int, horizon: float) -> None:
 
     from circle_collision_ros.core.static import (GridFrame, OccupancyMap, Polygon, Segments,
                                                   StaticIndex, StaticWorld)
-    from circle_collision_ros.pipeline.state_batch import StateBatch
 
     occupied = np.zeros((8, 8), bool)
     occupied[0, :] = occupied[3:5, 3] = True
@@ -59,9 +59,20 @@ def _static(dimensions: int, horizon: float) -> None:
         OccupancyMap("map", occupied, GridFrame(0.5)),
         Polygon("box", np.array([[10.0, 0.0], [11.0, 0.0], [11.0, 1.0]])),
         Segments("wall", np.array([[-3.0, -3.0]]), np.array([[-3.0, 3.0]]))])
+    index = StaticIndex.build(world)
+    for threaded in (False, True):  # the query's serial and threaded twins
+        with threads_forced(threaded):
+            _static_frame(index, horizon)
+
+
+def _static_frame(index, horizon: float) -> None:
+    import numpy as np
+
+    from circle_collision_ros.pipeline.state_batch import StateBatch
+
     predictor = CollisionPredictor(PredictorConfig(dimensions=2, horizon=horizon,
                                                    frame_id="map", use_covariance=False))
-    predictor.set_static(StaticIndex.build(world))
+    predictor.set_static(index)
     n, t = 4, 1_000_000_000
     position = np.array([[1.0, 2.0, 0.0], [9.0, 0.5, 0.0], [-2.0, 0.0, 0.0], [2.0, 2.0, 0.0]])
     velocity = np.array([[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [-1.0, 0.0, 0.0], [0.0, 0.0, 0.0]])

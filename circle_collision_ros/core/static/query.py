@@ -22,10 +22,12 @@ from fractions import Fraction
 from typing import NamedTuple
 
 import numpy as np
-from numba import njit
+import numba
+from numba import njit, prange
 
 from circle_collision_ros.core.narrow.batch import certified_pair2
 from circle_collision_ros.core.narrow.evaluate import EPS, UNDECIDED
+from circle_collision_ros.core.parallel_policy import threads_pay
 from circle_collision_ros.core.narrow.exact import exact_first_contact
 from circle_collision_ros.core.static.edge import F_BOUND, edge_contact
 from circle_collision_ros.core.static.edge_exact import exact_edge_contact
@@ -93,12 +95,13 @@ def _swept_box(px, py, vx, vy, ax, ay, r, t0, t1, lo, hi):
 PIECES = 8
 
 
-@njit(cache=True)
-def _query(P, V, A, R, H, ok, starts, ends, side, points, eob, pob, x0, y0, inv_h, nx, ny,
-           eptr, eitems, pptr, pitems, out_t, out_ob, out_kind, out_idx, skip_ptr, skip, und):
-    """Certified pass over every body; returns the number of undecided (row, kind, index)
-    triples written to ``und`` (or -needed when ``und`` is too small).  Row b ignores the
-    points ``skip[skip_ptr[b]:skip_ptr[b + 1]]`` (corners it only slides past)."""
+@njit(cache=True, nogil=True)
+def _query_range(b0, b1, P, V, A, R, H, ok, starts, ends, side, points, eob, pob, x0, y0,
+                 inv_h, nx, ny, eptr, eitems, pptr, pitems, out_t, out_ob, out_kind, out_idx,
+                 skip_ptr, skip, und):
+    """Certified pass over bodies b0..b1-1; returns the number of undecided (row, kind,
+    index) triples written to ``und`` (or -needed when ``und`` is too small).  Row b ignores
+    the points ``skip[skip_ptr[b]:skip_ptr[b + 1]]`` (corners it only slides past)."""
     ne = starts.shape[0]
     npt = points.shape[0]
     seen_e = np.full(ne, -1, np.int64)
@@ -106,7 +109,7 @@ def _query(P, V, A, R, H, ok, starts, ends, side, points, eob, pob, x0, y0, inv_
     lo = np.empty(2)
     hi = np.empty(2)
     n_und = 0
-    for b in range(P.shape[0]):
+    for b in range(b0, b1):
         out_t[b] = math.nan
         out_ob[b] = -1
         out_kind[b] = 0
@@ -183,6 +186,38 @@ def _query(P, V, A, R, H, ok, starts, ends, side, points, eob, pob, x0, y0, inv_
                             bt, bob, bk, bi = t, pob[k], 2, k
         out_t[b], out_ob[b], out_kind[b], out_idx[b] = bt, bob, bk, bi
     return n_und if n_und <= und.shape[0] else -n_und
+
+
+@njit(cache=True)
+def _query(P, V, A, R, H, ok, starts, ends, side, points, eob, pob, x0, y0, inv_h, nx, ny,
+           eptr, eitems, pptr, pitems, out_t, out_ob, out_kind, out_idx, skip_ptr, skip, und):
+    """Every body on this thread; ``und`` is (1, cap, 3); returns the counts per chunk."""
+    counts = np.zeros(1, np.int64)
+    counts[0] = _query_range(0, P.shape[0], P, V, A, R, H, ok, starts, ends, side, points, eob,
+                             pob, x0, y0, inv_h, nx, ny, eptr, eitems, pptr, pitems, out_t,
+                             out_ob, out_kind, out_idx, skip_ptr, skip, und[0])
+    return counts
+
+
+@njit(cache=True, parallel=True)
+def _query_threaded(P, V, A, R, H, ok, starts, ends, side, points, eob, pob, x0, y0, inv_h, nx,
+                    ny, eptr, eitems, pptr, pitems, out_t, out_ob, out_kind, out_idx, skip_ptr,
+                    skip, und):
+    """``_query`` with the bodies cut into ``und.shape[0]`` chunks on numba's threads: each
+    body's answer is computed exactly as there (its own features, its own order)."""
+    chunks = und.shape[0]
+    n = P.shape[0]
+    counts = np.zeros(chunks, np.int64)
+    for c in prange(chunks):
+        counts[c] = _query_range(n * c // chunks, n * (c + 1) // chunks, P, V, A, R, H, ok,
+                                 starts, ends, side, points, eob, pob, x0, y0, inv_h, nx, ny,
+                                 eptr, eitems, pptr, pitems, out_t, out_ob, out_kind, out_idx,
+                                 skip_ptr, skip, und[c])
+    return counts
+
+
+#: From this many bodies a query may run on numba's threads (core.parallel_policy decides).
+THREADED_BODIES = 256
 
 
 def _rows(x, name: str, n: int | None) -> np.ndarray:
@@ -333,16 +368,22 @@ def _certified_then_exact(P, V, A, R, H, ok, index, todo, skip_ptr, skip, out_t,
     else:  # the first pass: nothing skipped (no per-row Python work)
         sp, sk = np.zeros(m + 1), np.empty(0)
     sp, sk = sp.astype(np.int64), sk.astype(np.int64)
-    und = np.empty((64, 3), np.int64)
     args = (*sub, H, ok[todo], w.starts, w.ends, w.solid_side.astype(np.int64), w.points,
             w.edge_obstacle, w.point_obstacle, index.x0, index.y0, 1.0 / index.h, index.nx,
             index.ny, index.edge_ptr, index.edge_items, index.point_ptr, index.point_items,
             t, ob, kind, idx, sp, sk)
-    n_und = _query(*args, und)
-    if n_und < 0:
-        und = np.empty((-n_und, 3), np.int64)
-        n_und = _query(*args, und)
-    for i, fk, k in und[:n_und]:
+    threaded = threads_pay(m, THREADED_BODIES)
+    kernel = _query_threaded if threaded else _query
+    chunks = 2 * numba.get_num_threads() if threaded else 1
+    cap = 64
+    while True:
+        und = np.empty((chunks, cap, 3), np.int64)
+        counts = kernel(*args, und)
+        if (counts >= 0).all():
+            break
+        cap = int(-counts.min())
+    rows = np.concatenate([und[c, :counts[c]] for c in range(chunks)])
+    for i, fk, k in rows:
         b = todo[i]
         if fk == KIND_EDGE:
             te = exact_edge_contact(P[b], V[b], A[b], R[b], w.starts[k], w.ends[k],

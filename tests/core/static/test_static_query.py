@@ -340,3 +340,24 @@ def test_a_point_body_sliding_along_a_map_wall_past_its_corner_is_no_contact():
     p = (float.fromhex("0x1.315p+3"), float.fromhex("-0x1.cp-1"))
     v = (float.fromhex("0x1.7p+0"), 0.0)
     assert _one(world, p, v, (0.0, 0.0), 0.0, 5.0)[0] == math.inf
+
+
+def test_the_threaded_query_equals_the_serial_one():
+    from circle_collision_ros.core.parallel_policy import threads_forced
+
+    world = _room()
+    index = StaticIndex.build(world)
+    rng = np.random.default_rng(12)
+    n = 700
+    P = rng.uniform([-1.9, -1.4], [1.9, 1.4], size=(n, 2))
+    V = rng.normal(size=(n, 2))
+    A = rng.normal(size=(n, 2)) * 0.3
+    R = rng.uniform(0.0, 0.15, n)
+    R[::50] = 0.0  # point bodies: some take the exact path
+    out = []
+    for threaded in (False, True):
+        with threads_forced(threaded):
+            out.append(time_to_static(P, V, A, R, index, 2.0))
+    for a, b in zip(*out):
+        np.testing.assert_array_equal(a, b)
+    assert np.isfinite(out[0].time).sum() > n // 3
