@@ -18,12 +18,13 @@ another edge), so both sides of every edge can be tested alike.
 from __future__ import annotations
 
 import math
+import os
+from concurrent.futures import ThreadPoolExecutor
 from fractions import Fraction
 from typing import NamedTuple
 
 import numpy as np
-import numba
-from numba import njit, prange
+from numba import njit
 
 from circle_collision_ros.core.narrow.batch import certified_pair2
 from circle_collision_ros.core.narrow.evaluate import EPS, UNDECIDED
@@ -188,35 +189,34 @@ def _query_range(b0, b1, P, V, A, R, H, ok, starts, ends, side, points, eob, pob
     return n_und if n_und <= und.shape[0] else -n_und
 
 
-@njit(cache=True)
-def _query(P, V, A, R, H, ok, starts, ends, side, points, eob, pob, x0, y0, inv_h, nx, ny,
-           eptr, eitems, pptr, pitems, out_t, out_ob, out_kind, out_idx, skip_ptr, skip, und):
-    """Every body on this thread; ``und`` is (1, cap, 3); returns the counts per chunk."""
-    counts = np.zeros(1, np.int64)
-    counts[0] = _query_range(0, P.shape[0], P, V, A, R, H, ok, starts, ends, side, points, eob,
-                             pob, x0, y0, inv_h, nx, ny, eptr, eitems, pptr, pitems, out_t,
-                             out_ob, out_kind, out_idx, skip_ptr, skip, und[0])
-    return counts
-
-
-@njit(cache=True, parallel=True)
-def _query_threaded(P, V, A, R, H, ok, starts, ends, side, points, eob, pob, x0, y0, inv_h, nx,
-                    ny, eptr, eitems, pptr, pitems, out_t, out_ob, out_kind, out_idx, skip_ptr,
-                    skip, und):
-    """``_query`` with the bodies cut into ``und.shape[0]`` chunks on numba's threads: each
-    body's answer is computed exactly as there (its own features, its own order)."""
+def _query(args: tuple, und: np.ndarray, threaded: bool) -> np.ndarray:
+    """The certified pass over every body, in ``und.shape[0]`` chunks of bodies; chunks run
+    on a thread pool when ``threaded`` (the kernel releases the GIL, and each chunk has its
+    own candidate stamps and undecided list, so every body is computed exactly as in one
+    pass).  Returns each chunk's count of undecided triples (negative: more than fit)."""
     chunks = und.shape[0]
-    n = P.shape[0]
-    counts = np.zeros(chunks, np.int64)
-    for c in prange(chunks):
-        counts[c] = _query_range(n * c // chunks, n * (c + 1) // chunks, P, V, A, R, H, ok,
-                                 starts, ends, side, points, eob, pob, x0, y0, inv_h, nx, ny,
-                                 eptr, eitems, pptr, pitems, out_t, out_ob, out_kind, out_idx,
-                                 skip_ptr, skip, und[c])
-    return counts
+    n = args[0].shape[0]
+
+    def run(c: int) -> int:
+        return _query_range(n * c // chunks, n * (c + 1) // chunks, *args, und[c])
+
+    if threaded and chunks > 1:
+        return np.array(list(_pool().map(run, range(chunks))), np.int64)
+    return np.array([run(c) for c in range(chunks)], np.int64)
 
 
-#: From this many bodies a query may run on numba's threads (core.parallel_policy decides).
+_POOL: list = []
+
+
+def _pool() -> ThreadPoolExecutor:
+    """The query's worker threads (one per core), made on first use."""
+    if not _POOL:
+        _POOL.append(ThreadPoolExecutor(max_workers=os.cpu_count() or 1,
+                                        thread_name_prefix="static_query"))
+    return _POOL[0]
+
+
+#: From this many bodies a query may run on threads (core.parallel_policy decides).
 THREADED_BODIES = 256
 
 
@@ -373,12 +373,11 @@ def _certified_then_exact(P, V, A, R, H, ok, index, todo, skip_ptr, skip, out_t,
             index.ny, index.edge_ptr, index.edge_items, index.point_ptr, index.point_items,
             t, ob, kind, idx, sp, sk)
     threaded = threads_pay(m, THREADED_BODIES)
-    kernel = _query_threaded if threaded else _query
-    chunks = 2 * numba.get_num_threads() if threaded else 1
+    chunks = 2 * (os.cpu_count() or 1) if threaded else 1
     cap = 64
     while True:
         und = np.empty((chunks, cap, 3), np.int64)
-        counts = kernel(*args, und)
+        counts = _query(args, und, threaded)
         if (counts >= 0).all():
             break
         cap = int(-counts.min())
