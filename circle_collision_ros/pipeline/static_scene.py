@@ -213,7 +213,9 @@ class StaticCache:
 
     def __init__(self) -> None:
         self._ids = np.empty(0, dtype=object)
-        self._key: tuple | None = None  # (index, H + S): a change of either recomputes all
+        # (index, H + S): a change of either recomputes all; the index itself is held (an
+        # id() could be reused by a new index once the old one is freed)
+        self._key: tuple | None = None
         self._state = np.empty((0, 8))  # T, t_b, p(2), v(2), a(2)... as float64 for compare
         self._radius = np.empty(0)
         self._tau = np.empty(0)
@@ -237,11 +239,12 @@ class StaticCache:
         state[:, 0] = T
         state[:, 1] = tb
         state[:, 2:4], state[:, 4:6], state[:, 6:8] = P[:, :2], V[:, :2], A[:, :2]
-        key = (id(index), horizon + slack_s)
+        key = (index, horizon + slack_s)
         ids_arr = np.array(ids, dtype=object)
         dirty = np.ones(n, bool)
         keep = np.zeros(n, np.int64)
-        if key == self._key and len(self._ids):
+        if (self._key is not None and self._key[0] is index and self._key[1] == key[1]
+                and len(self._ids)):
             pos = np.searchsorted(self._ids, ids_arr)
             pos = np.minimum(pos, len(self._ids) - 1)
             same = ((self._ids[pos] == ids_arr) & (self._state[pos] == state).all(axis=1)

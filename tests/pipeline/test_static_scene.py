@@ -134,3 +134,19 @@ def test_a_one_body_update_evaluates_that_body_alone() -> None:
     predictor.predict()
     assert predictor._static_cache.evaluated == n  # noqa: SLF001
     assert math.isfinite(predictor.config.horizon)
+
+
+def test_a_new_world_is_answered_with_unchanged_bodies() -> None:
+    """The cache holds the index it answered: bodies that did not move are answered
+    against a new world (also when the old index is freed and its id() reused)."""
+    predictor = CollisionPredictor(PredictorConfig(horizon=4.0, frame_id="map"))
+    n = 3
+    P = np.array([[0.0, 0.0], [0.0, 5.0], [0.0, -5.0]])
+    V = np.array([[1.0, 0.0], [1.0, 0.0], [1.0, 0.0]])
+    predictor.ingest(_batch(["a", "b", "c"], np.full(n, T0), P, V, np.zeros((n, 2)),
+                            np.full(n, 0.5)), None)
+    for x in (2.0, 3.0, 2.5, 3.5):  # each world replaces (and frees) the previous index
+        wall = StaticWorld.build([Segments("w", np.array([[x, -10.0]]), np.array([[x, 10.0]]))])
+        predictor.set_static(StaticIndex.build(wall))
+        rows = predictor.predict().static
+        assert rows.id_a == ["a", "b", "c"] and (rows.ttc == x - 0.5).all()
