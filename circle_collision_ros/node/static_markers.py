@@ -7,6 +7,8 @@ Rarely sent and drawn off the prediction path by the executor between prediction
 """
 from __future__ import annotations
 
+import time
+
 from builtin_interfaces.msg import Time
 from geometry_msgs.msg import Point
 from std_msgs.msg import ColorRGBA, Header
@@ -18,6 +20,7 @@ __all__ = ["STATIC_MARKER_NAMESPACE", "static_markers"]
 
 STATIC_MARKER_NAMESPACE = "static"
 LINE_WIDTH_M = 0.03
+YIELD_EVERY = 256  # edges between two hand-overs of the GIL (~0.5 ms of Python)
 GREY = ColorRGBA(r=0.55, g=0.55, b=0.6, a=1.0)
 
 
@@ -31,9 +34,13 @@ def static_markers(world: StaticWorld | None, frame_id: str, stamp: Time) -> Mar
         edges = world.edge_obstacle == k
         starts, ends = world.starts[edges], world.ends[edges]
         points = []
-        for (x0, y0), (x1, y1) in zip(starts.tolist(), ends.tolist()):
+        for k, ((x0, y0), (x1, y1)) in enumerate(zip(starts.tolist(), ends.tolist())):
             points.append(Point(x=x0, y=y0, z=0.0))
             points.append(Point(x=x1, y=y1, z=0.0))
+            if k % YIELD_EVERY == YIELD_EVERY - 1:
+                # this runs on the indexing thread: hand the GIL to the executor often, or a
+                # prediction waits up to the interpreter's switch interval each time
+                time.sleep(0)
         marker = Marker(header=header, ns=STATIC_MARKER_NAMESPACE, id=k, type=Marker.LINE_LIST,
                         action=Marker.ADD, points=points, color=GREY, text=name)
         marker.scale.x = LINE_WIDTH_M

@@ -213,6 +213,7 @@ class StaticCache:
 
     def __init__(self) -> None:
         self._ids = np.empty(0, dtype=object)
+        self._id_list: list = []
         # (index, H + S): a change of either recomputes all; the index itself is held (an
         # id() could be reused by a new index once the old one is freed)
         self._key: tuple | None = None
@@ -245,10 +246,14 @@ class StaticCache:
         keep = np.zeros(n, np.int64)
         if (self._key is not None and self._key[0] is index and self._key[1] == key[1]
                 and len(self._ids)):
-            pos = np.searchsorted(self._ids, ids_arr)
-            pos = np.minimum(pos, len(self._ids) - 1)
-            same = ((self._ids[pos] == ids_arr) & (self._state[pos] == state).all(axis=1)
-                    & (self._radius[pos] == Rad))
+            if ids == self._id_list:  # the same bodies (tracker frames): rows align
+                pos = np.arange(n)
+                same = (self._state == state).all(axis=1) & (self._radius == Rad)
+            else:
+                pos = np.searchsorted(self._ids, ids_arr)
+                pos = np.minimum(pos, len(self._ids) - 1)
+                same = ((self._ids[pos] == ids_arr) & (self._state[pos] == state).all(axis=1)
+                        & (self._radius[pos] == Rad))
             dirty = ~same
             keep = pos
         tau = np.empty(n)
@@ -273,6 +278,7 @@ class StaticCache:
             inside = c.kind == KIND_INSIDE
             point[rows[inside]] = p[inside]
         self._ids, self._key, self._state, self._radius = ids_arr, key, state, Rad.copy()
+        self._id_list = list(ids)
         self._tau, self._ob, self._kind = tau, ob, kind
         self._point, self._normal, self._speed = point, normal, speed
 
