@@ -104,6 +104,10 @@ def test_dump_has_every_value_and_round_trips_through_params_file(ros_node, tmp_
     assert first["horizon"] == 5.0 and first["probability_threshold"] == 0.01
     path = tmp_path / "dump.yaml"
     path.write_text(dump_yaml(first))
+    # The second node has the first's name: until the client's graph has dropped the first,
+    # its services look ready, and a request could go out before the second's reader matched
+    # (seen once under a loaded CI run: "list_parameters: no answer").
+    assert spin_until(ros_node, lambda: "collision_node" not in ros_node.get_node_names(), 20.0)
     context, node = _start(["--params-file", str(path)])
     try:
         second = param_dump(ros_node, node)
@@ -128,6 +132,10 @@ def test_non_default_dump_round_trips(ros_node, tmp_path: Path) -> None:
     assert first["single_state_topics"] == ["robot_1/circle_state"] and first["horizon"] == 2.5
     path = tmp_path / "dump.yaml"
     path.write_text(dump_yaml(first))
+    # The second node has the first's name: until the client's graph has dropped the first,
+    # its services look ready, and a request could go out before the second's reader matched
+    # (seen once under a loaded CI run: "list_parameters: no answer").
+    assert spin_until(ros_node, lambda: "collision_node" not in ros_node.get_node_names(), 20.0)
     context, node = _start(["--params-file", str(path)])
     try:
         assert param_dump(ros_node, node) == first
