@@ -85,7 +85,8 @@ from circle_collision_ros.node.input_loss import InputLossMonitor
 from circle_collision_ros.node.activity import NodeActivity
 from circle_collision_ros.node.markers import MarkerPublisher
 from circle_collision_ros.node.probabilities import ProbabilityPublisher
-from circle_collision_ros.node.static_inputs import StaticInputs, StaticSettings
+from circle_collision_ros.node.static_inputs import StaticInputs
+from circle_collision_ros.pipeline.static_scene import StaticSettings
 from circle_collision_ros.pipeline.predictor import (RUNTIME_FIELDS, CollisionPredictor,
                                                      IntakeReport, PredictorConfig, predict_once)
 

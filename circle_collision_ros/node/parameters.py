@@ -30,6 +30,7 @@ from rclpy.node import Node
 from rclpy.parameter import Parameter
 
 from circle_collision_ros.pipeline.predictor import HorizonLimits
+from circle_collision_ros.pipeline.static_scene import parse_static_polygons
 
 
 @dataclass(frozen=True)
@@ -310,8 +311,6 @@ def validate(name: str, value: Any) -> str | None:
         if any(not t or " " in t for t in value):
             return f"{name} has an empty or malformed topic name: {list(value)!r}"
     if name == "static_polygons" and isinstance(value, str):
-        from circle_collision_ros.pipeline.static_scene import parse_static_polygons
-
         try:
             parse_static_polygons(value)
         except ValueError as exc:

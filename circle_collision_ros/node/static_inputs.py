@@ -44,7 +44,7 @@ from circle_collision_ros.pipeline.static_scene import (
     build_index,
 )
 
-__all__ = ["StaticInputs", "StaticSettings"]
+__all__ = ["StaticInputs"]
 
 
 class StaticInputs:
@@ -179,10 +179,6 @@ class StaticInputs:
         for sub in self._subscriptions:
             self._node.destroy_subscription(sub)
         self._subscriptions = []
-
-    def wait_idle(self, timeout: float = 10.0) -> None:
-        """Tests: wait until every submitted build finished (not until applied)."""
-        self._worker.submit(lambda: None).result(timeout)
 
     def close(self) -> None:
         """Unsubscribe, let a build in progress finish (its guard must still exist when it

@@ -124,14 +124,16 @@ def decode_odometry(data: bytes) -> OdometryFields:
                           tuple(values[_POSE_COVARIANCE]), tuple(values[_TWIST_COVARIANCE]))
 
 
-def unit_quaternion(q: tuple[float, float, float, float]) -> tuple[float, float, float, float]:
-    """q normalised, under QuaternionRule; raises OdometryError naming the problem."""
+def unit_quaternion(q: tuple[float, float, float, float], field: str = "pose.orientation",
+                    error: type[CdrError] = OdometryError) -> tuple[float, float, float, float]:
+    """q normalised, under QuaternionRule; raises ``error`` naming ``field`` and the problem
+    (an OccupancyGrid's origin takes the same rule)."""
     norm = math.sqrt(sum(c * c for c in q)) if all(math.isfinite(c) for c in q) else math.nan
     if not math.isfinite(norm) or norm == 0.0:
-        raise OdometryError(f"pose.orientation {q} is zero or not finite")
+        raise error(f"{field} {q} is zero or not finite")
     if abs(norm - 1.0) > QuaternionRule.TOLERANCE:
-        raise OdometryError(
-            f"pose.orientation {q} is not a unit quaternion (norm {norm:.6g}; "
+        raise error(
+            f"{field} {q} is not a unit quaternion (norm {norm:.6g}; "
             f"accepted within {QuaternionRule.TOLERANCE:g} of 1)"
         )
     return q[0] / norm, q[1] / norm, q[2] / norm, q[3] / norm

@@ -52,7 +52,8 @@ import numpy as np
 
 from circle_collision_ros.pipeline.cdr import (CDR_BE, CDR_LE, ORIGIN, CdrError, align, read_string,
                                                read_u32)
-from circle_collision_ros.pipeline.odometry import QuaternionRule, body_id_of_topic
+from circle_collision_ros.pipeline.odometry import (QuaternionRule, body_id_of_topic,
+                                                    unit_quaternion)
 
 OCCUPANCY_GRID_TYPE = "nav_msgs/msg/OccupancyGrid"
 POLYGON_STAMPED_TYPE = "geometry_msgs/msg/PolygonStamped"
@@ -194,15 +195,7 @@ def map_yaw(q: tuple[float, float, float, float]) -> float:
     """Yaw (rad, in (-pi, pi]) of a map orientation q = (x, y, z, w), which must be a rotation
     about z; raises StaticInputError naming info.origin.orientation otherwise."""
     q = tuple(float(c) for c in q)
-    norm = math.sqrt(sum(c * c for c in q)) if all(math.isfinite(c) for c in q) else math.nan
-    if not math.isfinite(norm) or norm == 0.0:
-        raise StaticInputError(f"info.origin.orientation {q} is zero or not finite")
-    if abs(norm - 1.0) > QuaternionRule.TOLERANCE:
-        raise StaticInputError(
-            f"info.origin.orientation {q} is not a unit quaternion (norm {norm:.6g}; "
-            f"accepted within {QuaternionRule.TOLERANCE:g} of 1)"
-        )
-    x, y, z, w = (c / norm for c in q)
+    x, y, z, w = unit_quaternion(q, "info.origin.orientation", StaticInputError)
     tilt = math.hypot(x, y)
     if tilt > MAX_TILT:
         raise StaticInputError(

@@ -47,15 +47,18 @@ _MAX_INPUT = 1e150  # the narrow phase's documented input range
 Poly = list  # integer coefficients, ascending powers, highest one nonzero
 
 
-def _bits(x: float) -> int:
+def float_bits(x: float) -> int:
+    """The float64's bit pattern as a signed 64-bit integer (consecutive floats differ by 1)."""
     return struct.unpack("<q", struct.pack("<d", x))[0]
 
 
-def _float(b: int) -> float:
+def bits_float(b: int) -> float:
+    """The float64 with bit pattern ``b`` (inverse of float_bits)."""
     return struct.unpack("<d", struct.pack("<q", b))[0]
 
 
-def _sign(x: int) -> int:
+def int_sign(x: int) -> int:
+    """-1, 0 or 1."""
     return (x > 0) - (x < 0)
 
 
@@ -117,10 +120,10 @@ def _eval_sign(p: Poly, n: int, s: int) -> int:
     for c in reversed(p[:-1]):
         shift += s
         r = r * n + (c << shift)
-    return _sign(r)
+    return int_sign(r)
 
 
-def _dyadic(x: float) -> tuple[int, int]:
+def dyadic(x: float) -> tuple[int, int]:
     """(n, s) with x = n / 2^s, s >= 0."""
     n, d = x.as_integer_ratio()  # d is a power of two
     return n, d.bit_length() - 1
@@ -154,26 +157,26 @@ class _Roots:
         g = _gcd(p, _deriv(p))
         self.p = _primitive(_pdiv(p, g)[0]) if len(g) > 1 else p  # square-free part
         self.seq = _sturm(self.p)
-        self.v0 = _variations(_sign(s[0]) for s in self.seq)
+        self.v0 = _variations(int_sign(s[0]) for s in self.seq)
 
     def sign(self, x: float | tuple[int, int]) -> int:
         """Sign of the square-free part at x (a float, or (n, s) for n / 2^s)."""
-        n, s = _dyadic(x) if isinstance(x, float) else x
+        n, s = dyadic(x) if isinstance(x, float) else x
         return _eval_sign(self.p, n, s)
 
     def v(self, x: float | tuple[int, int]) -> int:
-        n, s = _dyadic(x) if isinstance(x, float) else x
+        n, s = dyadic(x) if isinstance(x, float) else x
         return _variations(_eval_sign(q, n, s) for q in self.seq)
 
     def v_inf(self) -> int:
-        return _variations(_sign(s[-1]) for s in self.seq)
+        return _variations(int_sign(s[-1]) for s in self.seq)
 
     def any_upto(self, x: float | tuple[int, int]) -> bool:
         """Some root in (0, x] (x > 0)."""
         return self.sign(x) == 0 or self.v0 - self.v(x) > 0
 
 
-def _scaled_ints(vals: list) -> list:
+def scaled_ints(vals: list) -> list:
     """The floats in `vals` times one common power of two, as exact integers."""
     ratios = [x.as_integer_ratio() for x in vals]
     s = max(d.bit_length() - 1 for _, d in ratios)  # 2^s clears every denominator
@@ -196,7 +199,7 @@ def exact_first_contact(p_a: Sequence[float], v_a: Sequence[float], a_a: Sequenc
         # beyond the documented input range: integers of ~2000 bits and more
         # make the exact path arbitrarily slow (NaN, like an overflow)
         return math.nan
-    w = _scaled_ints(vals)  # p_a, v_a, a_a, r_a, p_b, v_b, a_b, r_b, times 2^s
+    w = scaled_ints(vals)  # p_a, v_a, a_a, r_a, p_b, v_b, a_b, r_b, times 2^s
     half = 3 * D + 1
     dp = [w[i] - w[half + i] for i in range(D)]
     dv = [w[D + i] - w[half + D + i] for i in range(D)]
@@ -229,19 +232,19 @@ def exact_first_contact(p_a: Sequence[float], v_a: Sequence[float], a_a: Sequenc
             return math.inf
         hi = _MAX_BITS
     else:
-        hi = _bits(H)
-    if not roots.any_upto(_float(hi)):
+        hi = float_bits(H)
+    if not roots.any_upto(bits_float(hi)):
         return math.inf
     lo = 0  # invariant: no root in (0, float(lo)], a root in (0, float(hi)]
     # Sturm counts until (lo, hi] isolates the first root; from then on the
     # sign of the square-free part (every root simple, so a sign change at
     # each) decides, one polynomial evaluation per step instead of a sequence
-    s_lo = _sign(roots.p[0])
-    v_lo, v_hi = roots.v0, roots.v(_float(hi))
-    single = roots.sign(_float(hi)) != 0 and v_lo - v_hi == 1
+    s_lo = int_sign(roots.p[0])
+    v_lo, v_hi = roots.v0, roots.v(bits_float(hi))
+    single = roots.sign(bits_float(hi)) != 0 and v_lo - v_hi == 1
     while hi - lo > 1:
         mid = (lo + hi) // 2
-        x = _float(mid)
+        x = bits_float(mid)
         if single:
             if roots.sign(x) == s_lo:
                 lo = mid
@@ -258,13 +261,13 @@ def exact_first_contact(p_a: Sequence[float], v_a: Sequence[float], a_a: Sequenc
             lo = mid
             v_lo = v_mid
             s_lo = s_mid
-            single = v_lo - v_hi == 1 and roots.sign(_float(hi)) != 0
+            single = v_lo - v_hi == 1 and roots.sign(bits_float(hi)) != 0
     # first root r in (x_lo, x_hi]: round to nearest (never to 0)
-    x_lo, x_hi = _float(lo), _float(hi)
+    x_lo, x_hi = bits_float(lo), bits_float(hi)
     if lo == 0:
         return x_hi
     # m = (x_lo + x_hi) / 2 = n / 2^s exactly
-    (n_lo, e_lo), (n_hi, e_hi) = _dyadic(x_lo), _dyadic(x_hi)
+    (n_lo, e_lo), (n_hi, e_hi) = dyadic(x_lo), dyadic(x_hi)
     e = max(e_lo, e_hi)
     m = (n_lo << (e - e_lo)) + (n_hi << (e - e_hi)), e + 1
     if not roots.any_upto(m):
@@ -276,7 +279,7 @@ def exact_first_contact(p_a: Sequence[float], v_a: Sequence[float], a_a: Sequenc
     q = _primitive(_pdiv(roots.p, [-m[0], 1 << m[1]])[0])
     if len(q) > 1:
         sq = _sturm(q)
-        va = _variations(_eval_sign(s, *_dyadic(x_lo)) for s in sq)
+        va = _variations(_eval_sign(s, *dyadic(x_lo)) for s in sq)
         vm = _variations(_eval_sign(s, *m) for s in sq)
         if va - vm > 0:
             return x_lo  # r < m

@@ -437,7 +437,6 @@ def incremental_pairs(dirty, alive, P, V, A, Rad, T, Tf, lo, hi, E, slack_ns, H,
     The pairs are those of the grid with an overlay (bounds overlapping means sharing a
     cell unless one is big), so the same (A, B) in the same order.
     """
-    D = P.shape[1]
     for x in range(dirty.shape[0]):
         s = dirty[x]
         gstale[s] = True
@@ -477,7 +476,17 @@ def incremental_pairs(dirty, alive, P, V, A, Rad, T, Tf, lo, hi, E, slack_ns, H,
             y = moved[q]
             if alive[y]:
                 keys, m = _push_pair(keys, m, s, y, lo, hi, cap)
-    keys = np.sort(keys[:m])
+    Ao, Bo = _kept_pairs(np.sort(keys[:m]), P, V, A, Rad, Tf, rank, cap, t_end)
+    return Ao, Bo, n_moved
+
+
+@njit(cache=True, error_model="numpy")
+def _kept_pairs(keys, P, V, A, Rad, Tf, rank, cap, t_end):
+    """The pairs of ``keys`` (min slot * cap + max slot; a key repeated in a row is taken once)
+    oriented so that the first body's rank is smaller, kept by the broad phase's relative test
+    over [0, t_end]: (A, B) in key order."""
+    D = P.shape[1]
+    m = keys.shape[0]
     Ao = np.empty(m, dtype=np.int64)
     Bo = np.empty(m, dtype=np.int64)
     u = 0
@@ -496,7 +505,7 @@ def incremental_pairs(dirty, alive, P, V, A, Rad, T, Tf, lo, hi, E, slack_ns, H,
             Ao[u] = a
             Bo[u] = b
             u += 1
-    return Ao[:u], Bo[:u], n_moved
+    return Ao[:u], Bo[:u]
 
 
 @njit(cache=True, error_model="numpy")
@@ -515,7 +524,6 @@ def ego_pairs(bounds_of, query, alive, ego, ego_members, P, V, A, Rad, T, Tf, lo
     ego set: the same boxes, the same closed-interval test and relative test) that contain an
     ego body and a body of `query`.
     """
-    D = P.shape[1]
     for x in range(bounds_of.shape[0]):
         s = bounds_of[x]
         if alive[s]:
@@ -524,24 +532,9 @@ def ego_pairs(bounds_of, query, alive, ego, ego_members, P, V, A, Rad, T, Tf, lo
             tb = np.float64(E + slack_ns - T[s]) * 1e-9 + H
             swept_bound_row(P, V, A, Rad, s, ta, tb, lo, hi, s)
     keys, tests = ego_box_keys(query, alive, ego, ego_members, lo, hi, cap)
-    m = keys.shape[0]
-    Ao = np.empty(m, dtype=np.int64)
-    Bo = np.empty(m, dtype=np.int64)
-    u = 0
-    for k in range(m):
-        a = keys[k] // cap
-        b = keys[k] % cap
-        if rank[a] > rank[b]:
-            a, b = b, a
-        if D == 2:
-            keep = rel_keep(P, V, A, Rad, Tf, a, b, 0.0, t_end, 2)
-        else:
-            keep = rel_keep(P, V, A, Rad, Tf, a, b, 0.0, t_end, 3)
-        if keep:
-            Ao[u] = a
-            Bo[u] = b
-            u += 1
-    return Ao[:u], Bo[:u], tests
+    # each pair is listed once (ego_box_keys tests it once), so no key repeats
+    Ao, Bo = _kept_pairs(keys, P, V, A, Rad, Tf, rank, cap, t_end)
+    return Ao, Bo, tests
 
 
 @njit(cache=True, error_model="numpy")

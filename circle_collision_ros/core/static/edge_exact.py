@@ -51,9 +51,11 @@ thousands of bits and a bisection instead of the float estimate (~1 ms).
 from __future__ import annotations
 
 import math
-import struct
 import sys
 from typing import Sequence
+
+from circle_collision_ros.core.narrow.exact import (bits_float, dyadic, float_bits, int_sign,
+                                                    scaled_ints)
 
 __all__ = ["exact_edge_contact"]
 
@@ -63,36 +65,11 @@ _MAX = sys.float_info.max
 _OVERFLOW = (1 << 1024) - (1 << 970)
 
 
-def _bits(x: float) -> int:
-    return struct.unpack("<q", struct.pack("<d", x))[0]
-
-
-def _float(b: int) -> float:
-    return struct.unpack("<d", struct.pack("<q", b))[0]
-
-
-def _sign(x: int) -> int:
-    return (x > 0) - (x < 0)
-
-
-def _dyadic(x: float) -> tuple[int, int]:
-    """(n, s) with x = n / 2^s, s >= 0 (x finite)."""
-    n, d = x.as_integer_ratio()  # d is a power of two
-    return n, d.bit_length() - 1
-
-
-def _scaled_ints(vals: list) -> list:
-    """Return the floats in `vals` times one common power of two, as exact integers."""
-    ratios = [x.as_integer_ratio() for x in vals]
-    s = max(d.bit_length() - 1 for _, d in ratios)  # 2^s clears every denominator
-    return [n << (s - (d.bit_length() - 1)) for n, d in ratios]
-
-
 def _lowest_sign(*coeffs: int) -> int:
     """Return the sign of the lowest-order nonzero coefficient (0 if all are zero)."""
     for c in coeffs:
         if c:
-            return _sign(c)
+            return int_sign(c)
     return 0
 
 
@@ -118,13 +95,13 @@ class _Surd:
     __rmul__ = __mul__
 
     def sign(self) -> int:
-        sa, sb = _sign(self.a), _sign(self.b)
+        sa, sb = int_sign(self.a), int_sign(self.b)
         if sb == 0 or sa == sb:
             return sa if sa else sb
         if sa == 0:
             return sb
         # opposite signs: the larger of |a| and |b| sqrt(q) wins
-        return sa * _sign(self.a * self.a - self.b * self.b * self.q)
+        return sa * int_sign(self.a * self.a - self.b * self.b * self.q)
 
     def approx(self) -> float:
         """Float value, a few ulps off (may raise OverflowError for huge values)."""
@@ -162,7 +139,7 @@ class _Time:
         return _sign2(self.x * k - _Surd(self.den * n, 0, self.x.q), self.y * k, self.d)
 
     def cmp_float(self, f: float) -> int:
-        return self.cmp(*_dyadic(f))
+        return self.cmp(*dyadic(f))
 
     def poly_sign(self, c0: int, c1: int, c2: int) -> int:
         """Sign of c0 + c1 T + c2 T^2 (integers c0, c1, c2).
@@ -195,21 +172,21 @@ def _round(t: _Time, guess: float, hi: int) -> float:
     """
 
     def cmp(b: int) -> int:
-        return t.cmp_float(_float(b))
+        return t.cmp_float(bits_float(b))
 
     lo = 0  # invariant: float(lo) < t < float(hi)
-    b = min(max(_bits(guess), lo + 1), hi - 1) if 0.0 < guess < math.inf else (lo + hi) // 2
+    b = min(max(float_bits(guess), lo + 1), hi - 1) if 0.0 < guess < math.inf else (lo + hi) // 2
     if lo < b < hi:
         c = cmp(b)
         if c == 0:
-            return _float(b)
+            return bits_float(b)
         step = 1
         if c > 0:
             lo = b
             while lo + step < hi:
                 c = cmp(lo + step)
                 if c == 0:
-                    return _float(lo + step)
+                    return bits_float(lo + step)
                 if c < 0:
                     hi = lo + step
                     break
@@ -220,7 +197,7 @@ def _round(t: _Time, guess: float, hi: int) -> float:
             while hi - step > lo:
                 c = cmp(hi - step)
                 if c == 0:
-                    return _float(hi - step)
+                    return bits_float(hi - step)
                 if c > 0:
                     lo = hi - step
                     break
@@ -230,19 +207,19 @@ def _round(t: _Time, guess: float, hi: int) -> float:
         mid = (lo + hi) // 2
         c = cmp(mid)
         if c == 0:
-            return _float(mid)
+            return bits_float(mid)
         if c > 0:
             lo = mid
         else:
             hi = mid
     if lo == 0:
-        return _float(hi)  # below the smallest subnormal: still a positive time
-    (n_lo, s_lo), (n_hi, s_hi) = _dyadic(_float(lo)), _dyadic(_float(hi))
+        return bits_float(hi)  # below the smallest subnormal: still a positive time
+    (n_lo, s_lo), (n_hi, s_hi) = dyadic(bits_float(lo)), dyadic(bits_float(hi))
     s = max(s_lo, s_hi)
     c = t.cmp((n_lo << (s - s_lo)) + (n_hi << (s - s_hi)), s + 1)  # t vs the exact midpoint
     if c == 0:
-        return _float(lo if lo % 2 == 0 else hi)
-    return _float(lo if c < 0 else hi)
+        return bits_float(lo if lo % 2 == 0 else hi)
+    return bits_float(lo if c < 0 else hi)
 
 
 def _entering(sigma: int, m: tuple[int, int, int], R: int, Q: int) -> _Time | None:
@@ -287,7 +264,7 @@ def exact_edge_contact(p: Sequence[float], v: Sequence[float], a: Sequence[float
             or solid_side not in (-1, 0, 1) or (vals[7], vals[8]) == (vals[9], vals[10])):
         return math.nan
     solid_side = int(solid_side)  # a numpy integer would overflow in the big products
-    px, py, vx, vy, ax, ay, R, Ax, Ay, Bx, By = _scaled_ints(vals)
+    px, py, vx, vy, ax, ay, R, Ax, Ay, Bx, By = scaled_ints(vals)
     ex, ey = Bx - Ax, By - Ay
     Q = ex * ex + ey * ey
     dx, dy = px - Ax, py - Ay
@@ -303,7 +280,7 @@ def exact_edge_contact(p: Sequence[float], v: Sequence[float], a: Sequence[float
         return 0.0
     if gap0 == 0:
         if R > 0:
-            sigma = _sign(m[0])
+            sigma = int_sign(m[0])
             approaching = _lowest_sign(sigma * m[1], sigma * m[2]) < 0
         else:  # a point on the line: only a solid can be entered at once
             approaching = bool(solid_side) and _lowest_sign(solid_side * m[1],
@@ -335,5 +312,5 @@ def exact_edge_contact(p: Sequence[float], v: Sequence[float], a: Sequence[float
             guess = t.approx()
         except (OverflowError, ZeroDivisionError, ValueError):
             guess = math.nan  # extreme magnitudes: bisection from scratch
-        best = _round(t, guess, _bits(top))
+        best = _round(t, guess, float_bits(top))
     return best

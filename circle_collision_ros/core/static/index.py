@@ -22,7 +22,7 @@ __all__ = ["StaticIndex"]
 MAX_CELLS_PER_AXIS = 2048
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, error_model="numpy")
 def cell_range(lo, hi, x0, y0, inv_h, nx, ny):
     """Inclusive cell range of a box, widened by one cell and clipped to the grid."""
     i0 = int(math.floor((lo[0] - x0) * inv_h)) - 1
@@ -33,7 +33,7 @@ def cell_range(lo, hi, x0, y0, inv_h, nx, ny):
 
 
 # nogil: the node builds an index on a worker thread while its executor predicts
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, error_model="numpy")
 def _fill(lo, hi, x0, y0, inv_h, nx, ny):
     """CSR rows (ptr, items) listing item k in every cell its box [lo[k], hi[k]] touches."""
     n = lo.shape[0]

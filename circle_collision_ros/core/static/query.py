@@ -26,11 +26,12 @@ from typing import NamedTuple
 import numpy as np
 from numba import njit
 
+from circle_collision_ros.core.broad.bounds import swept_bound_row
 from circle_collision_ros.core.narrow.batch import certified_pair2
 from circle_collision_ros.core.narrow.evaluate import EPS, UNDECIDED
 from circle_collision_ros.core.parallel_policy import threads_pay
 from circle_collision_ros.core.narrow.exact import exact_first_contact
-from circle_collision_ros.core.static.edge import F_BOUND, edge_contact
+from circle_collision_ros.core.static.edge import edge_contact
 from circle_collision_ros.core.static.edge_exact import exact_edge_contact
 from circle_collision_ros.core.static.index import StaticIndex, cell_range
 from circle_collision_ros.core.static.occupancy import cell_occupied_at
@@ -58,7 +59,7 @@ class StaticContacts(NamedTuple):
     closing_speed: np.ndarray
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, inline="always", error_model="numpy")
 def _better(t, ob, kind, idx, bt, bob, bkind, bidx):
     """Ties break on (obstacle, kind, feature), so the answer never depends on visit order."""
     if t != bt or t == math.inf:
@@ -70,33 +71,13 @@ def _better(t, ob, kind, idx, bt, bob, bkind, bidx):
     return idx < bidx
 
 
-@njit(cache=True)
-def _swept_box(px, py, vx, vy, ax, ay, r, t0, t1, lo, hi):
-    """The centre's axis ranges over [t0, t1] (0 <= t0 < t1), widened by r and a margin that
-    covers the rounding of these few operations (16 ulps of the coordinate's scale, twice)."""
-    for d, (c0, c1, c2) in enumerate(((px, vx, ax), (py, vy, ay))):
-        start = c0 + t0 * (c1 + 0.5 * t0 * c2)
-        end = c0 + t1 * (c1 + 0.5 * t1 * c2)
-        a = min(start, end)
-        b = max(start, end)
-        if c2 != 0.0:
-            tv = -c1 / c2
-            if t0 < tv < t1:
-                cv = c0 + tv * (c1 + 0.5 * tv * c2)
-                a = min(a, cv)
-                b = max(b, cv)
-        m = 2.0 * F_BOUND * (abs(c0) + t1 * abs(c1) + t1 * t1 * abs(c2) + r) + r
-        lo[d] = a - m
-        hi[d] = b + m
-
-
 # A swept box over all of [0, H] holds every feature near the box's diagonal for a diagonal
 # path; up to this many boxes over equal parts of [0, H] follow the path (~1/3 of the
 # candidates of a long diagonal path in the benchmark rooms), at one cell range each.
 PIECES = 8
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, error_model="numpy")
 def _query_range(b0, b1, P, V, A, R, H, ok, starts, ends, side, points, eob, pob, x0, y0,
                  inv_h, nx, ny, eptr, eitems, pptr, pitems, out_t, out_ob, out_kind, out_idx,
                  skip_ptr, skip, und):
@@ -107,8 +88,12 @@ def _query_range(b0, b1, P, V, A, R, H, ok, starts, ends, side, points, eob, pob
     npt = points.shape[0]
     seen_e = np.full(ne, -1, np.int64)
     seen_p = np.full(npt, -1, np.int64)
-    lo = np.empty(2)
-    hi = np.empty(2)
+    # the broad phase's swept bound of the body over a window (core.broad.swept_bound_row:
+    # the disc stays inside it, with its margins), viewed as one row
+    box_lo = np.empty((1, 2))
+    box_hi = np.empty((1, 2))
+    lo = box_lo[0]
+    hi = box_hi[0]
     n_und = 0
     for b in range(b0, b1):
         out_t[b] = math.nan
@@ -122,7 +107,7 @@ def _query_range(b0, b1, P, V, A, R, H, ok, starts, ends, side, points, eob, pob
         full = not (H < math.inf)
         pieces = 1
         if not full:
-            _swept_box(px, py, vx, vy, ax, ay, r, 0.0, H, lo, hi)
+            swept_bound_row(P, V, A, R, b, 0.0, H, box_lo, box_hi, 0)
             i0, j0, i1, j1 = cell_range(lo, hi, x0, y0, inv_h, nx, ny)
             if not (lo[0] - lo[0] == 0.0 and hi[0] - hi[0] == 0.0 and lo[1] - lo[1] == 0.0
                     and hi[1] - hi[1] == 0.0):
@@ -135,8 +120,8 @@ def _query_range(b0, b1, P, V, A, R, H, ok, starts, ends, side, points, eob, pob
             if full:
                 i0, j0, i1, j1 = 0, 0, 0, 0
             elif pieces > 1:
-                _swept_box(px, py, vx, vy, ax, ay, r, H * piece / pieces,
-                           H * (piece + 1) / pieces, lo, hi)
+                swept_bound_row(P, V, A, R, b, H * piece / pieces, H * (piece + 1) / pieces,
+                                box_lo, box_hi, 0)
                 i0, j0, i1, j1 = cell_range(lo, hi, x0, y0, inv_h, nx, ny)
             for j in range(j0, j1 + 1):
                 for i in range(i0, i1 + 1):
