@@ -453,7 +453,7 @@ def run_box2d(fams: list) -> tuple[np.ndarray, float, int]:
     return t, sec, sum(s == O.e_failed for s, _ in out)
 
 
-@njit(cache=True)
+@njit  # uncached: a cached loop keeps the package kernels it was built with
 def _feature_loop(P, V, A, R, H, first, count, starts, ends, side, out):
     """Per row the certified kernels on its polygon's edges and corners (no index, no exact
     fallback, no inside test); returns the number of UNDECIDED features."""
@@ -577,14 +577,14 @@ def step_rows(f: Family, t_ref: np.ndarray, rep: int) -> list:
 
 # ---------------------------------------------------------------- kernel ns per pair
 
-@njit(cache=True)
+@njit  # uncached: a cached loop keeps the package kernels it was built with
 def _edge_loop(P, V, A, R, S, E, H, out):
     for i in range(P.shape[0]):
         out[i] = edge_contact(P[i, 0], P[i, 1], V[i, 0], V[i, 1], A[i, 0], A[i, 1], R[i],
                               S[i, 0], S[i, 1], E[i, 0], E[i, 1], 0, H)
 
 
-@njit(cache=True)
+@njit  # uncached: a cached loop keeps the package kernels it was built with
 def _pair_loop(P, V, A, R, M, H, out):
     for i in range(P.shape[0]):
         out[i] = certified_pair2(P[i, 0], P[i, 1], V[i, 0], V[i, 1], A[i, 0], A[i, 1], R[i],

@@ -22,14 +22,20 @@ What this kernel proves, and how:
   can exist at all.
 * Every other sign (phi at 0, at H, at the bracket's ends, the discriminant, phi' at H) is
   taken from float64 only beyond the rounding bound ``16 eps M(t)``, and from the
-  double-double evaluation only beyond ``64 eps^2 M(t)``, with
-  ``M(t) = |e|_1 (|g0|_1 + |v|_1 t + |a|_1 t^2/2 + r)`` bounding every term's magnitude.
-  Either bound is several times the worst-case rounding error of its evaluation, so a sign
-  that clears it is the sign of the exact value.
-* A time is returned only when ``phi(pred t) > 0`` and ``phi(succ t) < 0`` are proved (the
-  entering root is the only + -> - crossing of a quadratic), so it lies within one ulp of
-  the exact root, and only when the foot point is proved inside the open segment on that
-  whole bracket.
+  compensated evaluation (double-double power-basis coefficients, compensated Horner) only
+  beyond ``64 eps^2 M(t)``, with ``M(t) = |e|_1 (|g0|_1 + |v|_1 t + |a|_1 t^2/2 + r)``
+  bounding every term's magnitude.  Either bound is several times the worst-case rounding
+  error of its evaluation (``_phi_dd`` derives the second's), so a sign that clears it is
+  the sign of the exact value.
+* A time is returned only inside a proved bracket ``phi(lo) > 0 > phi(hi)`` of adjacent
+  floats (or of t's two neighbours; the entering root is the only + -> - crossing of a
+  quadratic), so it lies within one ulp of the exact root; of two adjacent floats the one
+  with the smaller ``|phi|`` is returned, in practice the nearest float.
+* The foot point must be proved inside the open segment on a proved bracket of the root:
+  first on a wider bracket ``t +- w`` proved in float64 (w a few float error bounds over
+  the slope), which settles most rows without the compensated evaluation, and on the
+  one-ulp bracket otherwise.  Proved outside, the side has no edge contact (the end's
+  corner has it).
 * Touching at t = 0 (phi(0) within its bound of 0), near-tangent grazes, a foot point at an
   endpoint to within rounding, and inputs outside [2^-300, 2^300] are left UNDECIDED.
 
@@ -57,7 +63,7 @@ from circle_collision_ros.core.narrow.evaluate import EPS, UNDECIDED
 INF = math.inf
 NAN = math.nan
 F_BOUND = 16.0 * EPS  # float64 evaluation: error < ~4 eps M(t), see the module docstring
-DD_BOUND = 64.0 * EPS * EPS  # double-double evaluation: error < ~5 eps^2 M(t)
+DD_BOUND = 64.0 * EPS * EPS  # compensated evaluation: error < 10 eps^2 M(t) (_phi_dd)
 # Inputs whose nonzero magnitudes lie in [2^-300, 2^300] keep every product below (up to
 # 4 factors, times t^2 <= H^2 bounded separately) normal and finite; the rest go exact.
 _TINY = 2.0 ** -300
@@ -99,38 +105,117 @@ def _det_sign(exh, exl, eyh, eyl, x, y):
 
 
 @njit(cache=True, error_model="numpy", inline="always")
-def _g_dd(gh, gl, v, a, t):
-    """One coordinate of ``g(t) = g0 + v t + a t^2/2`` as a double-double (~6u^2 relative
-    to |g0| + |v| t + |a| t^2/2): the products are exact (two_prod), the sums accurate."""
-    vth, vtl = two_prod(v, t)
-    tth, ttl = two_prod(t, t)
-    ath, atl = two_prod(0.5 * a, tth)
-    atl += 0.5 * a * ttl
-    sh, sl = dd_add(gh, gl, vth, vtl)
-    return dd_add(sh, sl, ath, atl)
+def _dd_dot(ah, al, bh, bl, ch, cl, dh, dl):
+    """``a b + c d`` for dd factors, as a dd (error ~6u^2 of ``|a b| + |c d|``)."""
+    p1h, p1l = dd_mul(ah, al, bh, bl)
+    p2h, p2l = dd_mul(ch, cl, dh, dl)
+    return dd_add(p1h, p1l, p2h, p2l)
+
+
+@njit(cache=True, error_model="numpy", inline="always")
+def _dd_dot_f(ah, al, b, ch, cl, d):
+    """``a b + c d`` for dd a, c and float b, d, as a dd: the high products are exact
+    (two_prod) and their sum exact (two_sum); only the low terms round, by ~2u^2 of
+    ``|a b| + |c d|``."""
+    p1, e1 = two_prod(ah, b)
+    p2, e2 = two_prod(ch, d)
+    sh, sl = two_sum(p1, p2)
+    sl += (e1 + al * b) + (e2 + cl * d)
+    return two_sum(sh, sl)
+
+
+@njit(cache=True, error_model="numpy", inline="always")
+def _horner_dd(c, t):
+    """``(c2 t + c1) t + c0`` for dd coefficients ``c = (c0h, c0l, c1h, c1l, c2h, c2l)`` and
+    a float t, by compensated Horner: each step's product and sum errors are exact
+    (two_prod, two_sum) and carried, with the coefficients' low parts, in a float
+    correction.  Returns (value, correction); their sum errs by less than ~4u^2 of
+    ``|c2| t^2 + |c1| t + |c0|`` (the corrections are below u of the terms and rounded once
+    more), like a double-double evaluation at half its cost.
+
+    Reference: S. Graillat, P. Langlois, N. Louvet, "Compensated Horner scheme", Research
+    Report RR2005-04, Univ. Perpignan (2005).
+    """
+    p, pe = two_prod(c[4], t)
+    s, se = two_sum(p, c[2])
+    err = c[5] * t + pe + se + c[3]
+    p, pe = two_prod(s, t)
+    s, se = two_sum(p, c[0])
+    return s, err * t + pe + se + c[1]
 
 
 @njit(cache=True, error_model="numpy")
-def _phi_dd(sig, gxh, gxl, gyh, gyl, exh, exl, eyh, eyl, vx, vy, ax, ay, rLh, rLl, t):
-    """``sigma w.g(t) - r L`` in double-double (value as one float; error < 5 eps^2 M(t))."""
-    Gxh, Gxl = _g_dd(gxh, gxl, vx, ax, t)
-    Gyh, Gyl = _g_dd(gyh, gyl, vy, ay, t)
-    p1h, p1l = dd_mul(exh, exl, Gyh, Gyl)
-    p2h, p2l = dd_mul(eyh, eyl, Gxh, Gxl)
-    ph, pl = dd_add(p1h, p1l, -p2h, -p2l)
-    fh, fl = dd_add(sig * ph, sig * pl, -rLh, -rLl)
-    return fh + fl
+def _psi_dd(gxh, gxl, gyh, gyl, exh, exl, eyh, eyl, vx, vy, ax, ay, r):
+    """``r L`` as a dd (L from Q = e.e in dd, with sqrt's Newton correction) and the dd
+    power-basis coefficients of ``psi = w.g(t)`` (a 6-tuple for ``_horner_dd``).
+
+    Each coefficient is a 2-term dot product of exact inputs (g0 and e are TwoSum dd's, v
+    and a floats, halving a is exact), so it errs by ~6u^2 of its term sizes, which
+    ``M(t)`` bounds.
+    """
+    qh, ql = two_prod(exh, exh)
+    q2h, q2l = two_prod(eyh, eyh)
+    qh, ql2 = two_sum(qh, q2h)
+    ql = ql + q2l + ql2 + 2.0 * (exh * exl + eyh * eyl)
+    Lh = math.sqrt(qh)
+    sqh, sql = two_prod(Lh, Lh)
+    Ll = ((qh - sqh) - sql + ql) / (2.0 * Lh)
+    rLh, rLl = two_prod(r, Lh)
+    rLl += r * Ll
+    c0 = _dd_dot(exh, exl, gyh, gyl, -eyh, -eyl, gxh, gxl)
+    c1 = _dd_dot_f(exh, exl, vy, -eyh, -eyl, vx)
+    c2 = _dd_dot_f(exh, exl, 0.5 * ay, -eyh, -eyl, 0.5 * ax)
+    return rLh, rLl, (c0[0], c0[1], c1[0], c1[1], c2[0], c2[1])
 
 
 @njit(cache=True, error_model="numpy")
-def _pi_dd(gxh, gxl, gyh, gyl, exh, exl, eyh, eyl, vx, vy, ax, ay, t):
-    """``e.g(t)`` in double-double (value as one float)."""
-    Gxh, Gxl = _g_dd(gxh, gxl, vx, ax, t)
-    Gyh, Gyl = _g_dd(gyh, gyl, vy, ay, t)
-    p1h, p1l = dd_mul(exh, exl, Gxh, Gxl)
-    p2h, p2l = dd_mul(eyh, eyl, Gyh, Gyl)
-    ph, pl = dd_add(p1h, p1l, p2h, p2l)
-    return ph + pl
+def _pi_coeffs_dd(gxh, gxl, gyh, gyl, exh, exl, eyh, eyl, vx, vy, ax, ay):
+    """The dd power-basis coefficients of ``pi = e.g(t)`` (same errors as ``_psi_dd``'s)."""
+    c0 = _dd_dot(exh, exl, gxh, gxl, eyh, eyl, gyh, gyl)
+    c1 = _dd_dot_f(exh, exl, vx, eyh, eyl, vy)
+    c2 = _dd_dot_f(exh, exl, 0.5 * ax, eyh, eyl, 0.5 * ay)
+    return (c0[0], c0[1], c1[0], c1[1], c2[0], c2[1])
+
+
+@njit(cache=True, error_model="numpy", inline="always")
+def _phi_dd(sig, ps, rLh, rLl, t):
+    """``sigma psi(t) - r L``, compensated (value as one float).
+
+    Error, with u = eps/2 and ``T = |psi2| t^2 + |psi1| t + |psi0| <= M(t)``: the dd
+    coefficients err by < 6u^2 of their term sizes (<= 6u^2 M(t) at t); compensated Horner
+    by < 24u^2 T (each step's correction is below u of its terms and is summed with
+    relative error < 4u); r L by < 4u^2 r |e|; the final two_sum is exact and its
+    correction's sum errs by < 6u^2 M(t).  Total < 40u^2 M(t) = 10 eps^2 M(t): DD_BOUND
+    (64 eps^2 M(t)) holds it with a 6x margin, and the last rounding keeps the sign of a
+    value beyond that bound.
+    """
+    h, l = _horner_dd(ps, t)
+    fh, fe = two_sum(sig * h, -rLh)
+    return fh + (fe + (sig * l - rLl))
+
+
+@njit(cache=True, error_model="numpy", inline="always")
+def _pi_dd(pc, t):
+    """``e.g(t)``, compensated (value as one float; error as ``_phi_dd``'s, < 10 eps^2 of
+    ``M(t) + |e|^2``)."""
+    h, l = _horner_dd(pc, t)
+    return h + l
+
+
+@njit(cache=True, error_model="numpy", inline="always")
+def _foot(q_lo, q_hi, dip, Q, err):
+    """Where the foot point is over a bracket [lo, hi] of the root, from ``pi = e.g`` at its
+    ends (each within ``err``): +1 inside the open segment (0 < pi < Q) on all of it, -1
+    outside it ([0, Q] excluded) on all of it, 0 not proved.  ``dip`` bounds how far the
+    quadratic pi strays beyond its end values inside the bracket (``|pi2| (hi - lo)^2``);
+    Q = e.e is itself rounded, by less than ``4 eps Q``."""
+    e = err + dip
+    eQ = 4.0 * EPS * Q
+    if min(q_lo, q_hi) > e and Q - max(q_lo, q_hi) > e + eQ:
+        return 1
+    if max(q_lo, q_hi) < -e or min(q_lo, q_hi) - Q > e + eQ:
+        return -1
+    return 0
 
 
 @njit(cache=True, error_model="numpy")
@@ -145,6 +230,26 @@ def edge_contact(px, py, vx, vy, ax, ay, r, Ax, Ay, Bx, By, solid_side, H):
     chk = px + py + vx + vy + ax + ay + r + Ax + Ay + Bx + By
     if not (chk - chk == 0.0) or not (r >= 0.0) or not (H >= 0.0) or (Ax == Bx and Ay == By):
         return NAN
+    # --- cheap, exact-safe rejection: the swept box of the centre against the segment's box
+    if H < INF:
+        for c0, c1, c2, s0, s1 in ((px, vx, ax, Ax, Bx), (py, vy, ay, Ay, By)):
+            lo_c = min(c0, c0 + H * (c1 + 0.5 * H * c2))
+            hi_c = max(c0, c0 + H * (c1 + 0.5 * H * c2))
+            if c2 != 0.0:
+                tv = -c1 / c2
+                if 0.0 < tv < H:
+                    cv = c0 + tv * (c1 + 0.5 * tv * c2)
+                    lo_c = min(lo_c, cv)
+                    hi_c = max(hi_c, cv)
+            # margin: 16 ulps of the coordinate's scale covers the rounding of these few
+            # operations (the vertex value included, whose tv is itself rounded); _TINY
+            # covers their absolute error where values are subnormal (the scale check
+            # below comes after this test); an overflow gives inf or NaN, never a rejection
+            m = F_BOUND * (abs(c0) + H * abs(c1) + H * H * abs(c2) + abs(s0) + abs(s1) + r)
+            m += _TINY
+            if lo_c - r - m > max(s0, s1) or hi_c + r + m < min(s0, s1):
+                return INF
+
     gxh, gxl = two_sum(px, -Ax)
     gyh, gyl = two_sum(py, -Ay)
     exh, exl = two_sum(Bx, -Ax)
@@ -160,23 +265,6 @@ def edge_contact(px, py, vx, vy, ax, ay, r, Ax, Ay, Bx, By, solid_side, H):
     l1v = abs(vx) + abs(vy)
     l1a = abs(ax) + abs(ay)
 
-    # --- cheap, exact-safe rejection: the swept box of the centre against the segment's box
-    if H < INF:
-        for c0, c1, c2, s0, s1 in ((px, vx, ax, Ax, Bx), (py, vy, ay, Ay, By)):
-            lo_c = min(c0, c0 + H * (c1 + 0.5 * H * c2))
-            hi_c = max(c0, c0 + H * (c1 + 0.5 * H * c2))
-            if c2 != 0.0:
-                tv = -c1 / c2
-                if 0.0 < tv < H:
-                    cv = c0 + tv * (c1 + 0.5 * tv * c2)
-                    lo_c = min(lo_c, cv)
-                    hi_c = max(hi_c, cv)
-            # margin: 16 ulps of the coordinate's scale covers the rounding of these few
-            # operations (the vertex value included, whose tv is itself rounded)
-            m = F_BOUND * (abs(c0) + H * abs(c1) + H * H * abs(c2) + abs(s0) + abs(s1) + r)
-            if lo_c - r - m > max(s0, s1) or hi_c + r + m < min(s0, s1):
-                return INF
-
     # --- power-basis coefficients in float64 (high parts; bounds cover the low parts)
     psi0 = exh * gyh - eyh * gxh
     psi1 = exh * vy - eyh * vx
@@ -185,18 +273,12 @@ def edge_contact(px, py, vx, vy, ax, ay, r, Ax, Ay, Bx, By, solid_side, H):
     pi1 = exh * vx + eyh * vy
     pi2 = 0.5 * (exh * ax + eyh * ay)
     Q = exh * exh + eyh * eyh
-    L = math.sqrt(Q)
-    rL = r * L
-    # r L in double-double: L from Q = e.e in dd (sqrt's Newton correction)
-    qh, ql = two_prod(exh, exh)
-    q2h, q2l = two_prod(eyh, eyh)
-    qh, ql2 = two_sum(qh, q2h)
-    ql = ql + q2l + ql2 + 2.0 * (exh * exl + eyh * eyl)
-    Lh = math.sqrt(qh)
-    sqh, sql = two_prod(Lh, Lh)
-    Ll = ((qh - sqh) - sql + ql) / (2.0 * Lh)
-    rLh, rLl = two_prod(r, Lh)
-    rLl += r * Ll
+    rL = r * math.sqrt(Q)
+    # the dd forms (r L, the power-basis coefficients) are built on first use: most rows
+    # are decided from the float values above
+    have_dd = False
+    rLh, rLl = 0.0, 0.0
+    ps = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
 
     def m_at(t):
         return Le * (l1g + l1v * t + 0.5 * l1a * t * t + r)
@@ -233,11 +315,11 @@ def edge_contact(px, py, vx, vy, ax, ay, r, Ax, Ay, Bx, By, solid_side, H):
     sp0 = _certain(psi0 - rL, e0)  # phi_+(0)
     sm0 = _certain(-psi0 - rL, e0)  # phi_-(0)
     if sp0 == _UNKNOWN or sm0 == _UNKNOWN:
+        rLh, rLl, ps = _psi_dd(gxh, gxl, gyh, gyl, exh, exl, eyh, eyl, vx, vy, ax, ay, r)
+        have_dd = True
         d0 = DD_BOUND * m_at(0.0)
-        sp0 = _certain(_phi_dd(1.0, gxh, gxl, gyh, gyl, exh, exl, eyh, eyl, vx, vy, ax, ay,
-                               rLh, rLl, 0.0), d0)
-        sm0 = _certain(_phi_dd(-1.0, gxh, gxl, gyh, gyl, exh, exl, eyh, eyl, vx, vy, ax, ay,
-                               rLh, rLl, 0.0), d0)
+        sp0 = _certain(_phi_dd(1.0, ps, rLh, rLl, 0.0), d0)
+        sm0 = _certain(_phi_dd(-1.0, ps, rLh, rLl, 0.0), d0)
         if sp0 == _UNKNOWN or sm0 == _UNKNOWN:
             return UNDECIDED
     if sp0 < 0 and sm0 < 0:  # |psi0| < r L: inside the band
@@ -267,8 +349,11 @@ def edge_contact(px, py, vx, vy, ax, ay, r, Ax, Ay, Bx, By, solid_side, H):
         else:
             fH = _certain(k0 + H * (k1 + H * k2), F_BOUND * m_at(H))
             if fH == _UNKNOWN:
-                fH = _certain(_phi_dd(sig, gxh, gxl, gyh, gyl, exh, exl, eyh, eyl, vx, vy, ax,
-                                      ay, rLh, rLl, H), DD_BOUND * m_at(H))
+                if not have_dd:
+                    rLh, rLl, ps = _psi_dd(gxh, gxl, gyh, gyl, exh, exl, eyh, eyl, vx, vy, ax,
+                                           ay, r)
+                    have_dd = True
+                fH = _certain(_phi_dd(sig, ps, rLh, rLl, H), DD_BOUND * m_at(H))
                 if fH == _UNKNOWN:
                     return UNDECIDED
         # does phi have an entering root in (0, H]?  (signs only; see the module docstring)
@@ -317,25 +402,52 @@ def edge_contact(px, py, vx, vy, ax, ay, r, Ax, Ay, Bx, By, solid_side, H):
             t = 0.0
         if t > H:
             t = H
-        # bracket by proved signs: phi(lo) > 0 > phi(hi) with lo, hi the neighbours of t
+        # a float-proved bracket [t - w, t + w] around the root, w a few times the float
+        # error over the slope: enough to settle most foot points without double-double
+        foot = 0  # foot point on the root's bracket: 1 inside, -1 outside, 0 not proved
+        slope = k1 + 2.0 * k2 * t
+        if slope < 0.0:
+            w = 4.0 * F_BOUND * m_at(t) / -slope
+            tl, th = t - w, t + w
+            if tl > 0.0 and th <= H and tl < t < th:
+                fl_ok = k0 + tl * (k1 + tl * k2) > F_BOUND * m_at(tl)
+                fh_ok = k0 + th * (k1 + th * k2) < -F_BOUND * m_at(th)
+                if fl_ok and fh_ok:
+                    foot = _foot(pi0 + tl * (pi1 + tl * pi2), pi0 + th * (pi1 + th * pi2),
+                                 abs(pi2) * (th - tl) * (th - tl), Q,
+                                 2.0 * F_BOUND * (m_at(th) + Le * Le))
+        if foot < 0:
+            continue  # the contact with the line is beyond an end: the end's (a corner)
+        if not have_dd:
+            rLh, rLl, ps = _psi_dd(gxh, gxl, gyh, gyl, exh, exl, eyh, eyl, vx, vy, ax, ay, r)
+            have_dd = True
+        # bracket by proved signs, phi(lo) > 0 > phi(hi) with lo, hi adjacent floats or
+        # t's two neighbours: the root is then within one ulp of the t returned
         ok = False
         for _ in range(4):
             if t <= 0.0:
                 t = next_up(0.0)
-            lo = next_down(t)
-            hi = next_up(t)
-            flo = _phi_dd(sig, gxh, gxl, gyh, gyl, exh, exl, eyh, eyl, vx, vy, ax, ay, rLh,
-                          rLl, lo)
-            fhi = _phi_dd(sig, gxh, gxl, gyh, gyl, exh, exl, eyh, eyl, vx, vy, ax, ay, rLh,
-                          rLl, hi)
-            clo = _certain(flo, DD_BOUND * m_at(lo))
-            chi = _certain(fhi, DD_BOUND * m_at(hi))
-            if clo > 0 and chi < 0:
-                ok = True
+            ft = _phi_dd(sig, ps, rLh, rLl, t)
+            ct = _certain(ft, DD_BOUND * m_at(t))
+            lo, hi = next_down(t), next_up(t)
+            if ct > 0:  # the root is above t: is it below t's successor?
+                lo, flo = t, ft
+                fhi = _phi_dd(sig, ps, rLh, rLl, hi)
+                ok = _certain(fhi, DD_BOUND * m_at(hi)) < 0
+            elif ct < 0:
+                hi, fhi = t, ft
+                flo = _phi_dd(sig, ps, rLh, rLl, lo)
+                ok = _certain(flo, DD_BOUND * m_at(lo)) > 0
+            else:  # phi(t) is 0 to within its bound: prove both neighbours
+                flo = _phi_dd(sig, ps, rLh, rLl, lo)
+                fhi = _phi_dd(sig, ps, rLh, rLl, hi)
+                ok = (_certain(flo, DD_BOUND * m_at(lo)) > 0
+                      and _certain(fhi, DD_BOUND * m_at(hi)) < 0)
+            if ok:
+                if ct != _UNKNOWN:  # of two adjacent floats, the one nearer the root
+                    t = lo if flo < -fhi else hi
                 break
             # Newton from the dd value (the slope needs no accuracy: only the bracket proves)
-            ft = _phi_dd(sig, gxh, gxl, gyh, gyl, exh, exl, eyh, eyl, vx, vy, ax, ay, rLh, rLl,
-                         t)
             slope = k1 + 2.0 * k2 * t
             if not (slope < 0.0):
                 break
@@ -344,16 +456,12 @@ def edge_contact(px, py, vx, vy, ax, ay, r, Ax, Ay, Bx, By, solid_side, H):
                 break
         if not ok or hi > H and H < INF:
             return UNDECIDED
-        # the foot point over the bracket: inside the open segment, or certainly outside
-        qlo = _pi_dd(gxh, gxl, gyh, gyl, exh, exl, eyh, eyl, vx, vy, ax, ay, lo)
-        qhi = _pi_dd(gxh, gxl, gyh, gyl, exh, exl, eyh, eyl, vx, vy, ax, ay, hi)
-        # dd error plus the quadratic's possible dip between the ends (|pi2| (hi - lo)^2)
-        eqd = DD_BOUND * (m_at(hi) + Le * Le) + abs(pi2) * (hi - lo) * (hi - lo)
-        eQ = 4.0 * EPS * Q  # Q itself is rounded (its dd low part is below this)
-        inside = min(qlo, qhi) > eqd and Q - max(qlo, qhi) > eqd + eQ
-        outside = max(qlo, qhi) < -eqd or min(qlo, qhi) - Q > eqd + eQ
-        if inside:
+        if foot == 0:  # the foot point over the 1-ulp bracket, in double-double
+            pc = _pi_coeffs_dd(gxh, gxl, gyh, gyl, exh, exl, eyh, eyl, vx, vy, ax, ay)
+            foot = _foot(_pi_dd(pc, lo), _pi_dd(pc, hi), abs(pi2) * (hi - lo) * (hi - lo), Q,
+                         DD_BOUND * (m_at(hi) + Le * Le))
+        if foot > 0:
             best = min(best, t)
-        elif not outside:
+        elif foot == 0:
             return UNDECIDED
     return best

@@ -13,16 +13,12 @@ import numpy as np
 import pytest
 
 from circle_collision_ros.core.static.edge_exact import exact_edge_contact
+from tests.core.static.edge_rows import endpoint_rows, graze_rows, make_row, random_rows
 from tests.core.static.reference_static import reference_edge
 
 INF = math.inf
 A0, B0 = (0.0, 0.0), (10.0, 0.0)  # the x-axis segment of the hand cases; left = y > 0
 Z = (0.0, 0.0)
-
-
-def _unit_normal(A, B):
-    e = np.subtract(B, A)
-    return np.array([-e[1], e[0]]) / math.hypot(*e), e / math.hypot(*e)
 
 
 def _check_family(rows, min_hits: int) -> None:
@@ -40,89 +36,21 @@ def _check_family(rows, min_hits: int) -> None:
     assert hits >= min_hits, hits  # the family exercises positive contact times
 
 
-def _row(p, v, a, r, A, B, side, H=INF):
-    f = [float(x) for x in (*p, *v, *a, r, *A, *B)]
-    return (f[0:2], f[2:4], f[4:6], f[6], f[7:9], f[9:11], int(side), float(H))
-
-
-def _random_rows(seed: int, n: int, accelerate: bool, scale: float = 1.0,
-                 offset: float = 0.0):
-    """Bodies aimed (with noise) at a random point of a random segment."""
-    rng = np.random.default_rng(seed)
-    rows = []
-    for i in range(n):
-        A = offset + scale * rng.uniform(-5, 5, 2)
-        B = offset + scale * rng.uniform(-5, 5, 2)
-        p = offset + scale * rng.uniform(-10, 10, 2)
-        target = A + rng.uniform(-0.1, 1.1) * (B - A)
-        v = (target - p) * rng.uniform(0.2, 2) + scale * rng.normal(0, 0.3, 2)
-        a = scale * rng.normal(0, 1, 2) if accelerate else np.zeros(2)
-        r = 0.0 if i % 7 == 0 else scale * rng.uniform(0, 2)
-        H = INF if i % 2 else rng.uniform(0, 3)
-        rows.append(_row(p, v, a, r, A, B, rng.integers(-1, 2), H))
-    return rows
-
-
-def _graze_rows(seed: int, n: int, gaps, scale: float = 1.0, offset: float = 0.0):
-    """Parabolic paths passing at distance r + gap of the line at t*, foot inside.
-
-    Hits (gap < 0: two roots near t*) and near misses (gap > 0).
-    """
-    rng = np.random.default_rng(seed)
-    rows = []
-    for i in range(n):
-        A = offset + scale * rng.uniform(-5, 5, 2)
-        B = offset + scale * rng.uniform(-5, 5, 2)
-        nrm, tan = _unit_normal(A, B)
-        side = rng.choice([-1, 1])
-        r = scale * rng.uniform(0.2, 2)
-        foot = A + rng.uniform(0.1, 0.9) * (B - A)
-        t_star = rng.uniform(0.5, 5)
-        centre = foot + side * (r + gaps(rng, r)) * nrm
-        u = tan * scale * rng.uniform(-2, 2)  # velocity at t*: along the line
-        a = side * scale * rng.uniform(0.1, 2) * nrm + scale * rng.normal(0, 0.5) * tan
-        v = u - a * t_star
-        p = centre - v * t_star - a * t_star ** 2 / 2
-        rows.append(_row(p, v, a, r, A, B, rng.integers(-1, 2)))
-    return rows
-
-
-def _endpoint_rows(seed: int, n: int):
-    """Contacts whose foot point is within ~1e-12 (relative) of A or B, either side."""
-    rng = np.random.default_rng(seed)
-    rows = []
-    for i in range(n):
-        A, B = rng.uniform(-5, 5, 2), rng.uniform(-5, 5, 2)
-        nrm, tan = _unit_normal(A, B)
-        side = rng.choice([-1, 1])
-        r = rng.uniform(0.1, 2) if i % 5 else 0.0
-        lam = rng.choice([-1, 1]) * 10 ** rng.uniform(-13, -11)
-        lam = lam if i % 2 else 1 + lam
-        t_c = rng.uniform(0.5, 5)
-        centre = A + lam * (B - A) + side * r * nrm
-        u = -side * rng.uniform(0.5, 2) * nrm + rng.normal(0, 1) * tan  # entering at t_c
-        a = rng.normal(0, 0.5, 2) if i % 3 else np.zeros(2)
-        v = u - a * t_c
-        p = centre - v * t_c - a * t_c ** 2 / 2
-        rows.append(_row(p, v, a, r, A, B, rng.integers(-1, 2)))
-    return rows
-
-
 # --- seeded families against the reference -------------------------------------------------
 
 def test_straight_lines_match_reference():
-    _check_family(_random_rows(101, 2000, accelerate=False), min_hits=500)
+    _check_family(random_rows(101, 2000, accelerate=False), min_hits=500)
 
 
 def test_accelerating_match_reference():
-    _check_family(_random_rows(202, 2000, accelerate=True), min_hits=500)
+    _check_family(random_rows(202, 2000, accelerate=True), min_hits=500)
 
 
 def test_near_grazing_match_reference():
     def gaps(rng, r):
         return rng.choice([-1, 1]) * r * 10 ** rng.uniform(-13, -11)
 
-    rows = _graze_rows(303, 2000, gaps)
+    rows = graze_rows(303, 2000, gaps)
     _check_family(rows, min_hits=700)
     misses = sum(exact_edge_contact(*row) == INF for row in rows)
     assert misses >= 700  # both outcomes of the 1e-12 graze occur
@@ -133,13 +61,13 @@ def test_map_scale_match_reference():
     def gaps(rng, r):
         return rng.choice([-1, 1]) * 10 ** rng.uniform(-6, -2)
 
-    rows = _graze_rows(404, 1000, gaps, offset=1e4)
-    rows += _random_rows(405, 1000, accelerate=True, offset=1.2e4)
+    rows = graze_rows(404, 1000, gaps, offset=1e4)
+    rows += random_rows(405, 1000, accelerate=True, offset=1.2e4)
     _check_family(rows, min_hits=700)
 
 
 def test_foot_point_near_an_endpoint_match_reference():
-    rows = _endpoint_rows(505, 2000)
+    rows = endpoint_rows(505, 2000)
     _check_family(rows, min_hits=500)
 
 
@@ -287,8 +215,8 @@ def _grid_rows(seed: int, n: int):
         v = np.round(((target - p) * rng.uniform(0.2, 2) + rng.normal(0, 0.3, 2)) * 2 ** 20)
         a = np.round(rng.normal(0, 1, 2) * 2 ** 20) if i % 2 else np.zeros(2)
         r = 0.0 if i % 10 == 0 else abs(g(1)[0]) / 8
-        rows.append(_row(p, v * 2.0 ** -20, a * 2.0 ** -20, r, A, B, rng.integers(-1, 2),
-                         INF if i % 3 else rng.uniform(0, 3)))
+        rows.append(make_row(p, v * 2.0 ** -20, a * 2.0 ** -20, r, A, B, rng.integers(-1, 2),
+                              INF if i % 3 else rng.uniform(0, 3)))
     return rows
 
 

@@ -1,0 +1,81 @@
+"""Seeded rows ``(p, v, a, r, A, B, solid_side, H)`` for the edge-interior kernels' tests."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+INF = math.inf
+
+
+def unit_normal(A, B):
+    e = np.subtract(B, A)
+    return np.array([-e[1], e[0]]) / math.hypot(*e), e / math.hypot(*e)
+
+
+def make_row(p, v, a, r, A, B, side, H=INF):
+    f = [float(x) for x in (*p, *v, *a, r, *A, *B)]
+    return (f[0:2], f[2:4], f[4:6], f[6], f[7:9], f[9:11], int(side), float(H))
+
+
+def random_rows(seed: int, n: int, accelerate: bool, scale: float = 1.0,
+                 offset: float = 0.0):
+    """Bodies aimed (with noise) at a random point of a random segment."""
+    rng = np.random.default_rng(seed)
+    rows = []
+    for i in range(n):
+        A = offset + scale * rng.uniform(-5, 5, 2)
+        B = offset + scale * rng.uniform(-5, 5, 2)
+        p = offset + scale * rng.uniform(-10, 10, 2)
+        target = A + rng.uniform(-0.1, 1.1) * (B - A)
+        v = (target - p) * rng.uniform(0.2, 2) + scale * rng.normal(0, 0.3, 2)
+        a = scale * rng.normal(0, 1, 2) if accelerate else np.zeros(2)
+        r = 0.0 if i % 7 == 0 else scale * rng.uniform(0, 2)
+        H = INF if i % 2 else rng.uniform(0, 3)
+        rows.append(make_row(p, v, a, r, A, B, rng.integers(-1, 2), H))
+    return rows
+
+
+def graze_rows(seed: int, n: int, gaps, scale: float = 1.0, offset: float = 0.0):
+    """Parabolic paths passing at distance r + gap of the line at t*, foot inside.
+
+    Hits (gap < 0: two roots near t*) and near misses (gap > 0).
+    """
+    rng = np.random.default_rng(seed)
+    rows = []
+    for i in range(n):
+        A = offset + scale * rng.uniform(-5, 5, 2)
+        B = offset + scale * rng.uniform(-5, 5, 2)
+        nrm, tan = unit_normal(A, B)
+        side = rng.choice([-1, 1])
+        r = scale * rng.uniform(0.2, 2)
+        foot = A + rng.uniform(0.1, 0.9) * (B - A)
+        t_star = rng.uniform(0.5, 5)
+        centre = foot + side * (r + gaps(rng, r)) * nrm
+        u = tan * scale * rng.uniform(-2, 2)  # velocity at t*: along the line
+        a = side * scale * rng.uniform(0.1, 2) * nrm + scale * rng.normal(0, 0.5) * tan
+        v = u - a * t_star
+        p = centre - v * t_star - a * t_star ** 2 / 2
+        rows.append(make_row(p, v, a, r, A, B, rng.integers(-1, 2)))
+    return rows
+
+
+def endpoint_rows(seed: int, n: int):
+    """Contacts whose foot point is within ~1e-12 (relative) of A or B, either side."""
+    rng = np.random.default_rng(seed)
+    rows = []
+    for i in range(n):
+        A, B = rng.uniform(-5, 5, 2), rng.uniform(-5, 5, 2)
+        nrm, tan = unit_normal(A, B)
+        side = rng.choice([-1, 1])
+        r = rng.uniform(0.1, 2) if i % 5 else 0.0
+        lam = rng.choice([-1, 1]) * 10 ** rng.uniform(-13, -11)
+        lam = lam if i % 2 else 1 + lam
+        t_c = rng.uniform(0.5, 5)
+        centre = A + lam * (B - A) + side * r * nrm
+        u = -side * rng.uniform(0.5, 2) * nrm + rng.normal(0, 1) * tan  # entering at t_c
+        a = rng.normal(0, 0.5, 2) if i % 3 else np.zeros(2)
+        v = u - a * t_c
+        p = centre - v * t_c - a * t_c ** 2 / 2
+        rows.append(make_row(p, v, a, r, A, B, rng.integers(-1, 2)))
+    return rows
