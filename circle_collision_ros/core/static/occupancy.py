@@ -40,6 +40,7 @@ from dataclasses import dataclass
 from typing import NamedTuple
 
 import numpy as np
+from numba import njit
 
 __all__ = ["occupied_cells", "GridFrame", "GridEdges", "boundary_edges", "cell_occupied_at",
            "DEFAULT_THRESHOLD"]
@@ -182,31 +183,76 @@ def _check_occupied(occupied) -> np.ndarray:
     return occ
 
 
-def _runs(d: np.ndarray, along_rows: bool):
-    """Maximal runs of equal nonzero values of ``d`` along one axis.
+@njit(cache=True, nogil=True)
+def _scan(P, fill, per_line, line, first, last, value):
+    """One pass over the padded cells ``P`` (module ``_boundary_runs``): the horizontal runs
+    (written in order from row 0 when ``fill``) and each vertical line's runs (counted in
+    ``per_line``; when ``fill``, written at ``per_line[x]``, the line's next slot, which
+    then advances).  Returns the number of horizontal runs.  The inner loops are plain
+    loads and compares over a row, in memory order."""
+    rows, cols = P.shape  # h + 2, w + 2
+    w = cols - 2
+    n = 0
+    for j in range(rows - 1):  # horizontal line y = j: cells of pad rows j + 1 (above), j
+        above, below = P[j + 1], P[j]
+        prev, start = 0, 0
+        for c in range(1, cols):  # column w + 1 is padding: it closes the last run
+            v = np.int64(above[c]) - np.int64(below[c])
+            if v != prev:
+                if prev != 0:
+                    if fill:
+                        line[n], first[n], last[n], value[n] = j, start, c - 1, prev
+                    n += 1
+                start, prev = c - 1, v
+    open_v = np.zeros(w + 1, np.int64)
+    open_s = np.zeros(w + 1, np.int64)
+    for r in range(1, rows):  # vertical lines x = i at cell row r - 1 (row h + 1: padding)
+        cells = P[r]
+        for i in range(w + 1):
+            v = np.int64(cells[i]) - np.int64(cells[i + 1])
+            if v != open_v[i]:
+                if open_v[i] != 0:
+                    if fill:
+                        k = per_line[i]
+                        line[k], first[k], last[k], value[k] = i, open_s[i], r - 1, open_v[i]
+                    per_line[i] += 1
+                open_v[i], open_s[i] = v, r - 1
+    return n
 
-    ``d`` is padded with zeros at both ends of that axis.  Returns, per run,
-    the line index, the first and one-past-last corner along the line, and
-    the value.  Change points are found on the whole array in one pass; the
-    runs are then paired up from the (few) change points.
+
+@njit(cache=True, nogil=True)
+def _boundary_runs(occ):
+    """Every maximal run of equal nonzero values along the grid lines: (line, first corner,
+    one-past-last corner, value) arrays and how many of the rows are horizontal.
+
+    Horizontal line y = j, unit side (i, j) -> (i + 1, j): value occ[j, i] - occ[j - 1, i]
+    (+1: the cell above is occupied). Vertical line x = i, side (i, j) -> (i, j + 1): value
+    occ[j, i - 1] - occ[j, i] (+1: the cell on its left is occupied); cells outside the grid
+    are free (a zero border around a copy of the grid makes that branch-free). Rows:
+    horizontal runs by line then x, then vertical runs by line then y.
+
+    Two passes (``_scan``): count, then fill, each vertical run at its line's slot, so no
+    sort. Compiled without the GIL: a large map is indexed on the worker thread while the
+    executor keeps predicting.
     """
-    if along_rows:
-        change = d[:, 1:] != d[:, :-1]
-        line, k = np.nonzero(change)
-        before, after = d[line, k], d[line, k + 1]
-    else:
-        change = d[1:, :] != d[:-1, :]
-        k, line = np.nonzero(change)
-        # nonzero lists row-major; runs along columns need column-major order
-        order = np.argsort(line, kind="stable")
-        k, line = k[order], line[order]
-        before, after = d[k, line], d[k + 1, line]
-    # every run starts at a change point with a nonzero value after it and ends at the
-    # next one with a nonzero value before it; runs on a line are disjoint and ordered,
-    # and close before the zero padding, so the i-th start pairs with the i-th end
-    starts = after != 0
-    ends = before != 0
-    return line[starts], k[starts], k[ends], after[starts]
+    h, w = occ.shape
+    P = np.zeros((h + 2, w + 2), np.uint8)
+    for j in range(h):
+        for i in range(w):
+            P[j + 1, i + 1] = occ[j, i]
+    per_line = np.zeros(w + 1, np.int64)
+    empty = np.empty(0, np.int64)
+    nh = _scan(P, False, per_line, empty, empty, empty, empty)
+    slot = np.empty(w + 1, np.int64)
+    total = nh
+    for i in range(w + 1):
+        slot[i] = total
+        total += per_line[i]
+    line, first, last = (np.empty(total, np.int64), np.empty(total, np.int64),
+                         np.empty(total, np.int64))
+    value = np.empty(total, np.int64)
+    _scan(P, True, slot, line, first, last, value)
+    return line, first, last, value, nh
 
 
 def boundary_edges(occupied, frame: GridFrame) -> GridEdges:
@@ -224,15 +270,9 @@ def boundary_edges(occupied, frame: GridFrame) -> GridEdges:
     no two could be merged (collinear, touching end to start, same direction).
     """
     occ = _check_occupied(occupied)
-    h, w = occ.shape
-    pad = np.zeros((h + 2, w + 2), dtype=np.int8)
-    pad[1:-1, 1:-1] = occ
-    # horizontal grid line y = j (row j of dh), cell column i = column i + 1:
-    # +1 = cell above occupied -> edge runs +x (occupied on the left), -1 = below -> -x
-    hl, hs, he, hv = _runs(pad[1:, :] - pad[:-1, :], along_rows=True)
-    # vertical grid line x = i (column i of dv), cell row j = row j + 1:
-    # +1 = cell left of the line occupied -> edge runs +y, -1 = right -> -y
-    vl, vs, ve, vv = _runs(pad[:, :-1] - pad[:, 1:], along_rows=False)
+    line, first, last, value, n_h = _boundary_runs(np.ascontiguousarray(occ))
+    hl, hs, he, hv = line[:n_h], first[:n_h], last[:n_h], value[:n_h]
+    vl, vs, ve, vv = line[n_h:], first[n_h:], last[n_h:], value[n_h:]
     hpos, vpos = hv > 0, vv > 0
     # (ix, iy) corners; a run from corner s to corner e, reversed where the value is -1
     sx = np.concatenate([np.where(hpos, hs, he), vl]).astype(np.int64)
