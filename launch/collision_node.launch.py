@@ -1,6 +1,10 @@
 """Launch collision_node with the package's parameter file (ROS workspace users).
 
     ros2 launch circle_collision_ros collision_node.launch.py [demo:=true] [params_file:=...]
+        [autostart:=false]
+
+autostart:=false starts collision_node unconfigured, for a lifecycle manager (or
+`ros2 lifecycle set`) to configure and activate; the default configures and activates it.
 """
 import os
 
@@ -18,10 +22,14 @@ def generate_launch_description() -> LaunchDescription:
     return LaunchDescription([
         DeclareLaunchArgument("params_file", default_value=default_params,
                               description="Parameter YAML for collision_node"),
+        DeclareLaunchArgument("autostart", default_value="true",
+                              description="Configure and activate collision_node at start"),
         DeclareLaunchArgument("demo", default_value="false",
                               description="Also start the synthetic demo_scene publisher"),
         Node(package="circle_collision_ros", executable="collision_node", name="collision_node",
-             parameters=[LaunchConfiguration("params_file")], output="screen"),
+             parameters=[LaunchConfiguration("params_file"),
+                         {"autostart": LaunchConfiguration("autostart")}],
+             output="screen"),
         Node(package="circle_collision_ros", executable="demo_scene", name="demo_scene",
              output="screen", condition=IfCondition(LaunchConfiguration("demo"))),
     ])

@@ -156,3 +156,27 @@ def test_core_imports_neither_ros_nor_the_rest_of_the_package():
                 ):
                     bad.append(f"{name}:{node.lineno} imports {r}")
     assert bad == []
+
+
+def test_package_xml_lists_every_ros_package_the_code_imports():
+    """A ROS workspace resolves exec_depend: a missing one is a node that fails to start."""
+    import re
+
+    xml = (PACKAGE.parent / "package.xml").read_text()
+    declared = set(re.findall(r"<exec_depend>([\w-]+)</exec_depend>", xml))
+    ros = re.compile(r"\w+_msgs$|rclpy$|builtin_interfaces$|launch(_ros)?$|ament_index_python$")
+    used: dict[str, str] = {}
+    files = [*PACKAGE.rglob("*.py"), *(PACKAGE.parent / "launch").glob("*.py")]
+    for path in files:
+        for node in ast.walk(ast.parse(path.read_text(), str(path))):
+            roots = ([a.name for a in node.names] if isinstance(node, ast.Import) else
+                     [node.module] if isinstance(node, ast.ImportFrom) and not node.level
+                     and node.module else [])
+            for r in roots:
+                if r == "rclpy.lifecycle" or r.startswith("rclpy.lifecycle."):
+                    used.setdefault("lifecycle_msgs", str(path))  # its services' types
+                top = r.split(".")[0]
+                if ros.match(top):
+                    used.setdefault(top, str(path))
+    missing = {p: where for p, where in used.items() if p not in declared}
+    assert missing == {}, f"package.xml lacks exec_depend for {missing}"

@@ -421,8 +421,8 @@ class CollisionNode(LifecycleNode):
         self._inputs = inputs
         self._odometry_sources = odometry
         # Static geometry (maps, polygons): indexed off the prediction path
-        # (node/static_inputs). Its world lives from configure to cleanup, its subscriptions
-        # while active.
+        # (node/static_inputs). Its world and subscriptions live from configure to cleanup;
+        # its markers are published while active.
         if settings.used:
             self.static = StaticInputs(self, settings, lambda: self.predictor.frame_id,
                                        self._adopt_frame, self._on_static_world, self._warn,
@@ -475,7 +475,7 @@ class CollisionNode(LifecycleNode):
         # Everything a callback may take in one go: what the input queues can hold.
         self._drain_limit = sum(s.subscription.qos_profile.depth for s in self._inputs) or 1
         if self.static is not None:
-            self.static.subscribe()
+            self.static.activate()
         self._set_publish_rate(p("publish_rate"))
         self._expiry_timer = self.create_timer(self.EXPIRY_PERIOD_S, self._on_expiry_timer)
         self._diagnostics_timer = self.create_timer(1.0, self._publish_diagnostics)
@@ -492,7 +492,7 @@ class CollisionNode(LifecycleNode):
                 self.destroy_subscription(source.subscription)
                 source.subscription = None
         if self.static is not None:
-            self.static.unsubscribe()
+            self.static.deactivate()
         for name in ("_publish_timer", "_expiry_timer", "_diagnostics_timer", "_qos_timer"):
             timer = getattr(self, name, None)
             if timer is not None:

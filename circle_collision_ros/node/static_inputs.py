@@ -81,7 +81,8 @@ class StaticInputs:
         self._markers_pub = node.create_publisher(MarkerArray, "~/static_markers", QoSProfile(
             history=HistoryPolicy.KEEP_LAST, depth=1, reliability=ReliabilityPolicy.RELIABLE,
             durability=DurabilityPolicy.TRANSIENT_LOCAL))
-        # (topic, type, callback, QoS) of each input; subscribed while the node is active
+        # (topic, type, callback, QoS) of each input, subscribed from configure to cleanup:
+        # the world is current when the node activates, and a map is indexed once
         self._inputs: list[tuple] = []
         if settings.map_topic:
             topic = node.resolve_topic_name(settings.map_topic)
@@ -94,12 +95,15 @@ class StaticInputs:
                                  QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=10,
                                             reliability=ReliabilityPolicy.RELIABLE)))
         self.topics = [(topic, msg_type) for topic, msg_type, _, _ in self._inputs]
-        self._subscriptions: list = []
-        self._markers: MarkerArray | None = None  # of the applied world, sent on activation
+        self._markers: bytes | None = None  # of the applied world (CDR), sent while active
+        self._active = False
         if self.obstacles.version:  # the parameters' polygons: indexed before any input
             index, self._markers, _ = _timed_build(self.obstacles, self._frame(), node)
             self._apply(index, self.obstacles.version)
             self.applied_version = self.obstacles.version
+        self._subscriptions = [
+            node.create_subscription(msg_type, topic, callback, qos, raw=True)
+            for topic, msg_type, callback, qos in self._inputs]
 
     # -- inputs ---------------------------------------------------------------------------------
     def _take(self, type_name: str, topic: str, data: bytes) -> bool:
@@ -161,29 +165,29 @@ class StaticInputs:
         self.applied_version = version
         self.index_s_last = seconds
         self._markers = markers
-        self._markers_pub.publish(markers)
+        if self._active:
+            self._markers_pub.publish(markers)
         self._apply(index, version)
 
-    def subscribe(self) -> None:
-        """Take inputs (the node's activation); a map server's transient-local map arrives
-        again, and is indexed again."""
-        if self._markers is not None:  # the display gets the world the node keeps
+    def activate(self) -> None:
+        """The node's activation: the display gets the world the node holds, and each new
+        one from now on."""
+        self._active = True
+        if self._markers is not None:
             self._markers_pub.publish(self._markers)
-        if not self._subscriptions:
-            self._subscriptions = [
-                self._node.create_subscription(msg_type, topic, callback, qos, raw=True)
-                for topic, msg_type, callback, qos in self._inputs]
 
-    def unsubscribe(self) -> None:
-        """Stop taking inputs (deactivation); the world stays."""
-        for sub in self._subscriptions:
-            self._node.destroy_subscription(sub)
-        self._subscriptions = []
+    def deactivate(self) -> None:
+        """The node's deactivation: the inputs are still taken and indexed (the world stays
+        current), nothing is published."""
+        self._active = False
 
     def close(self) -> None:
         """Unsubscribe, let a build in progress finish (its guard must still exist when it
         signals), then release the guard and the marker publisher (the node's cleanup)."""
-        self.unsubscribe()
+        self._active = False
+        for sub in self._subscriptions:
+            self._node.destroy_subscription(sub)
+        self._subscriptions = []
         self._worker.shutdown(wait=True, cancel_futures=True)
         self._node.destroy_guard_condition(self._guard)
         self._node.destroy_publisher(self._markers_pub)

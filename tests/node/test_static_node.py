@@ -9,7 +9,10 @@ Guarantees proved here:
 - the static world is drawn on ~/static_markers (transient local, one LINE_LIST per obstacle);
 - bad maps (wrong frame, size not width*height, resolution <= 0, NaN origin) each get a
   warning naming the reason, never crash the node, and leave the world as it was;
-- static inputs in 3-D are refused at start-up.
+- static inputs in 3-D are refused at start-up;
+- managed: the static inputs are taken from configure to cleanup, so a polygon sent while
+  the node is inactive is in the world at activation, the transient-local map is indexed once
+  (not again at each activation), and ~/static_markers is published only while active.
 """
 from __future__ import annotations
 
@@ -252,6 +255,55 @@ def test_static_world_is_recorded_and_replays_bit_for_bit(ros_context, ros_node,
     tampered = [r._replace(data=serialize_message(type(_string())(data='{"version": 99}')))
                 if r.topic.endswith("/static_applied") else r for r in records]
     assert any("never received" in m for m in replay_offline(tampered).mismatches)
+
+
+def test_static_world_stays_current_while_inactive(ros_context, ros_node) -> None:
+    from visualization_msgs.msg import MarkerArray
+
+    from tests.node.test_lifecycle import Lifecycle
+
+    now = ros_node.get_clock().now().nanoseconds
+    map_pub = ros_node.create_publisher(OccupancyGrid, "map", LATCHED)
+    map_pub.publish(_grid(now))
+    node = CollisionNode(context=ros_context, parameter_overrides=[
+        Parameter("autostart", value=False), Parameter("map_topic", value="map"),
+        Parameter("polygon_topics", value=["crate/polygon"]), Parameter("frame_id", value="map"),
+        Parameter("stale_timeout", value=600.0), Parameter("horizon", value=10.0)])
+    lifecycle = Lifecycle(ros_node, node)
+    drawn: list = []
+    ros_node.create_subscription(MarkerArray, "/collision_node/static_markers", drawn.append,
+                                 LATCHED)
+    predictions: list[CollisionPredictionArray] = []
+    ros_node.create_subscription(CollisionPredictionArray, "collision_predictions",
+                                 predictions.append, 50)
+    qos = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
+    states = ros_node.create_publisher(CircleStateArray, "circle_states", qos)
+    crate = ros_node.create_publisher(PolygonStamped, "crate/polygon", qos)
+    try:
+        assert lifecycle.set("configure")
+        # inactive: the map arrives and is indexed, a polygon is taken; nothing is drawn
+        assert spin_until(ros_node, lambda: node.static.applied_version >= 1, 30.0, (node,))
+        assert spin_until(ros_node, lambda: crate.get_subscription_count() > 0, 20.0, (node,))
+        crate.publish(_polygon(now, [(1.0, -0.5), (1.5, -0.5), (1.5, 0.5), (1.0, 0.5)]))
+        assert spin_until(ros_node, lambda: node.static.applied_version >= 2, 20.0, (node,))
+        spin_until(ros_node, lambda: False, 0.5, (node,))
+        assert not drawn and not predictions
+        # active: the world held (map and crate) is drawn and answered
+        assert lifecycle.set("activate")
+        assert spin_until(ros_node, lambda: bool(drawn), 20.0, (node,))
+        assert sorted(m.text for m in drawn[-1].markers[1:]) == ["crate", "map"]
+        assert spin_until(ros_node, reader_matched(node, "circle_states"), 30.0, (node,))
+        states.publish(state_array([state("a", (0.0, 0.0), (1.0, 0.0), r=0.5, stamp_ns=now)]))
+        assert spin_until(ros_node, lambda: predictions and ("a", "crate") in _rows(
+            predictions[-1]), 20.0, (node,))
+        assert _rows(predictions[-1])[("a", "crate")].time_to_collision == 0.5
+        # deactivate and activate again: the map is not delivered and indexed again
+        version = node.static.applied_version
+        assert lifecycle.set("deactivate") and lifecycle.set("activate")
+        spin_until(ros_node, lambda: False, 1.0, (node,))
+        assert node.static.applied_version == version
+    finally:
+        node.destroy_node()
 
 
 def _string():
