@@ -311,6 +311,16 @@ def clean_single_state(batch: StateBatch, frame_id: str, now_ns: int | None) -> 
     return BatchCheck(_GOOD, [], frame_id, _EXACT)
 
 
+def _largest_magnitude(x: np.ndarray) -> np.ndarray:
+    """Per row of (n, D) ``x``, the largest |value|; NaN where a value is NaN (np.maximum
+    propagates it). Column by column: an ``.all(axis=1)`` over a 3-wide axis of a strided
+    view costs several times more at 10,000 rows."""
+    out = np.abs(x[:, 0])
+    for c in range(1, x.shape[1]):
+        np.maximum(out, np.abs(x[:, c]), out=out)
+    return out
+
+
 def check_batch(
     batch: StateBatch, *, frame_id: str, now_ns: int | None, dimensions: int = 3
 ) -> BatchCheck:
@@ -345,9 +355,9 @@ def check_batch(
     limit = ValueLimits.MAX_MAGNITUDE  # also false for NaN and +-inf
     finite = (
         (np.abs(batch.radius) <= limit)
-        & (np.abs(batch.position) <= limit).all(axis=1)
-        & (np.abs(batch.velocity) <= limit).all(axis=1)
-        & (np.abs(batch.acceleration) <= limit).all(axis=1)
+        & (_largest_magnitude(batch.position) <= limit)
+        & (_largest_magnitude(batch.velocity) <= limit)
+        & (_largest_magnitude(batch.acceleration) <= limit)
     )
     covariance_bad, uncertain, block = covariance_checks(batch, dimensions)
     geometry_bad = ~batch.remove & (~finite | (batch.radius < 0.0)) | covariance_bad
