@@ -129,9 +129,10 @@ def _horner_dd(c, t):
     """``(c2 t + c1) t + c0`` for dd coefficients ``c = (c0h, c0l, c1h, c1l, c2h, c2l)`` and
     a float t, by compensated Horner: each step's product and sum errors are exact
     (two_prod, two_sum) and carried, with the coefficients' low parts, in a float
-    correction.  Returns (value, correction); their sum errs by less than ~4u^2 of
-    ``|c2| t^2 + |c1| t + |c0|`` (the corrections are below u of the terms and rounded once
-    more), like a double-double evaluation at half its cost.
+    correction.  Returns (value, correction); their sum errs from the value of the dd
+    coefficients by less than 24u^2 of ``|c2| t^2 + |c1| t + |c0|`` (each step's
+    correction is below u of its terms and is summed with relative error < 4u), as a
+    double-double evaluation would, at about half its cost.
 
     Reference: S. Graillat, P. Langlois, N. Louvet, "Compensated Horner scheme", Research
     Report RR2005-04, Univ. Perpignan (2005).
@@ -456,7 +457,7 @@ def edge_contact(px, py, vx, vy, ax, ay, r, Ax, Ay, Bx, By, solid_side, H):
                 break
         if not ok or hi > H and H < INF:
             return UNDECIDED
-        if foot == 0:  # the foot point over the 1-ulp bracket, in double-double
+        if foot == 0:  # the foot point over the 1-ulp bracket, compensated
             pc = _pi_coeffs_dd(gxh, gxl, gyh, gyl, exh, exl, eyh, eyl, vx, vy, ax, ay)
             foot = _foot(_pi_dd(pc, lo), _pi_dd(pc, hi), abs(pi2) * (hi - lo) * (hi - lo), Q,
                          DD_BOUND * (m_at(hi) + Le * Le))
