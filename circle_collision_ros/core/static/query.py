@@ -262,6 +262,47 @@ def _inside_polygon(x: np.ndarray, y: np.ndarray, vx: np.ndarray, vy: np.ndarray
     return inside
 
 
+@njit(cache=True, inline="always", error_model="numpy")
+def _grid_line(c, origin, res, n):
+    """(i, on): the grid line i with ``origin + i res <= c < origin + (i + 1) res`` (the
+    lines rounded once, as the map's edges are), and whether c is on line i; i = -2 for a
+    value beyond the grid's lines (its cells are free either way)."""
+    f = (c - origin) / res
+    if not (-2.0 <= f <= n + 2.0):  # also NaN: never converted to an integer
+        return -2, False
+    i = np.int64(math.floor(f))
+    for _ in range(2):  # the estimate is off by at most one line
+        if origin + i * res > c:
+            i -= 1
+        if origin + (i + 1) * res <= c:
+            i += 1
+    return i, origin + i * res == c
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def _cell(occ, i, j):
+    h, w = occ.shape
+    return 0 <= i < w and 0 <= j < h and occ[j, i]
+
+
+@njit(cache=True, error_model="numpy")
+def _inside_unrotated(occ, origin_x, origin_y, res, x, y, out):
+    """``_inside_map`` for yaw 0, one compiled pass: a point on a cell line is inside only
+    when the cells on both sides of it are occupied (all four at a cell corner)."""
+    h, w = occ.shape
+    for k in range(x.shape[0]):
+        i, on_x = _grid_line(x[k], origin_x, res, w)
+        j, on_y = _grid_line(y[k], origin_y, res, h)
+        inside = _cell(occ, i, j)
+        if inside and on_x:
+            inside = _cell(occ, i - 1, j)
+        if inside and on_y:
+            inside = _cell(occ, i, j - 1)
+        if inside and on_x and on_y:
+            inside = _cell(occ, i - 1, j - 1)
+        out[k] = inside
+
+
 def _inside_map(occ: np.ndarray, frame, x: np.ndarray, y: np.ndarray) -> np.ndarray:
     """Whether each point lies strictly inside the occupied cells (a point on a boundary
     between occupied and free cells is not inside).
@@ -273,30 +314,11 @@ def _inside_map(occ: np.ndarray, frame, x: np.ndarray, y: np.ndarray) -> np.ndar
     (r below that) sitting on the boundary."""
     if frame.yaw != 0.0:
         return cell_occupied_at(occ, frame, x, y)
-    h, w = occ.shape
-
-    def locate(c, origin, n):
-        line = lambda i: origin + i.astype(np.float64) * frame.resolution  # noqa: E731
-        i = np.floor((c - origin) / frame.resolution).astype(np.int64)
-        for _ in range(2):  # the estimate is off by at most one line
-            i = np.where(line(i) > c, i - 1, i)
-            i = np.where(line(i + 1) <= c, i + 1, i)
-        return i, line(i) == c
-
-    i, on_x = locate(x, frame.origin_x, w)
-    j, on_y = locate(y, frame.origin_y, h)
-
-    def occupied(ii, jj):
-        ok = (ii >= 0) & (ii < w) & (jj >= 0) & (jj < h)
-        out = np.zeros(ii.shape, bool)
-        out[ok] = occ[jj[ok], ii[ok]]
-        return out
-
-    inside = occupied(i, j)
-    inside &= np.where(on_x, occupied(i - 1, j), True)
-    inside &= np.where(on_y, occupied(i, j - 1), True)
-    inside &= np.where(on_x & on_y, occupied(i - 1, j - 1), True)
-    return inside
+    out = np.empty(len(x), np.bool_)
+    _inside_unrotated(np.ascontiguousarray(occ, dtype=np.bool_), frame.origin_x,
+                      frame.origin_y, frame.resolution, np.ascontiguousarray(x, np.float64),
+                      np.ascontiguousarray(y, np.float64), out)
+    return out
 
 
 def _details(p, v, a, t, world, kind, feature):

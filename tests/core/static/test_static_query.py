@@ -15,6 +15,7 @@ Guarantees proved here (docs/static.md):
 from __future__ import annotations
 
 import math
+import warnings
 from fractions import Fraction
 
 import numpy as np
@@ -308,6 +309,20 @@ def test_bad_input_rows_are_nan_and_bad_obstacles_are_refused():
 
 
 WALL_SEGMENTS = Segments("wall", np.array([[-10.0, 0]]), np.array([[10.0, 0]]))
+
+
+def test_bodies_far_beyond_a_map_are_outside_it_without_an_invalid_cast():
+    """The map's inside test never converts an out-of-range cell index to an integer (numpy
+    warned 'invalid value encountered in cast' and relied on the platform's garbage)."""
+    occ = np.ones((4, 4), bool)
+    world = StaticWorld.build([OccupancyMap("map", occ, GridFrame(0.5))])
+    p = [[1e300, 1.0], [1.0, -1e300], [-3e299, 2e299], [1.0, 1.0]]
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        c = time_to_static(p, [[0.0, 0.0]] * 4, [[0.0, 0.0]] * 4, 0.0, StaticIndex.build(world),
+                           1.0)
+    assert c.time.tolist() == [math.inf, math.inf, math.inf, 0.0]
+    assert c.kind[3] == KIND_INSIDE
 
 
 @pytest.mark.parametrize("v, expected", [((0.0, 1.0), 0.0), ((0.0, -1.0), math.inf),
