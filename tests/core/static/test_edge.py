@@ -127,3 +127,65 @@ def test_each_decision_is_reached():
         t = _kernel(row)
         kinds["edge" if 0.0 < t < INF else "end"] += 1
     assert min(kinds.values()) >= 300, kinds
+
+
+def test_compensated_evaluation_is_within_its_stated_error():
+    """``_phi_dd`` and ``_pi_dd`` against exact rational values of psi and pi (from the exact
+    inputs; r L by Newton on its exact square, far below these errors; half the rows with
+    r L within rounding of |psi(t)|, where phi cancels): beyond the final
+    rounding of the value to one float (half an ulp of it, which never changes a sign), the
+    error stays below the derived 10 eps^2 M(t) (``_phi_dd``'s docstring), a sixth of the
+    bound the kernel uses."""
+    from fractions import Fraction as F
+
+    from circle_collision_ros.core.narrow.dd import two_sum
+    from circle_collision_ros.core.narrow.evaluate import EPS
+    from circle_collision_ros.core.static.edge import (_phi_dd, _pi_coeffs_dd, _pi_dd,
+                                                      _psi_dd)
+
+    rng = np.random.default_rng(99)
+    worst = 0.0
+    for i in range(3000):
+        scale = 10.0 ** rng.uniform(-3, 4)
+        off = rng.choice([0.0, 1e4, -3e3])
+        A = off + scale * rng.uniform(-5, 5, 2)
+        B = A + scale * rng.uniform(-3, 3, 2) * (10.0 ** rng.uniform(-4, 0))
+        p = A + scale * rng.uniform(-5, 5, 2)
+        v, a = rng.normal(0, 2, 2), rng.normal(0, 1, 2) * (i % 3 != 0)
+        t = float(rng.uniform(0, 20))
+        r = scale * rng.uniform(0, 1)
+        if i % 2:  # r L within rounding of |psi(t)|: phi(t) cancels to near 0
+            c = p - A + v * t + a * t * t / 2
+            e_ = B - A
+            r = abs(e_[0] * c[1] - e_[1] * c[0]) / math.hypot(*e_)
+        g = [two_sum(float(p[k]), -float(A[k])) for k in range(2)]
+        e = [two_sum(float(B[k]), -float(A[k])) for k in range(2)]
+        flat = (g[0][0], g[0][1], g[1][0], g[1][1], e[0][0], e[0][1], e[1][0], e[1][1],
+                float(v[0]), float(v[1]), float(a[0]), float(a[1]))
+        rLh, rLl, ps = _psi_dd(*flat, float(r))
+        pc = _pi_coeffs_dd(*flat)
+        # exact values
+        gx, gy = F(float(p[0])) - F(float(A[0])), F(float(p[1])) - F(float(A[1]))
+        ex, ey = F(float(B[0])) - F(float(A[0])), F(float(B[1])) - F(float(A[1]))
+        T = F(t)
+        Gx = gx + F(float(v[0])) * T + F(float(a[0])) * T * T / 2
+        Gy = gy + F(float(v[1])) * T + F(float(a[1])) * T * T / 2
+        psi, pi = ex * Gy - ey * Gx, ex * Gx + ey * Gy
+        Q = ex * ex + ey * ey
+        rL2 = F(float(r)) ** 2 * Q  # (r L)^2, exact
+        M = (abs(e[0][0]) + abs(e[1][0])) * (abs(g[0][0]) + abs(g[1][0]) + (abs(v[0]) + abs(
+            v[1])) * t + 0.5 * (abs(a[0]) + abs(a[1])) * t * t + r)
+        for sig in (1.0, -1.0):
+            got = F(_phi_dd(sig, ps, rLh, rLl, t))
+            # |got - (sig psi - r L)| via r L's exact square: bracket r L between two
+            # rationals 1e-40 apart (Newton on the exact square)
+            root = F(math.sqrt(float(rL2)))
+            for _ in range(3):
+                if root:
+                    root = (root + rL2 / root) / 2
+            err = abs(got - (F(sig) * psi - root)) - F(math.ulp(float(got))) / 2
+            worst = max(worst, float(err) / (EPS * EPS * M))
+        got_pi = _pi_dd(pc, t)
+        err_pi = abs(F(got_pi) - pi) - F(math.ulp(got_pi)) / 2
+        worst = max(worst, float(err_pi) / (EPS * EPS * (M + float(Q))))
+    assert worst < 10.0, worst
