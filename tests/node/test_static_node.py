@@ -63,6 +63,16 @@ def _polygon(now_ns: int, points, frame: str = "map") -> PolygonStamped:
     return msg
 
 
+def _client(ros_node) -> tuple[list, object, object]:
+    """The test's side: the predictions it receives, and its state and crate publishers."""
+    predictions: list[CollisionPredictionArray] = []
+    ros_node.create_subscription(CollisionPredictionArray, "collision_predictions",
+                                 predictions.append, 50)
+    qos = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
+    return (predictions, ros_node.create_publisher(CircleStateArray, "circle_states", qos),
+            ros_node.create_publisher(PolygonStamped, "crate/polygon", qos))
+
+
 def _rows(msg: CollisionPredictionArray) -> dict:
     return {(p.id_a, p.id_b): p for p in msg.predictions}
 
@@ -82,13 +92,9 @@ def test_map_before_start_robots_polygons_and_service(ros_context, ros_node) -> 
             Parameter("frame_id", value="map"), Parameter("horizon", value=10.0),
             Parameter("stale_timeout", value=600.0)],
     )
-    predictions: list[CollisionPredictionArray] = []
-    ros_node.create_subscription(CollisionPredictionArray, "collision_predictions",
-                                 predictions.append, 50)
-    qos = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
-    states = ros_node.create_publisher(CircleStateArray, "circle_states", qos)
-    odom = ros_node.create_publisher(Odometry, "robot/odom", qos)
-    crate = ros_node.create_publisher(PolygonStamped, "crate/polygon", qos)
+    predictions, states, crate = _client(ros_node)
+    odom = ros_node.create_publisher(Odometry, "robot/odom", QoSProfile(
+        depth=10, reliability=ReliabilityPolicy.RELIABLE))
     try:
         # the map arrives and is indexed off the prediction path
         assert spin_until(ros_node, lambda: node.static.applied_version >= 2, 30.0, (node,))
@@ -216,12 +222,7 @@ def test_static_world_is_recorded_and_replays_bit_for_bit(ros_context, ros_node,
         Parameter("static_polygons", value='{"keep_out": [[3, 1], [4, 1], [4, 2], [3, 2]]}'),
         Parameter("frame_id", value="map"), Parameter("stale_timeout", value=600.0),
         Parameter("horizon", value=10.0), Parameter("record_path", value=str(bag))])
-    predictions: list[CollisionPredictionArray] = []
-    ros_node.create_subscription(CollisionPredictionArray, "collision_predictions",
-                                 predictions.append, 50)
-    qos = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
-    states = ros_node.create_publisher(CircleStateArray, "circle_states", qos)
-    crate = ros_node.create_publisher(PolygonStamped, "crate/polygon", qos)
+    predictions, states, crate = _client(ros_node)
     try:
         assert spin_until(ros_node, lambda: node.static.applied_version >= 2, 30.0, (node,))
         assert spin_until(ros_node, reader_matched(node, "circle_states"), 30.0, (node,))
@@ -273,12 +274,7 @@ def test_static_world_stays_current_while_inactive(ros_context, ros_node) -> Non
     drawn: list = []
     ros_node.create_subscription(MarkerArray, "/collision_node/static_markers", drawn.append,
                                  LATCHED)
-    predictions: list[CollisionPredictionArray] = []
-    ros_node.create_subscription(CollisionPredictionArray, "collision_predictions",
-                                 predictions.append, 50)
-    qos = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
-    states = ros_node.create_publisher(CircleStateArray, "circle_states", qos)
-    crate = ros_node.create_publisher(PolygonStamped, "crate/polygon", qos)
+    predictions, states, crate = _client(ros_node)
     try:
         assert lifecycle.set("configure")
         # inactive: the map arrives and is indexed, a polygon is taken; nothing is drawn

@@ -60,8 +60,11 @@ def graze_rows(seed: int, n: int, gaps, scale: float = 1.0, offset: float = 0.0)
     return rows
 
 
-def endpoint_rows(seed: int, n: int):
-    """Contacts whose foot point is within ~1e-12 (relative) of A or B, either side."""
+def endpoint_rows(seed: int, n: int, exponents: tuple[float, float] = (-13, -11),
+                  finite_horizons: bool = False):
+    """Contacts whose foot point is within 10**exponents (relative) of A or B, either side:
+    the end's contact or the edge's; with ``finite_horizons`` every fourth row has a random
+    horizon in [0, 6] s (the rest none)."""
     rng = np.random.default_rng(seed)
     rows = []
     for i in range(n):
@@ -69,7 +72,7 @@ def endpoint_rows(seed: int, n: int):
         nrm, tan = unit_normal(A, B)
         side = rng.choice([-1, 1])
         r = rng.uniform(0.1, 2) if i % 5 else 0.0
-        lam = rng.choice([-1, 1]) * 10 ** rng.uniform(-13, -11)
+        lam = rng.choice([-1, 1]) * 10 ** rng.uniform(*exponents)
         lam = lam if i % 2 else 1 + lam
         t_c = rng.uniform(0.5, 5)
         centre = A + lam * (B - A) + side * r * nrm
@@ -77,5 +80,6 @@ def endpoint_rows(seed: int, n: int):
         a = rng.normal(0, 0.5, 2) if i % 3 else np.zeros(2)
         v = u - a * t_c
         p = centre - v * t_c - a * t_c ** 2 / 2
-        rows.append(make_row(p, v, a, r, A, B, rng.integers(-1, 2)))
+        H = rng.uniform(0, 6) if finite_horizons and i % 4 == 0 else INF
+        rows.append(make_row(p, v, a, r, A, B, rng.integers(-1, 2), H))
     return rows

@@ -21,7 +21,6 @@ from tests.core.static.edge_rows import (
     graze_rows,
     make_row,
     random_rows,
-    unit_normal,
 )
 
 INF = math.inf
@@ -52,28 +51,6 @@ def _compare(rows) -> dict:
     return {"rows": len(rows), "undecided": und, "hits": hits, "nearest": nearest}
 
 
-def _foot_beyond_an_end_rows(seed: int, n: int):
-    """Bodies entering the band of the line with the foot point just beyond A or B (by 1e-9
-    to 1e-2 of the length) or just inside: the contact is the end's, or the edge's."""
-    rng = np.random.default_rng(seed)
-    rows = []
-    for i in range(n):
-        A, B = rng.uniform(-5, 5, 2), rng.uniform(-5, 5, 2)
-        nrm, tan = unit_normal(A, B)
-        side = rng.choice([-1, 1])
-        r = rng.uniform(0.05, 1.0)
-        lam = rng.choice([-1, 1]) * 10 ** rng.uniform(-9, -2)
-        lam = lam if i % 2 else 1 + lam
-        t_c = rng.uniform(0.2, 4)
-        centre = A + lam * (B - A) + side * r * nrm
-        u = -side * rng.uniform(0.3, 2) * nrm + rng.normal(0, 0.5) * tan
-        a = rng.normal(0, 0.5, 2) if i % 3 else np.zeros(2)
-        v = u - a * t_c
-        p = centre - v * t_c - a * t_c ** 2 / 2
-        rows.append(make_row(p, v, a, r, A, B, 0, INF if i % 4 else rng.uniform(0, 6)))
-    return rows
-
-
 def _near_segment_rows(seed: int, n: int):
     """Bodies 0.5-4 m from 0.5-3 m segments, half aimed at them, H = 10 s (the benchmark's
     per-pair rows): most reach the bracket or a float rejection."""
@@ -101,7 +78,7 @@ FAMILIES = {
     "straight": (lambda: random_rows(111, 1500, accelerate=False), 0.01),
     "accelerating": (lambda: random_rows(222, 1500, accelerate=True), 0.01),
     "near_segment": (lambda: _near_segment_rows(333, 2000), 0.01),
-    "foot_beyond_an_end": (lambda: _foot_beyond_an_end_rows(444, 1500), 0.01),
+    "foot_beyond_an_end": (lambda: endpoint_rows(444, 1500, (-9, -2), True), 0.01),
     "graze_1e-6": (lambda: graze_rows(555, 1000, _gaps(-7, -5)), 0.05),
     "graze_1e-12": (lambda: graze_rows(666, 500, _gaps(-13, -11)), 1.0),
     "map_scale": (lambda: graze_rows(777, 500, _gaps(-6, -2), offset=1e4)
@@ -121,7 +98,7 @@ def test_kernel_agrees_with_the_exact_solver(name):
 
 def test_each_decision_is_reached():
     """The families above reach the float-proved foot point on both sides and the bracket."""
-    rows = _foot_beyond_an_end_rows(444, 1500)
+    rows = endpoint_rows(444, 1500, (-9, -2), True)
     kinds = {"edge": 0, "end": 0}
     for row in rows:
         t = _kernel(row)
