@@ -219,18 +219,29 @@ def _rows(x, name: str, n: int | None) -> np.ndarray:
     return np.ascontiguousarray(a)
 
 
-def _strictly_inside_exact(px: float, py: float, vx: np.ndarray, vy: np.ndarray) -> bool:
-    """In rationals: the point lies in the polygon's interior (on the boundary: False)."""
+def _strictly_inside_edges(px: float, py: float, x1: np.ndarray, y1: np.ndarray,
+                           x2: np.ndarray, y2: np.ndarray) -> bool:
+    """Exactly: the point lies in the interior of the region the closed loops of edges
+    (x1, y1) -> (x2, y2) bound (even-odd crossings of the ray to +x); on an edge: False.
+
+    Each edge's orientation ``o`` of the point is taken from float64 where beyond its
+    rounding bound (then it is not 0, so the point is off that edge's line), and in
+    rationals for the rest."""
+    o = (x2 - x1) * (py - y1) - (y2 - y1) * (px - x1)
+    # each difference is rounded relative to its operands, each product and the sum once
+    err = 8.0 * EPS * ((np.abs(x2) + np.abs(x1)) * (abs(py) + np.abs(y1))
+                       + (np.abs(y2) + np.abs(y1)) * (abs(px) + np.abs(x1)))
+    sure = np.abs(o) > err
+    crosses = (y1 > py) != (y2 > py)
+    inside = bool(np.count_nonzero(sure & crosses & ((o > 0) == (y2 > y1))) % 2)
     F = Fraction
     x, y = F(px), F(py)
-    n = len(vx)
-    inside = False
-    for i in range(n):
-        x1, y1, x2, y2 = F(vx[i]), F(vy[i]), F(vx[(i + 1) % n]), F(vy[(i + 1) % n])
-        o = (x2 - x1) * (y - y1) - (y2 - y1) * (x - x1)
-        if o == 0 and min(x1, x2) <= x <= max(x1, x2) and min(y1, y2) <= y <= max(y1, y2):
+    for k in np.flatnonzero(~sure):
+        a, b, c, d = F(x1[k]), F(y1[k]), F(x2[k]), F(y2[k])
+        ok = (c - a) * (y - b) - (d - b) * (x - a)
+        if ok == 0 and min(a, c) <= x <= max(a, c) and min(b, d) <= y <= max(b, d):
             return False  # on an edge
-        if (y1 > y) != (y2 > y) and (o > 0) == (y2 > y1):
+        if (b > y) != (d > y) and (ok > 0) == (d > b):
             inside = not inside
     return inside
 
@@ -257,8 +268,10 @@ def _inside_polygon(x: np.ndarray, y: np.ndarray, vx: np.ndarray, vy: np.ndarray
         unsure |= near
         crosses = (y1 > y) != (y2 > y)
         inside ^= crosses & ((o > 0) == (y2 > y1))
-    for k in np.flatnonzero(unsure):
-        inside[k] = _strictly_inside_exact(float(x[k]), float(y[k]), vx, vy)
+    if unsure.any():
+        wx, wy = np.roll(vx, -1), np.roll(vy, -1)
+        for k in np.flatnonzero(unsure):
+            inside[k] = _strictly_inside_edges(float(x[k]), float(y[k]), vx, vy, wx, wy)
     return inside
 
 
@@ -303,22 +316,38 @@ def _inside_unrotated(occ, origin_x, origin_y, res, x, y, out):
         out[k] = inside
 
 
-def _inside_map(occ: np.ndarray, frame, x: np.ndarray, y: np.ndarray) -> np.ndarray:
+def _inside_map(occ: np.ndarray, frame, x: np.ndarray, y: np.ndarray, starts: np.ndarray,
+                ends: np.ndarray) -> np.ndarray:
     """Whether each point lies strictly inside the occupied cells (a point on a boundary
-    between occupied and free cells is not inside).
+    between occupied and free cells is not inside), exactly for the map's float64 geometry:
+    the region its edges (``starts``, ``ends``: the cell corners rounded once) bound.
 
     With yaw 0 the cell lines are ``origin + i * resolution`` rounded once, exactly the map's
-    edges, so locating a point between them, and on one, is exact.  A rotated map is looked
-    up in float64 (``occupancy.cell_occupied_at``): a point within rounding (~1e-15 of a cell)
-    of a cell side may land in either neighbouring cell, which only matters for a point body
-    (r below that) sitting on the boundary."""
-    if frame.yaw != 0.0:
-        return cell_occupied_at(occ, frame, x, y)
-    out = np.empty(len(x), np.bool_)
-    _inside_unrotated(np.ascontiguousarray(occ, dtype=np.bool_), frame.origin_x,
-                      frame.origin_y, frame.resolution, np.ascontiguousarray(x, np.float64),
-                      np.ascontiguousarray(y, np.float64), out)
-    return out
+    edges, so locating a point between them, and on one, is exact (``_inside_unrotated``).  A
+    rotated map is looked up in float64 (``occupancy.cell_occupied_at``), which is right for
+    a point farther from every cell line than the lookup's and the corners' rounding; a point
+    within a generous margin of a line is decided by the edges themselves
+    (``_strictly_inside_edges``; its merged edges run between rounded corners, so near a
+    line only they define the region)."""
+    if frame.yaw == 0.0:
+        out = np.empty(len(x), np.bool_)
+        _inside_unrotated(np.ascontiguousarray(occ, dtype=np.bool_), frame.origin_x,
+                          frame.origin_y, frame.resolution, np.ascontiguousarray(x, np.float64),
+                          np.ascontiguousarray(y, np.float64), out)
+        return out
+    inside = cell_occupied_at(occ, frame, x, y)
+    fx, fy = frame.map_to_cell(x, y)
+    # rounding of the lookup and of the corners, in cells: a few ulps of the coordinates'
+    # size over the resolution; 256 ulps and 1e-9 of a cell are far beyond it
+    scale = ((np.abs(x) + np.abs(y) + abs(frame.origin_x) + abs(frame.origin_y))
+             / frame.resolution + np.abs(fx) + np.abs(fy))
+    margin = 1e-9 + 256.0 * EPS * scale
+    with np.errstate(invalid="ignore"):
+        near = (np.abs(fx - np.round(fx)) <= margin) | (np.abs(fy - np.round(fy)) <= margin)
+    for k in np.flatnonzero(near):
+        inside[k] = _strictly_inside_edges(float(x[k]), float(y[k]), starts[:, 0], starts[:, 1],
+                                           ends[:, 0], ends[:, 1])
+    return inside
 
 
 def _details(p, v, a, t, world, kind, feature):
@@ -519,7 +548,8 @@ def time_to_static(p, v, a, r, index: StaticIndex, horizon: float = math.inf
             hit = _inside_polygon(x, y, vs[:, 0], vs[:, 1]) & (inside_ob < 0)
             inside_ob[hit] = ob
         for ob, occ, frame in w.maps:
-            hit = _inside_map(occ, frame, x, y) & (inside_ob < 0)
+            mine = w.edge_obstacle == ob
+            hit = _inside_map(occ, frame, x, y, w.starts[mine], w.ends[mine]) & (inside_ob < 0)
             inside_ob[hit] = ob
         hit = inside_ob >= 0
         rows = rows[hit]
