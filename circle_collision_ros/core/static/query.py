@@ -342,8 +342,12 @@ def _inside_map(occ: np.ndarray, frame, x: np.ndarray, y: np.ndarray, starts: np
     scale = ((np.abs(x) + np.abs(y) + abs(frame.origin_x) + abs(frame.origin_y))
              / frame.resolution + np.abs(fx) + np.abs(fy))
     margin = 1e-9 + 256.0 * EPS * scale
+    h, w = occ.shape
     with np.errstate(invalid="ignore"):
         near = (np.abs(fx - np.round(fx)) <= margin) | (np.abs(fy - np.round(fy)) <= margin)
+        # beyond the grid by a cell the lookup's "free" stands (and no exact pass is spent
+        # on a point so far out that the margin spans cells)
+        near &= (fx > -1.0) & (fx < w + 1.0) & (fy > -1.0) & (fy < h + 1.0)
     for k in np.flatnonzero(near):
         inside[k] = _strictly_inside_edges(float(x[k]), float(y[k]), starts[:, 0], starts[:, 1],
                                            ends[:, 0], ends[:, 1])

@@ -356,14 +356,15 @@ def test_bodies_far_beyond_a_map_are_outside_it_without_an_invalid_cast():
     """The map's inside test never converts an out-of-range cell index to an integer (numpy
     warned 'invalid value encountered in cast' and relied on the platform's garbage)."""
     occ = np.ones((4, 4), bool)
-    world = StaticWorld.build([OccupancyMap("map", occ, GridFrame(0.5))])
-    p = [[1e300, 1.0], [1.0, -1e300], [-3e299, 2e299], [1.0, 1.0]]
-    with warnings.catch_warnings():
-        warnings.simplefilter("error")
-        c = time_to_static(p, [[0.0, 0.0]] * 4, [[0.0, 0.0]] * 4, 0.0, StaticIndex.build(world),
-                           1.0)
-    assert c.time.tolist() == [math.inf, math.inf, math.inf, 0.0]
-    assert c.kind[3] == KIND_INSIDE
+    p = [[1e300, 1.0], [1.0, -1e300], [-3e299, 2e299], [1e17, 3.0], [1.0, 1.0]]
+    for yaw in (0.0, 0.3):  # a rotated map also stays out of its exact pass for them
+        world = StaticWorld.build([OccupancyMap("map", occ, GridFrame(0.5, yaw=yaw))])
+        with warnings.catch_warnings():
+            warnings.simplefilter("error")
+            c = time_to_static(p, [[0.0, 0.0]] * 5, [[0.0, 0.0]] * 5, 0.0,
+                               StaticIndex.build(world), 1.0)
+        assert c.time.tolist() == [math.inf] * 4 + [0.0], yaw
+        assert c.kind[4] == KIND_INSIDE
 
 
 @pytest.mark.parametrize("v, expected", [((0.0, 1.0), 0.0), ((0.0, -1.0), math.inf),
