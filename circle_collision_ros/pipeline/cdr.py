@@ -107,6 +107,16 @@ class CdrWriter:
         self._pad(8)
         self.buf += struct.pack(f"<{len(values)}d", *values)
 
+    def f32s(self, *values: float) -> None:
+        self._pad(4)
+        self.buf += struct.pack(f"<{len(values)}f", *values)
+
+    def f64_array(self, values: np.ndarray) -> None:
+        """Every value of ``values`` as float64, in C order (a sequence's elements; one
+        alignment for all: float64 fields only)."""
+        self._pad(8)
+        self.buf += np.ascontiguousarray(values, dtype="<f8").tobytes()
+
 
 class CdrReader:
     """Little-endian XCDR1 reader on plain ``struct`` reads, each checked against the buffer

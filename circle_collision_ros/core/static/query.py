@@ -219,6 +219,17 @@ def _rows(x, name: str, n: int | None) -> np.ndarray:
     return np.ascontiguousarray(a)
 
 
+def _orientation(x1, y1, x2, y2, px, py):
+    """(o, err): the orientation ``(x2 - x1)(py - y1) - (y2 - y1)(px - x1)`` of points
+    against edges in float64 (arrays broadcast), and a bound on its rounding error: each
+    difference is rounded relative to its operands, each product and the sum once, so
+    ``|o| > err`` proves the exact sign (and that the point is off the edge's line)."""
+    o = (x2 - x1) * (py - y1) - (y2 - y1) * (px - x1)
+    err = 8.0 * EPS * ((np.abs(x2) + np.abs(x1)) * (np.abs(py) + np.abs(y1))
+                       + (np.abs(y2) + np.abs(y1)) * (np.abs(px) + np.abs(x1)))
+    return o, err
+
+
 def _strictly_inside_edges(px: float, py: float, x1: np.ndarray, y1: np.ndarray,
                            x2: np.ndarray, y2: np.ndarray) -> bool:
     """Exactly: the point lies in the interior of the region the closed loops of edges
@@ -227,10 +238,7 @@ def _strictly_inside_edges(px: float, py: float, x1: np.ndarray, y1: np.ndarray,
     Each edge's orientation ``o`` of the point is taken from float64 where beyond its
     rounding bound (then it is not 0, so the point is off that edge's line), and in
     rationals for the rest."""
-    o = (x2 - x1) * (py - y1) - (y2 - y1) * (px - x1)
-    # each difference is rounded relative to its operands, each product and the sum once
-    err = 8.0 * EPS * ((np.abs(x2) + np.abs(x1)) * (abs(py) + np.abs(y1))
-                       + (np.abs(y2) + np.abs(y1)) * (abs(px) + np.abs(x1)))
+    o, err = _orientation(x1, y1, x2, y2, px, py)
     sure = np.abs(o) > err
     crosses = (y1 > py) != (y2 > py)
     inside = bool(np.count_nonzero(sure & crosses & ((o > 0) == (y2 > y1))) % 2)
@@ -259,10 +267,7 @@ def _inside_polygon(x: np.ndarray, y: np.ndarray, vx: np.ndarray, vy: np.ndarray
     n = len(vx)
     for i in range(n):
         x1, y1, x2, y2 = vx[i], vy[i], vx[(i + 1) % n], vy[(i + 1) % n]
-        o = (x2 - x1) * (y - y1) - (y2 - y1) * (x - x1)
-        # each difference is rounded relative to its operands, each product and the sum once
-        err = 8.0 * EPS * ((abs(x2) + abs(x1)) * (np.abs(y) + abs(y1))
-                           + (abs(y2) + abs(y1)) * (np.abs(x) + abs(x1)))
+        o, err = _orientation(x1, y1, x2, y2, x, y)
         near = ((np.abs(o) <= err) & (x >= min(x1, x2) - err) & (x <= max(x1, x2) + err)
                 & (y >= min(y1, y2) - err) & (y <= max(y1, y2) + err))
         unsure |= near
@@ -316,11 +321,12 @@ def _inside_unrotated(occ, origin_x, origin_y, res, x, y, out):
         out[k] = inside
 
 
-def _inside_map(occ: np.ndarray, frame, x: np.ndarray, y: np.ndarray, starts: np.ndarray,
-                ends: np.ndarray) -> np.ndarray:
+def _inside_map(occ: np.ndarray, frame, x: np.ndarray, y: np.ndarray, world, ob: int
+                ) -> np.ndarray:
     """Whether each point lies strictly inside the occupied cells (a point on a boundary
     between occupied and free cells is not inside), exactly for the map's float64 geometry:
-    the region its edges (``starts``, ``ends``: the cell corners rounded once) bound.
+    the region its edges (those of obstacle ``ob`` of ``world``: the cell corners rounded
+    once) bound.
 
     With yaw 0 the cell lines are ``origin + i * resolution`` rounded once, exactly the map's
     edges, so locating a point between them, and on one, is exact (``_inside_unrotated``).  A
@@ -348,9 +354,12 @@ def _inside_map(occ: np.ndarray, frame, x: np.ndarray, y: np.ndarray, starts: np
         # beyond the grid by a cell the lookup's "free" stands (and no exact pass is spent
         # on a point so far out that the margin spans cells)
         near &= (fx > -1.0) & (fx < w + 1.0) & (fy > -1.0) & (fy < h + 1.0)
-    for k in np.flatnonzero(near):
-        inside[k] = _strictly_inside_edges(float(x[k]), float(y[k]), starts[:, 0], starts[:, 1],
-                                           ends[:, 0], ends[:, 1])
+    if near.any():  # the map's edges, gathered only for such a point
+        mine = world.edge_obstacle == ob
+        s, e = world.starts[mine], world.ends[mine]
+        for k in np.flatnonzero(near):
+            inside[k] = _strictly_inside_edges(float(x[k]), float(y[k]), s[:, 0], s[:, 1],
+                                               e[:, 0], e[:, 1])
     return inside
 
 
@@ -552,8 +561,7 @@ def time_to_static(p, v, a, r, index: StaticIndex, horizon: float = math.inf
             hit = _inside_polygon(x, y, vs[:, 0], vs[:, 1]) & (inside_ob < 0)
             inside_ob[hit] = ob
         for ob, occ, frame in w.maps:
-            mine = w.edge_obstacle == ob
-            hit = _inside_map(occ, frame, x, y, w.starts[mine], w.ends[mine]) & (inside_ob < 0)
+            hit = _inside_map(occ, frame, x, y, w, ob) & (inside_ob < 0)
             inside_ob[hit] = ob
         hit = inside_ob >= 0
         rows = rows[hit]

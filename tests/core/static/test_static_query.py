@@ -209,14 +209,17 @@ def test_random_bodies_match_the_exact_reference(seed):
     assert contacts > n // 3
 
 
+def _room_bodies(seed: int, n: int):
+    """(P, V, A, R) of n bodies inside the room, accelerating, radii up to 0.15 m."""
+    rng = np.random.default_rng(seed)
+    return (rng.uniform([-1.9, -1.4], [1.9, 1.4], size=(n, 2)), rng.normal(size=(n, 2)),
+            rng.normal(size=(n, 2)) * 0.3, rng.uniform(0.0, 0.15, n))
+
+
 def test_the_answer_does_not_depend_on_edge_order_cells_or_translation():
     world = _room()
-    rng = np.random.default_rng(5)
     n = 300
-    P = rng.uniform([-1.9, -1.4], [1.9, 1.4], size=(n, 2))
-    V = rng.normal(size=(n, 2))
-    A = rng.normal(size=(n, 2)) * 0.3
-    R = rng.uniform(0.0, 0.15, n)
+    P, V, A, R = _room_bodies(5, n)
     base = time_to_static(P, V, A, R, StaticIndex.build(world), 2.0)
     # permuted segments and reversed polygon vertices
     perm = StaticWorld.build([
@@ -251,12 +254,8 @@ def _crate_and_rail(shift) -> StaticWorld:
 
 
 def test_an_exact_translation_changes_nothing():
-    rng = np.random.default_rng(6)
     n = 300
-    P = rng.uniform([-1.9, -1.4], [1.9, 1.4], size=(n, 2))
-    V = rng.normal(size=(n, 2))
-    A = rng.normal(size=(n, 2)) * 0.3
-    R = rng.uniform(0.0, 0.15, n)
+    P, V, A, R = _room_bodies(6, n)
     P = np.round(P * 2.0 ** 30) / 2.0 ** 30  # 30 fraction bits: P + shift is exact
     shift = np.array([1024.0, -2048.0])
     a = time_to_static(P + shift, V, A, R, StaticIndex.build(_crate_and_rail(shift)), 2.0)
@@ -404,12 +403,8 @@ def test_the_threaded_query_equals_the_serial_one():
 
     world = _room()
     index = StaticIndex.build(world)
-    rng = np.random.default_rng(12)
     n = 700
-    P = rng.uniform([-1.9, -1.4], [1.9, 1.4], size=(n, 2))
-    V = rng.normal(size=(n, 2))
-    A = rng.normal(size=(n, 2)) * 0.3
-    R = rng.uniform(0.0, 0.15, n)
+    P, V, A, R = _room_bodies(12, n)
     R[::50] = 0.0  # point bodies: some take the exact path
     out = []
     for threaded in (False, True):
