@@ -83,3 +83,60 @@ def endpoint_rows(seed: int, n: int, exponents: tuple[float, float] = (-13, -11)
         H = rng.uniform(0, 6) if finite_horizons and i % 4 == 0 else INF
         rows.append(make_row(p, v, a, r, A, B, rng.integers(-1, 2), H))
     return rows
+
+
+def straight_rows(seed: int, n: int, angles: tuple[float, float] = (-3, 0),
+                  gaps: tuple[float, float] = (-3, 0), scale: float = 1.0,
+                  offset: float = 0.0, finite_horizons: bool = True):
+    """a = 0: straight paths reaching the band ``r`` from the line at a foot point near the
+    segment (``lam`` in [-0.1, 1.1] of A -> B), from a gap of ``scale * 10**gaps`` at an
+    angle of ``10**angles`` rad to the wall (tiny angles: near-parallel, grazing
+    approaches); every fifth row moves away instead, every seventh is a point (r = 0),
+    every third has a horizon around its contact time (with ``finite_horizons``)."""
+    rng = np.random.default_rng(seed)
+    rows = []
+    for i in range(n):
+        A = offset + scale * rng.uniform(-5, 5, 2)
+        B = offset + scale * rng.uniform(-5, 5, 2)
+        nrm, tan = unit_normal(A, B)
+        side = rng.choice([-1, 1])
+        r = 0.0 if i % 7 == 0 else scale * rng.uniform(0.05, 2)
+        lam = rng.uniform(-0.1, 1.1)
+        theta = 10 ** rng.uniform(*angles)
+        speed = scale * rng.uniform(0.1, 3)
+        gap = scale * 10 ** rng.uniform(*gaps)
+        v = speed * (math.cos(theta) * rng.choice([-1, 1]) * tan - side * math.sin(theta) * nrm)
+        t_c = gap / (speed * math.sin(theta))
+        p = A + lam * (B - A) + side * r * nrm - v * t_c  # at r + gap from the line
+        if i % 5 == 4:
+            v = -v
+        H = INF
+        if finite_horizons and i % 3 == 0:
+            H = t_c * rng.uniform(0.5, 1.5)
+        rows.append(make_row(p, v, (0.0, 0.0), r, A, B, rng.integers(-1, 2), H))
+    return rows
+
+
+def touch_rows(seed: int, n: int, offset: float = 0.0):
+    """a = 0, axis-aligned walls with dyadic coordinates: the circle exactly touching the
+    line at t = 0 (foot inside, beyond an end or at it), or overlapping it by a dyadic
+    depth; moving in, out or along the wall."""
+    rng = np.random.default_rng(seed)
+    rows = []
+    for i in range(n):
+        x0 = offset + rng.integers(-64, 64) / 8
+        y0 = offset + rng.integers(-64, 64) / 8
+        L = rng.integers(1, 64) / 8
+        r = rng.integers(0, 16) / 16
+        side = rng.choice([-1, 1])
+        depth = 0.0 if i % 2 else rng.integers(1, 8) / 64
+        px = x0 + rng.choice([rng.integers(1, 8) / 8 * L, 0.0, L, -0.125, L + 0.125])
+        py = y0 + side * (r - depth)
+        v = rng.choice([-1, 0, 1]) * rng.integers(1, 8) / 4, rng.choice([-1, 0, 1]) * rng.integers(
+            1, 8) / 4
+        A, B = (x0, y0), (x0 + L, y0)
+        if i % 4 == 3:  # the same wall, vertical and reversed
+            A, B, px, py, v = (y0, x0 + L), (y0, x0), py, px, (v[1], v[0])
+        H = INF if i % 3 else rng.uniform(0, 4)
+        rows.append(make_row((px, py), v, (0.0, 0.0), r, A, B, rng.integers(-1, 2), H))
+    return rows
