@@ -76,7 +76,7 @@ from circle_collision_ros.recording.bag_recorder import (BagRecorder, RecordingE
                                                          qos_profiles_yaml)
 from circle_collision_ros.pipeline import kernels
 from circle_collision_ros.pipeline.cdr import CdrError
-from circle_collision_ros.pipeline.state_codec import decode_states
+from circle_collision_ros.pipeline.state_codec import StateDecoder
 from circle_collision_ros.pipeline.odometry import odometry_batch, odometry_sources
 from circle_collision_ros.pipeline.state_batch import StateBatch
 from circle_collision_ros.pipeline.state_groups import ingest_single_states
@@ -374,12 +374,12 @@ class CollisionNode(LifecycleNode):
             raise ValueError("static inputs (map_topic, polygon_topics, static_polygons) need "
                              f"dimensions = 2; this node predicts in {p('dimensions')}-D")
         reliability = p("state_reliability")
+        # a decoder per topic: each stream's unchanged ids are decoded once (StateDecoder)
         inputs = [InputTopic(self.resolve_topic_name(t), CircleStateArray,
-                             functools.partial(decode_states, msg_type=CircleStateArray),
+                             StateDecoder(CircleStateArray),
                              qos=functools.partial(Qos.states, reliability))
                   for t in p("state_topics")]
-        inputs += [InputTopic(self.resolve_topic_name(t), CircleState,
-                              functools.partial(decode_states, msg_type=CircleState),
+        inputs += [InputTopic(self.resolve_topic_name(t), CircleState, StateDecoder(CircleState),
                               qos=functools.partial(Qos.single_states, reliability))
                    for t in p("single_state_topics")]
         odometry = odometry_sources([self.resolve_topic_name(t) for t in p("odometry_topics")],

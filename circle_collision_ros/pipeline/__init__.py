@@ -24,8 +24,8 @@ from circle_collision_ros.pipeline.predictor import (RUNTIME_FIELDS, CollisionPr
                                                      HorizonLimits, IntakeReport, PredictionStats,
                                                      PredictorConfig, predict_once)
 from circle_collision_ros.pipeline.state_batch import StateBatch
-from circle_collision_ros.pipeline.state_codec import (COVARIANCE_SIZE, decode_states, encode_state,
-                                                       encode_state_array)
+from circle_collision_ros.pipeline.state_codec import (COVARIANCE_SIZE, StateDecoder, decode_states,
+                                                       encode_state, encode_state_array)
 from circle_collision_ros.pipeline.state_groups import GroupOutcome, ingest_single_states
 from circle_collision_ros.pipeline.state_validation import BatchCheck, Rejection, check_batch
 
@@ -53,6 +53,7 @@ __all__ = [
     "decode_string",
     "COVARIANCE_SIZE",
     "decode_states",
+    "StateDecoder",
     "encode_state",
     "encode_state_array",
     "PairPrediction",

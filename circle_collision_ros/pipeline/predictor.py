@@ -25,8 +25,8 @@ from circle_collision_msgs.msg import CircleState, CircleStateArray
 from circle_collision_ros.core.parallel_policy import threads_forced
 from circle_collision_ros.core.scene import Scene, SceneSnapshot
 from circle_collision_ros.core.warm_up import warm_large_frames, warm_scenes, warm_uncertain
-from circle_collision_ros.pipeline.state_codec import (decode_states, encode_state,
-                                                       encode_state_array)
+from circle_collision_ros.pipeline.state_codec import (StateDecoder, decode_states,
+                                                       encode_state, encode_state_array)
 from circle_collision_ros.core.static import StaticIndex
 from circle_collision_ros.pipeline.prediction_messages import ScenePrediction
 from circle_collision_ros.pipeline.static_scene import StaticCache
@@ -243,15 +243,18 @@ class CollisionPredictor:
                 replace(self.config, frame_id="map", report_all_pairs=report_all, max_bodies=n,
                         use_covariance=use)
             )
-            predictor.receive_batch(
-                decode_states(encode_state_array(batch, t, "map"), CircleStateArray), t
-            )
+            # a subscription's decoder: a first message parsed, the next (its values moved)
+            # read at the same layout
+            decode = StateDecoder(CircleStateArray)
+            decode(encode_state_array(batch, t, "map"))
+            later = replace(batch, stamp_ns=batch.stamp_ns + 1, position=batch.position + 0.5)
+            predictor.receive_batch(decode(encode_state_array(later, t + 1, "map")), t + 1)
             prediction = predictor.predict()
             prediction.to_cdr()
             # replay of recordings made before the probability fields
             prediction.to_cdr(uncertainty=False)
-            one = replace(batch.select(np.array([1])), stamp_ns=np.array([t + 1], np.int64))
-            predictor.receive_batch(decode_states(encode_state(one), CircleState), t + 1)
+            one = replace(batch.select(np.array([1])), stamp_ns=np.array([t + 2], np.int64))
+            predictor.receive_batch(decode_states(encode_state(one), CircleState), t + 2)
             predictor.predict().to_cdr()
 
     def reconfigure(self, **changes) -> None:

@@ -19,14 +19,17 @@ from circle_collision_msgs.msg import CircleState
 class StateBatch:
     """N states: ids, frames (own header's, else the array's), stamps in ns, SI arrays.
 
+    ids, frames : sequences of str, never changed once in a batch (the decoders give tuples,
+        which a stream's next messages may share: state_codec.StateDecoder).
+
     covariance : (N, 36) row-major 6x6 over (x, y, z, vx, vy, vz), zeros where a
         state gave none; covariance_size : (N,) how many values each state gave
         (0 or 36 are valid; validation rejects the rest). Both None when no
         state of the batch gave any (the common, exact case costs nothing).
     """
 
-    ids: list[str]
-    frames: list[str]
+    ids: Sequence[str]
+    frames: Sequence[str]
     stamp_ns: np.ndarray      # (N,) int64
     radius: np.ndarray        # (N,) float64, m
     position: np.ndarray      # (N, 3) m
@@ -47,8 +50,8 @@ class StateBatch:
                              s.acceleration.x, s.acceleration.y, s.acceleration.z) for s in states],
                            dtype=np.float64).reshape(n, 9)
         return StateBatch(
-            ids=[s.id for s in states],
-            frames=[s.header.frame_id or array_frame for s in states],
+            ids=tuple(s.id for s in states),
+            frames=tuple(s.header.frame_id or array_frame for s in states),
             stamp_ns=np.array([s.header.stamp.sec * 1_000_000_000 + s.header.stamp.nanosec
                                for s in states], dtype=np.int64),
             radius=np.array([s.radius for s in states], dtype=np.float64),
@@ -60,7 +63,8 @@ class StateBatch:
         """The states at `rows` (an index array), in that order."""
         index = rows.tolist()
         given = self.covariance is not None
-        return StateBatch(ids=[self.ids[k] for k in index], frames=[self.frames[k] for k in index],
+        return StateBatch(ids=tuple(self.ids[k] for k in index),
+                          frames=tuple(self.frames[k] for k in index),
                           stamp_ns=self.stamp_ns[rows], radius=self.radius[rows],
                           position=self.position[rows], velocity=self.velocity[rows],
                           acceleration=self.acceleration[rows], remove=self.remove[rows],

@@ -311,14 +311,74 @@ def clean_single_state(batch: StateBatch, frame_id: str, now_ns: int | None) -> 
     return BatchCheck(_GOOD, [], frame_id, _EXACT)
 
 
-def _largest_magnitude(x: np.ndarray) -> np.ndarray:
-    """Per row of (n, D) ``x``, the largest |value|; NaN where a value is NaN (np.maximum
-    propagates it). Column by column: an ``.all(axis=1)`` over a 3-wide axis of a strided
-    view costs several times more at 10,000 rows."""
-    out = np.abs(x[:, 0])
-    for c in range(1, x.shape[1]):
-        np.maximum(out, np.abs(x[:, c]), out=out)
-    return out
+@njit(cache=True)
+def _value_faults(radius, position, velocity, acceleration, remove, stamps, clock, now_ns,
+                  limit, max_future_ns, bad):
+    """bad[k] |= row k's values or stamp are unusable, in one pass: a state (not a removal)
+    with a radius or vector component beyond +-limit, NaN included (the comparisons are false
+    for it), or a negative radius; any row with a stamp <= 0 or more than max_future_ns after
+    now_ns (clock False: no future check). _reasons words the same rules."""
+    D = position.shape[1]
+    for k in range(radius.shape[0]):
+        ok = stamps[k] > 0 and not (clock and stamps[k] - now_ns > max_future_ns)
+        if not remove[k]:
+            # & without branches: a clean row (nearly all) runs straight through
+            r = radius[k]
+            ok &= (r >= 0.0) & (r <= limit)
+            for d in range(D):
+                ok &= ((abs(position[k, d]) <= limit) & (abs(velocity[k, d]) <= limit)
+                       & (abs(acceleration[k, d]) <= limit))
+        if not ok:
+            bad[k] = True
+
+
+class _Seen:
+    """The per-id and per-frame checks of the last id and frame tuples seen.
+
+    state_codec.StateDecoder hands a stream's unchanged ids and frames back as the same
+    tuples, so a tracker's frames pay these checks once.  A tuple is immutable and the entry
+    holds it, so its identity cannot be reused while it is here; each entry is replaced
+    whole, so a reader on another thread sees a matching pair.
+    """
+
+    ids: tuple = ((), None)  # (ids, (dup, empty))
+    frames: tuple = ((), "", False)  # (frames, frame_id, every frame is frame_id)
+
+
+def _id_faults(ids) -> tuple[np.ndarray, np.ndarray]:
+    """(dup, empty): per state, whether its id appears more than once, or is empty."""
+    if type(ids) is tuple:
+        seen, facts = _Seen.ids
+        if seen is ids:
+            return facts
+    n = len(ids)
+    # Per-id Python loops only where a set (C speed) shows they can find something:
+    # an array of distinct, non-empty ids (the usual tracker frame) skips them.
+    distinct = set(ids)
+    if len(distinct) == n:
+        dup = np.zeros(n, dtype=bool)
+    else:
+        counts = Counter(ids)
+        dup = np.fromiter((counts[i] > 1 for i in ids), dtype=bool, count=n)
+    if "" in distinct:
+        empty = np.fromiter((not i for i in ids), dtype=bool, count=n)
+    else:
+        empty = np.zeros(n, dtype=bool)
+    dup.flags.writeable = empty.flags.writeable = False  # shared by the frames that reuse them
+    if type(ids) is tuple:
+        _Seen.ids = (ids, (dup, empty))
+    return dup, empty
+
+
+def _all_in(frames, frame_id: str) -> bool:
+    """Whether every frame is ``frame_id``."""
+    seen, seen_id, every = _Seen.frames
+    if seen is frames and seen_id == frame_id:
+        return every
+    every = frames.count(frame_id) == len(frames)
+    if type(frames) is tuple:
+        _Seen.frames = (frames, frame_id, every)
+    return every
 
 
 def check_batch(
@@ -340,36 +400,22 @@ def check_batch(
         clean = clean_single_state(batch, frame_id, now_ns)
         if clean is not None:
             return clean
-    # Per-id Python loops only where a set (C speed) shows they can find something:
-    # an array of distinct, non-empty ids (the usual tracker frame) skips them.
-    distinct = set(batch.ids)
-    if len(distinct) == n:
-        dup = np.zeros(n, dtype=bool)
-    else:
-        counts = Counter(batch.ids)
-        dup = np.fromiter((counts[i] > 1 for i in batch.ids), dtype=bool, count=n)
-    if "" in distinct:
-        empty = np.fromiter((not i for i in batch.ids), dtype=bool, count=n)
-    else:
-        empty = np.zeros(n, dtype=bool)
-    limit = ValueLimits.MAX_MAGNITUDE  # also false for NaN and +-inf
-    finite = (
-        (np.abs(batch.radius) <= limit)
-        & (_largest_magnitude(batch.position) <= limit)
-        & (_largest_magnitude(batch.velocity) <= limit)
-        & (_largest_magnitude(batch.acceleration) <= limit)
-    )
+    dup, empty = _id_faults(batch.ids)
     covariance_bad, uncertain, block = covariance_checks(batch, dimensions)
-    geometry_bad = ~batch.remove & (~finite | (batch.radius < 0.0)) | covariance_bad
-    stamp_bad = batch.stamp_ns <= 0
-    if now_ns is not None:
-        stamp_bad |= batch.stamp_ns - now_ns > StampLimits.MAX_FUTURE_NS
-    bad = empty | dup | geometry_bad | stamp_bad
+    bad = empty | dup | covariance_bad
+    _value_faults(np.ascontiguousarray(batch.radius, dtype=np.float64),
+                  *(np.ascontiguousarray(x, dtype=np.float64)
+                    for x in (batch.position, batch.velocity, batch.acceleration)),
+                  np.ascontiguousarray(batch.remove, dtype=np.bool_),
+                  np.ascontiguousarray(batch.stamp_ns, dtype=np.int64),
+                  now_ns is not None, 0 if now_ns is None else int(now_ns),
+                  ValueLimits.MAX_MAGNITUDE,
+                  StampLimits.MAX_FUTURE_NS, bad)
     if not frame_id:
         candidates = np.flatnonzero(~bad & ~batch.remove)
         if candidates.size:
             frame_id = batch.frames[int(candidates[0])]
-    if frame_id and batch.frames.count(frame_id) != n:  # some state in another frame
+    if frame_id and not _all_in(batch.frames, frame_id):  # some state in another frame
         bad |= ~batch.remove & np.fromiter(
             (f != frame_id for f in batch.frames), dtype=bool, count=n
         )

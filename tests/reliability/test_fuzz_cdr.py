@@ -251,8 +251,8 @@ def test_strings_decode_one_by_one_semantics() -> None:
     for bodies in cases:
         data = encode_array(bodies, 10**9, "arrayframe")
         batch = decode_states(data, CircleStateArray)
-        assert batch.ids == [b.id for b in bodies]
-        assert batch.frames == [b.frame or "arrayframe" for b in bodies]
+        assert batch.ids == tuple(b.id for b in bodies)
+        assert batch.frames == tuple(b.frame or "arrayframe" for b in bodies)
     bad = encode_array([Body("ok"), Body("", id_bytes=b"\xff\xfe")], 10**9, "map")
     with pytest.raises(CdrError, match="UTF-8"):
         decode_states(bad, CircleStateArray)

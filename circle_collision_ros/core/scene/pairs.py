@@ -194,7 +194,7 @@ class PairsMixin:
     def _rebuild_all(self) -> None:
         self._clear_records()
         _, A, B = self._pairs_full()
-        self._store(A, B, self._evaluate_at_tp(A, B))
+        self._store_pairs(A, B)  # a few pairs (an ego set's): one compiled pass
         self._grid_built = False  # rebuilt lazily when a small update needs it
         self._dirty.clear()
         self._need_full = False
@@ -261,7 +261,8 @@ class PairsMixin:
         self._store_pairs(A, B)
 
     def _store_pairs(self, A: np.ndarray, B: np.ndarray) -> None:
-        """Evaluate the new candidate pairs (A, B) of an incremental update and store the hits."""
+        """Evaluate candidate pairs (A, B) (new ones of an incremental update, or all of a
+        rebuild) and store the hits."""
         if A.size == 0:
             return
         if A.size >= self.COMPILED_ROWS:

@@ -30,6 +30,8 @@ class StoreMixin:
     def _set_uncertain(self, slots, flags) -> None:
         """_U[slots] = flags, counting the uncertain bodies: an exact scene skips the
         uncertain query in O(1) instead of a pass over every slot."""
+        if flags is False and self._n_uncertain == 0:
+            return  # no body is uncertain: every flag is False already
         before = int(np.count_nonzero(self._U[slots]))
         self._U[slots] = flags
         self._n_uncertain += int(np.count_nonzero(self._U[slots])) - before

@@ -49,6 +49,29 @@ def store_states(P, V, A, Rad, T, recv, slots, rows, p, v, a, r, stamps, receive
         recv[s] = received
 
 
+@njit(cache=True)
+def newer_rows(slots, stamps, T, newer):
+    """newer[x] = whether row x is for a body not stored (slots[x] < 0) or newer than its
+    stored state (stamps[x] > T[slots[x]]); returns how many rows are for stored bodies."""
+    known = 0
+    for x in range(slots.shape[0]):
+        s = slots[x]
+        if s < 0:
+            newer[x] = True
+        else:
+            known += 1
+            newer[x] = stamps[x] > T[s]
+    return known
+
+
+def _c_f64(x):
+    """``x`` as a C-ordered, writeable float64 array (itself when it is one)."""
+    if type(x) is np.ndarray and x.dtype == np.float64 and x.flags.c_contiguous \
+            and x.flags.writeable:
+        return x
+    return np.require(x, np.float64, "CW")
+
+
 #: From this many accepted states merge copies them by store_states (numpy below).
 _COMPILED_STORE = 64
 
@@ -97,28 +120,33 @@ class StreamMixin:
         D = self._dim
         get = self._slot.get
         named = ids if rows.size == len(ids) else [ids[k] for k in rows.tolist()]
+        if type(named) is list:
+            named = tuple(named)  # immutable: it can be kept and compared by identity
         last = self._last_named
-        if (last is not None and last[2] == self._members_serial and type(named) is list
-                and named == last[0]):
+        if (last is not None and last[2] == self._members_serial and type(named) is tuple
+                and (named is last[0] or named == last[0])):
             # the ids of the last message, in its order, and no body came or went since (a
-            # tracker array's frames): the slots it looked up (a list comparison costs a
-            # fraction of the look-ups)
+            # tracker array's frames): the slots it looked up (a comparison costs a fraction of
+            # the look-ups, and none when a decoder handed the same tuple back)
             slots = last[1].copy()
         else:
             slots = np.fromiter(map(get, named, repeat(-1)), dtype=np.int64, count=rows.size)
-        st = stamps[rows]
-        known = slots >= 0
-        newer = np.ones(rows.size, dtype=bool)
-        newer[known] = st[known] > self._T[slots[known]]
-        if self._removals:
-            for x in np.flatnonzero(~known).tolist():
-                gone = self._removals.get(ids[rows[x]])
-                if gone is not None:
-                    if st[x] <= gone[0]:
-                        newer[x] = False  # older than its removal: a late state of a removed body
-                    else:
-                        del self._removals[ids[rows[x]]]
-        fresh = np.flatnonzero(~known & newer)
+        st = stamps if rows.size == stamps.shape[0] else stamps[rows]
+        newer = np.empty(rows.size, dtype=bool)
+        if newer_rows(slots, st, self._T, newer) == rows.size:
+            fresh = EMPTY_I  # every body is stored (a tracker's frames): none to add
+        else:
+            known = slots >= 0
+            if self._removals:
+                for x in np.flatnonzero(~known).tolist():
+                    gone = self._removals.get(ids[rows[x]])
+                    if gone is not None:
+                        if st[x] <= gone[0]:
+                            # older than its removal: a late state of a removed body
+                            newer[x] = False
+                        else:
+                            del self._removals[ids[rows[x]]]
+            fresh = np.flatnonzero(~known & newer)
         room = len(fresh) if self.max_bodies is None else max(0, self.max_bodies - len(self._slot))
         full = fresh[room:]
         fresh = fresh[:room]
@@ -131,20 +159,20 @@ class StreamMixin:
             slots[x] = s
         if fresh.size:
             self._add_utf8(slots[fresh])
-        if type(named) is list and rows.size >= _COMPILED_STORE:
-            self._last_named = (list(named), slots.copy(), self._members_serial)
+        if type(named) is tuple and rows.size >= _COMPILED_STORE:
+            self._last_named = (named, slots.copy(), self._members_serial)
         take = newer.copy()
         take[full] = False
-        sl, src = slots[take], rows[take]
+        # every row taken (a tracker's frame): no gathers
+        sl, src = (slots, rows) if take.all() else (slots[take], rows[take])
         if src.size:
             self._preserve(sl)
             big = src.size >= _COMPILED_STORE
             if big:
                 # one kind of array for the kernel (C order, writeable: no specialisation per
                 # input layout; a copy only of inputs that are not so)
-                f64 = np.float64
-                pva = [np.require(x, f64, "CW") for x in (positions, velocities, accelerations)]
-                r = np.require(radii, f64, "CW")
+                pva = [_c_f64(x) for x in (positions, velocities, accelerations)]
+                r = _c_f64(radii)
                 n_rows = stamps.shape[0]
                 big = r.shape == (n_rows,) and all(
                     x.ndim == 2 and x.shape[0] == n_rows and x.shape[1] >= D for x in pva
@@ -174,7 +202,7 @@ class StreamMixin:
                 self._need_full = True
             else:
                 self._dirty.update(sl.tolist())
-            newest = int(stamps[src].max())
+            newest = int((st if src is rows else stamps[src]).max())
             if self.reference_ns is None or newest > self.reference_ns:
                 self.reference_ns = newest
         if src.size or removed:
