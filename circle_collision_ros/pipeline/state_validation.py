@@ -333,24 +333,35 @@ def _value_faults(radius, position, velocity, acceleration, remove, stamps, cloc
 
 
 class _Seen:
-    """The per-id and per-frame checks of the last id and frame tuples seen.
+    """The per-id and per-frame checks of the last few id and frame tuples seen.
 
     state_codec.StateDecoder hands a stream's unchanged ids and frames back as the same
-    tuples, so a tracker's frames pay these checks once.  A tuple is immutable and the entry
-    holds it, so its identity cannot be reused while it is here; each entry is replaced
-    whole, so a reader on another thread sees a matching pair.
+    tuples, so a tracker's frames pay these checks once.  Keyed by identity, a few entries
+    (one per stream of a node with several array topics; one entry would make them evict
+    each other every message); an entry holds its tuple, so the identity cannot be reused
+    while it is here.  Entries are added and evicted whole (dict operations are atomic), so
+    a reader on another thread sees a matching pair.
     """
 
-    ids: tuple = ((), None)  # (ids, (dup, empty))
-    frames: tuple = ((), "", False)  # (frames, frame_id, every frame is frame_id)
+    SIZE = 8
+    ids: dict = {}  # id(ids) -> (ids, (dup, empty))
+    frames: dict = {}  # (id(frames), frame_id) -> (frames, every frame is frame_id)
+
+    @classmethod
+    def keep(cls, table: dict, key, entry: tuple) -> None:
+        """table[key] = entry, dropping the oldest entry beyond SIZE."""
+        table[key] = entry
+        if len(table) > cls.SIZE:
+            # the keys copied in one call: no iterator another thread's change could break
+            table.pop(tuple(table)[0], None)
 
 
 def _id_faults(ids) -> tuple[np.ndarray, np.ndarray]:
     """(dup, empty): per state, whether its id appears more than once, or is empty."""
     if type(ids) is tuple:
-        seen, facts = _Seen.ids
-        if seen is ids:
-            return facts
+        entry = _Seen.ids.get(id(ids))
+        if entry is not None and entry[0] is ids:
+            return entry[1]
     n = len(ids)
     # Per-id Python loops only where a set (C speed) shows they can find something:
     # an array of distinct, non-empty ids (the usual tracker frame) skips them.
@@ -366,18 +377,19 @@ def _id_faults(ids) -> tuple[np.ndarray, np.ndarray]:
         empty = np.zeros(n, dtype=bool)
     dup.flags.writeable = empty.flags.writeable = False  # shared by the frames that reuse them
     if type(ids) is tuple:
-        _Seen.ids = (ids, (dup, empty))
+        _Seen.keep(_Seen.ids, id(ids), (ids, (dup, empty)))
     return dup, empty
 
 
 def _all_in(frames, frame_id: str) -> bool:
     """Whether every frame is ``frame_id``."""
-    seen, seen_id, every = _Seen.frames
-    if seen is frames and seen_id == frame_id:
-        return every
+    key = (id(frames), frame_id)
+    entry = _Seen.frames.get(key)
+    if entry is not None and entry[0] is frames:
+        return entry[1]
     every = frames.count(frame_id) == len(frames)
     if type(frames) is tuple:
-        _Seen.frames = (frames, frame_id, every)
+        _Seen.keep(_Seen.frames, key, (frames, every))
     return every
 
 

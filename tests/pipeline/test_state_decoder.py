@@ -145,8 +145,10 @@ def test_single_states_and_unchanged_ids() -> None:
 
 def test_validation_of_a_shared_tuple_rejects_every_frame() -> None:
     """Duplicate and empty ids are found on each message that repeats them, and a state in
-    another frame is found after the scene frame changes, though the tuples are shared."""
+    another frame is found after the scene frame changes, though the tuples are shared; and
+    so with several streams taking turns (a node with several array topics)."""
     decoder = StateDecoder(CircleStateArray)
+    others = [StateDecoder(CircleStateArray) for _ in range(10)]  # more streams than entries
     for k in range(3):
         batch = decoder(encode_array([Body("a", stamp_ns=T0 + k), Body("a", stamp_ns=T0 + k),
                                       Body("", stamp_ns=T0 + k), Body("b", stamp_ns=T0 + k)],
@@ -155,6 +157,13 @@ def test_validation_of_a_shared_tuple_rejects_every_frame() -> None:
         assert check.good.tolist() == [False, False, False, True]
         assert "more than once" in check.rejections[0].reason
         assert "empty id" in check.rejections[2].reason
+        for j, other in enumerate(others):
+            clean = other(encode_array([Body(f"s{j}", stamp_ns=T0 + k),
+                                        Body(f"t{j}", stamp_ns=T0 + k, frame="odom")], T0 + k))
+            assert check_batch(clean, frame_id="map", now_ns=T0 + k,
+                               dimensions=2).good.tolist() == [True, False]
+            assert check_batch(clean, frame_id="odom", now_ns=T0 + k,
+                               dimensions=2).good.tolist() == [False, True]
     assert check_batch(batch, frame_id="odom", now_ns=T0, dimensions=2).good.tolist() == \
         [False] * 4
     assert check_batch(batch, frame_id="map", now_ns=T0, dimensions=2).good.tolist() == \
