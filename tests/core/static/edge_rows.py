@@ -36,6 +36,15 @@ def random_rows(seed: int, n: int, accelerate: bool, scale: float = 1.0,
     return rows
 
 
+def _wall(rng, scale: float, offset: float) -> tuple:
+    """A random segment A -> B in a square of side 10 scale around offset, its unit normal
+    and tangent, and a random side (+-1)."""
+    A = offset + scale * rng.uniform(-5, 5, 2)
+    B = offset + scale * rng.uniform(-5, 5, 2)
+    nrm, tan = unit_normal(A, B)
+    return A, B, nrm, tan, rng.choice([-1, 1])
+
+
 def graze_rows(seed: int, n: int, gaps, scale: float = 1.0, offset: float = 0.0):
     """Parabolic paths passing at distance r + gap of the line at t*, foot inside.
 
@@ -44,10 +53,7 @@ def graze_rows(seed: int, n: int, gaps, scale: float = 1.0, offset: float = 0.0)
     rng = np.random.default_rng(seed)
     rows = []
     for i in range(n):
-        A = offset + scale * rng.uniform(-5, 5, 2)
-        B = offset + scale * rng.uniform(-5, 5, 2)
-        nrm, tan = unit_normal(A, B)
-        side = rng.choice([-1, 1])
+        A, B, nrm, tan, side = _wall(rng, scale, offset)
         r = scale * rng.uniform(0.2, 2)
         foot = A + rng.uniform(0.1, 0.9) * (B - A)
         t_star = rng.uniform(0.5, 5)
@@ -96,10 +102,7 @@ def straight_rows(seed: int, n: int, angles: tuple[float, float] = (-3, 0),
     rng = np.random.default_rng(seed)
     rows = []
     for i in range(n):
-        A = offset + scale * rng.uniform(-5, 5, 2)
-        B = offset + scale * rng.uniform(-5, 5, 2)
-        nrm, tan = unit_normal(A, B)
-        side = rng.choice([-1, 1])
+        A, B, nrm, tan, side = _wall(rng, scale, offset)
         r = 0.0 if i % 7 == 0 else scale * rng.uniform(0.05, 2)
         lam = rng.uniform(-0.1, 1.1)
         theta = 10 ** rng.uniform(*angles)
