@@ -258,33 +258,54 @@ def _read_values(buf, f64, be, where, stamps, radius, pva, remove):
 class _Layout:
     """What StateDecoder keeps of the last message it parsed (see there)."""
 
-    __slots__ = ("data", "words", "tail", "mask", "where", "cov_size", "cov_at", "ids", "frames")
+    __slots__ = ("data", "words", "tail", "mask", "where", "cov_size", "cov_at", "ids", "frames",
+                 "misses", "rest")
+    #: After this many messages in a row that did not have the kept layout (two publishers on
+    #: one topic, a tracker that reorders its ids), the decoder rests for REST messages: it
+    #: parses them without comparing or keeping, so a miss's extra pass and mask are not
+    #: paid on every message.
+    MISSES = 3
+    REST = 8
 
     def __init__(self) -> None:
         self.data = b""
+        self.misses = 0
+        self.rest = 0
 
     def keep(self, data: bytes, where: np.ndarray, cov_size: np.ndarray | None,
              cov_at: np.ndarray, ids: tuple, frames: tuple, array: bool) -> None:
         """Remember the message just parsed (``array``: a CircleStateArray, with a stamp in
-        its header)."""
-        self.data, self.where, self.ids, self.frames = data, where, ids, frames
+        its header).  Only ``bytes`` are kept: they cannot change, where a buffer the caller
+        reuses would later compare equal to itself."""
+        if type(data) is not bytes or self.rest:
+            return
+        none = np.zeros(0, dtype=np.int64)
+        mask = _values_mask(len(data), ORIGIN if array else -1, where,
+                            none if cov_size is None else cov_size, cov_at)
+        words, tail = _words(data)
+        # every part built before any is replaced: the kept parts always belong together
+        self.data, self.words, self.tail, self.mask = data, words, tail, mask.view(np.uint64)
+        self.where, self.ids, self.frames, self.cov_at = where, ids, frames, cov_at
         # a copy: the batch's own array may be changed by its holder
         self.cov_size = None if cov_size is None else cov_size.copy()
-        self.cov_at = cov_at
-        size = len(data)
-        none = np.zeros(0, dtype=np.int64)
-        mask = _values_mask(size, ORIGIN if array else -1, where,
-                            none if cov_size is None else cov_size, cov_at)
-        self.mask = mask.view(np.uint64)
-        self.words, self.tail = _words(data)
 
     def batch(self, data: bytes, buf: np.ndarray, be: bool) -> StateBatch | None:
         """The batch of ``data`` when its layout is the kept message's, else None."""
-        if len(data) != len(self.data):
+        if type(data) is not bytes:
+            return None
+        if self.rest:
+            self.rest -= 1
+            return None
+        if not self.data:
             return None
         words, tail = _words(data)
-        if not _same_layout(words, tail, self.words, self.tail, self.mask):
+        if len(data) != len(self.data) or not _same_layout(words, tail, self.words, self.tail,
+                                                           self.mask):
+            self.misses += 1
+            if self.misses >= self.MISSES:
+                self.data, self.misses, self.rest = b"", 0, self.REST
             return None
+        self.misses = 0
         count = self.where.shape[0]
         stamps = np.empty(count, dtype=np.int64)
         radius = np.empty(count, dtype=np.float64)
@@ -334,7 +355,9 @@ class StateDecoder:
     state_validation.check_batch, and the scene's merge skip their per-id work for them).
     A tracker sends the same ids in the same order frame after frame: every frame after
     the first takes this path.  The batches are decode_states' bit for bit, and bytes it
-    refuses are refused.  Not thread-safe: one decoder per stream.
+    refuses are refused.  Only ``bytes`` messages are kept and compared (other buffers are
+    parsed), and after a few misses in a row the decoder parses a while without comparing
+    (_Layout.MISSES, REST).  Not thread-safe: one decoder per stream.
     """
 
     def __init__(self, msg_type: type, *, uncertainty: bool = True) -> None:

@@ -336,16 +336,22 @@ class _Seen:
     """The per-id and per-frame checks of the last few id and frame tuples seen.
 
     state_codec.StateDecoder hands a stream's unchanged ids and frames back as the same
-    tuples, so a tracker's frames pay these checks once.  Keyed by identity, a few entries
-    (one per stream of a node with several array topics; one entry would make them evict
-    each other every message); an entry holds its tuple, so the identity cannot be reused
-    while it is here.  Entries are added and evicted whole (dict operations are atomic), so
-    a reader on another thread sees a matching pair.
+    tuples, so a tracker's frames pay these checks once.  Keyed by identity, a few entries,
+    the least recently used evicted first (one per stream of a node with several array
+    topics; one entry would make them evict each other every message); an entry holds its
+    tuple, so the identity cannot be reused while it is here.  Entries are added and evicted
+    whole (dict operations are atomic), so a reader on another thread sees a matching pair.
     """
 
     SIZE = 8
     ids: dict = {}  # id(ids) -> (ids, (dup, empty))
     frames: dict = {}  # (id(frames), frame_id) -> (frames, every frame is frame_id)
+
+    @staticmethod
+    def used(table: dict, key, entry: tuple) -> None:
+        """Move a hit entry to the newest place (the oldest-used is evicted first)."""
+        table.pop(key, None)
+        table[key] = entry
 
     @classmethod
     def keep(cls, table: dict, key, entry: tuple) -> None:
@@ -361,6 +367,7 @@ def _id_faults(ids) -> tuple[np.ndarray, np.ndarray]:
     if type(ids) is tuple:
         entry = _Seen.ids.get(id(ids))
         if entry is not None and entry[0] is ids:
+            _Seen.used(_Seen.ids, id(ids), entry)
             return entry[1]
     n = len(ids)
     # Per-id Python loops only where a set (C speed) shows they can find something:
@@ -386,6 +393,7 @@ def _all_in(frames, frame_id: str) -> bool:
     key = (id(frames), frame_id)
     entry = _Seen.frames.get(key)
     if entry is not None and entry[0] is frames:
+        _Seen.used(_Seen.frames, key, entry)
         return entry[1]
     every = frames.count(frame_id) == len(frames)
     if type(frames) is tuple:

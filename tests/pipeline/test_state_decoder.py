@@ -97,35 +97,93 @@ def test_a_stream_decodes_as_each_message_alone(stream: list) -> None:
         got = decoder(data)
         _equal(got, want)
         assert type(got.ids) is tuple and type(got.frames) is tuple
-        if previous is not None and len(got):
-            # the same layout (only values changed): the same tuples, shared
-            same = key is not None and key == previous[1]
-            assert (got.ids is previous[0].ids) == same
-            assert (got.frames is previous[0].frames) == same
+        if previous is not None and len(got) and got.ids is previous[0].ids:
+            # shared only where only values changed (the same layout)
+            assert key is not None and key == previous[1]
+            assert got.frames is previous[0].frames
         previous = (got, key)
 
 
-def test_a_byte_changed_anywhere_decodes_as_alone() -> None:
-    """One message, then copies with one byte changed at every position in turn (values,
-    string bytes, lengths, padding, the encapsulation): the decoder that saw the message
-    decodes each copy exactly as decode_states, or refuses it as decode_states does."""
-    bodies = [Body("a1", stamp_ns=T0, covariance=(0.5,) * 36), Body("b", stamp_ns=T0 + 1),
+def _encoded(bodies: list, single: bool, big: bool, uncertainty: bool) -> bytes:
+    """bodies as a CircleStateArray (or the first as a CircleState), in either byte order and
+    either layout (uncertainty False: without the covariance sequence, as old recordings)."""
+    if single:
+        return encode_state(bodies[0], big_endian=big, with_covariance=uncertainty)
+    return encode_array(bodies, T0, "arr", big_endian=big, with_covariance=uncertainty)
+
+
+@pytest.mark.parametrize("single", [False, True], ids=["array", "single"])
+@pytest.mark.parametrize("big", [False, True], ids=["le", "be"])
+@pytest.mark.parametrize("uncertainty", [True, False], ids=["cov", "old"])
+def test_a_byte_changed_anywhere_decodes_as_alone(single: bool, big: bool,
+                                                  uncertainty: bool) -> None:
+    """A message parsed, then one of the same layout read at it (values moved), then copies
+    of that one with one byte changed at every position in turn (values, string bytes,
+    lengths, padding, the encapsulation): the decoder decodes each copy exactly as
+    decode_states, or refuses it as decode_states does; in both byte orders, both layouts,
+    arrays and single states."""
+    cov = (0.5,) * 36 if uncertainty else ()
+    bodies = [Body("a1", stamp_ns=T0, covariance=cov), Body("b", stamp_ns=T0 + 1),
               Body("c", stamp_ns=T0 + 2, frame="")]
-    data = encode_array(bodies, T0, "arr")
+    moved = [Body(b.id, radius=2.0, p=(1.0, 2.0, 3.0), stamp_ns=b.stamp_ns + 5, frame=b.frame,
+                  remove=True, covariance=tuple(x + 1 for x in b.covariance)) for b in bodies]
+    msg_type = CircleState if single else CircleStateArray
+    first = _encoded(bodies, single, big, uncertainty)
+    data = _encoded(moved, single, big, uncertainty)
     for pos in range(len(data)):
         for flip in (0x01, 0x80):
             changed = bytearray(data)
             changed[pos] ^= flip
             changed = bytes(changed)
-            decoder = StateDecoder(CircleStateArray)
-            decoder(data)
+            decoder = StateDecoder(msg_type, uncertainty=uncertainty)
+            decoder(first)
+            hit = decoder(data)  # the same layout: read at the kept one
+            _equal(hit, decode_states(data, msg_type, uncertainty=uncertainty))
+            assert hit.ids is decoder(first).ids
             try:
-                want = decode_states(changed, CircleStateArray)
+                want = decode_states(changed, msg_type, uncertainty=uncertainty)
             except CdrError:
                 with pytest.raises(CdrError):
                     decoder(changed)
                 continue
             _equal(decoder(changed), want)
+
+
+def test_a_reused_buffer_is_parsed_and_batches_are_independent() -> None:
+    """A caller that reads each message into the same bytearray gets each message's batch
+    (only immutable bytes are kept), and changing a returned batch's arrays changes no
+    later batch."""
+    a = encode_array([Body("aa", stamp_ns=T0), Body("bb", stamp_ns=T0)], T0)
+    b = encode_array([Body("xx", stamp_ns=T0 + 1), Body("yy", stamp_ns=T0 + 1)], T0)
+    buf = bytearray(a)
+    decoder = StateDecoder(CircleStateArray)
+    assert decoder(buf).ids == ("aa", "bb")
+    buf[:] = b
+    assert decoder(buf).ids == ("xx", "yy")
+    cov = [Body("c", stamp_ns=T0 + k, covariance=(0.25,) * 36) for k in range(2)]
+    decoder = StateDecoder(CircleStateArray)
+    first = decoder(encode_array(cov, T0))
+    for x in (first.radius, first.position, first.stamp_ns, first.covariance,
+              first.covariance_size):
+        x[...] = 0
+    data = encode_array([Body("c", stamp_ns=T0 + 9, covariance=(0.25,) * 36),
+                         Body("c", stamp_ns=T0 + 9, covariance=(0.25,) * 36)], T0)
+    _equal(decoder(data), decode_states(data, CircleStateArray))
+
+
+def test_a_stream_of_changing_layouts_rests_and_comes_back() -> None:
+    """Two publishers taking turns on one topic (two layouts): every message decodes as
+    alone; the decoder stops comparing for a while, and a steady stream afterwards shares
+    its tuples again."""
+    one = [encode_array([Body("a", stamp_ns=T0 + k)], T0 + k) for k in range(40)]
+    two = [encode_array([Body("bb", stamp_ns=T0 + k), Body("c", stamp_ns=T0 + k)], T0 + k)
+           for k in range(40)]
+    decoder = StateDecoder(CircleStateArray)
+    for k in range(20):
+        for data in (one[k], two[k]):
+            _equal(decoder(data), decode_states(data, CircleStateArray))
+    batches = [decoder(data) for data in two[20:]]
+    assert all(b.ids is batches[-1].ids for b in batches[-5:])
 
 
 def test_single_states_and_unchanged_ids() -> None:

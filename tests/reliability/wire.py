@@ -56,7 +56,7 @@ class _Writer:
         self.buf += struct.pack(self.e + f"{len(values)}d", *values)
 
 
-def _state(w: _Writer, b: Body) -> None:
+def _state(w: _Writer, b: Body, with_covariance: bool = True) -> None:
     if b.stamp is not None:
         w.pad(4)
         w.buf += struct.pack(w.e + "iI", *b.stamp)
@@ -66,26 +66,30 @@ def _state(w: _Writer, b: Body) -> None:
     w.string(b.id_bytes if b.id_bytes is not None else b.id.encode("utf-8", "surrogatepass"))
     w.f64s((b.radius, *b.p, *b.v, *b.a))
     w.buf.append(1 if b.remove else 0)
+    if not with_covariance:
+        return
     w.u32(len(b.covariance))
     if b.covariance:
         w.f64s(b.covariance)
 
 
-def encode_array(bodies, stamp_ns: int, frame: str = "map", big_endian: bool = False) -> bytes:
-    """Serialized CircleStateArray."""
+def encode_array(bodies, stamp_ns: int, frame: str = "map", big_endian: bool = False,
+                 with_covariance: bool = True) -> bytes:
+    """Serialized CircleStateArray (with_covariance False: the layout before CircleState had
+    its covariance sequence, as old recordings)."""
     w = _Writer(big_endian)
     w.stamp(stamp_ns)
     w.string(frame.encode())
     w.u32(len(bodies))
     for b in bodies:
-        _state(w, b)
+        _state(w, b, with_covariance)
     return bytes(w.buf)
 
 
-def encode_state(body: Body, big_endian: bool = False) -> bytes:
-    """Serialized CircleState."""
+def encode_state(body: Body, big_endian: bool = False, with_covariance: bool = True) -> bytes:
+    """Serialized CircleState (with_covariance as encode_array's)."""
     w = _Writer(big_endian)
-    _state(w, body)
+    _state(w, body, with_covariance)
     return bytes(w.buf)
 
 
