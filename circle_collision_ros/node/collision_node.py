@@ -374,7 +374,7 @@ class CollisionNode(LifecycleNode):
             raise ValueError("static inputs (map_topic, polygon_topics, static_polygons) need "
                              f"dimensions = 2; this node predicts in {p('dimensions')}-D")
         reliability = p("state_reliability")
-        # a decoder per topic: each stream's unchanged ids are decoded once (StateDecoder)
+        # a decoder per topic: a tracker's next frame is read at its layout (StateDecoder)
         inputs = [InputTopic(self.resolve_topic_name(t), CircleStateArray,
                              StateDecoder(CircleStateArray),
                              qos=functools.partial(Qos.states, reliability))

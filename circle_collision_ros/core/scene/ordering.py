@@ -63,8 +63,8 @@ class OrderingMixin:
 
     # ------------------------------------------------------------------ query
     #: Scattered records are compacted into the kept order from this many on: below it the
-    #: query's walk over them costs less than the compaction's array set-up (~0.07 ms, an
-    #: ego-centred scene's few records, bench/bench_ego.py).
+    #: query's walk over them costs less than the compaction's array set-up (an ego-centred
+    #: scene's few records: bench/bench_ego.py).
     _SCATTERED_ROWS = 256
 
     def predictions(self) -> SceneContacts:
