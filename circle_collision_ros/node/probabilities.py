@@ -8,10 +8,12 @@ stamped as the prediction it completes, on `collision_probabilities`: the messag
 scene publishes with ``uncertain_pair_budget`` 0, bit for bit.
 
 - The exact times never wait: the prediction path only hands over a reference.
-- The heavy kernels release the interpreter lock (numba ``nogil``): the rows are dealt to
-  ``PARTS`` threads, which run beside the prediction path at a lower scheduling priority
-  (``NICE``), in steps of a few rows that wait while the prediction path is busy
-  (node/activity.py): the exact path is not slowed by the cores or the lock they hold.
+- The heavy kernels release the interpreter lock (numba ``nogil``): the rows go to
+  ``PARTS`` threads at a lower scheduling priority (``NICE``), in steps of a few rows, each
+  taken by the next free thread. While the prediction path is busy (node/activity.py), the
+  threads beyond the cores it leaves free wait before their next step (``STEP_ASIDE`` of
+  them: one on a 2-core machine, where the other goes on beside the prediction path on the
+  second core; a step holds the interpreter lock only between its kernel calls).
 - Latest wins: a prediction superseded before the thread takes it is never completed
   (counted in ``superseded``). A prediction with nothing deferred is republished as it is.
 - Recording: each message is recorded with the log time of the prediction it completes, so
@@ -59,6 +61,9 @@ class ProbabilityPublisher:
     PARTS = min(2, os.cpu_count() or 1)
     #: Niceness of those threads (the prediction path keeps the process's, 0 by default).
     NICE = 10
+    #: Of those threads, how many wait while the prediction path is busy: all but one per
+    #: core the prediction path leaves free (its own thread takes one core).
+    STEP_ASIDE = max(PARTS - max((os.cpu_count() or 1) - 1, 0), 0)
 
     def __init__(self, publish: Callable[[bytes], None],
                  record: Callable[[bytes, int], None] | None = None,
@@ -77,11 +82,27 @@ class ProbabilityPublisher:
         self.superseded = 0  # offered predictions replaced before the thread took them
         self.last_compute_s = 0.0  # the last completion's evaluation time
         self.last_delay_s = 0.0  # the last message's offer-to-publish time
+        self._started = 0
+        self._started_lock = threading.Lock()
+        self._local = threading.local()
         self._pool = ThreadPoolExecutor(self.PARTS, "collision_node_probabilities",
-                                        initializer=_lower_priority)
+                                        initializer=self._start_worker)
         self._thread = threading.Thread(target=self._run, name="collision_node_probabilities",
                                         daemon=True)
         self._thread.start()
+
+    def _start_worker(self) -> None:
+        """Pool thread initializer: lower priority; the first STEP_ASIDE threads step aside."""
+        _lower_priority()
+        with self._started_lock:
+            self._local.steps_aside = self._started < self.STEP_ASIDE
+            self._started += 1
+
+    def _pause(self) -> None:
+        """Before each step of a completion: wait while the node is busy, if this thread
+        steps aside."""
+        if getattr(self._local, "steps_aside", True):
+            self.activity.pause()
 
     def offer(self, prediction: ScenePrediction, data: bytes, log_time_ns: int) -> None:
         """Hand over the newest prediction, its published bytes and its log time."""
@@ -119,7 +140,7 @@ class ProbabilityPublisher:
                 if job.prediction.deferred:
                     started = time.monotonic()
                     data = job.prediction.completed(self._pool, self.PARTS,
-                                                    self.activity.pause).to_cdr()
+                                                    self._pause).to_cdr()
                     self.last_compute_s = time.monotonic() - started
                     self.completed += 1
                 self._publish(data)

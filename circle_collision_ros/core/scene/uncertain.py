@@ -5,6 +5,7 @@ A part of ``Scene``.
 """
 from __future__ import annotations
 
+import threading
 from collections.abc import Callable
 from concurrent.futures import Executor
 from dataclasses import replace
@@ -522,10 +523,11 @@ def complete_uncertainty(uncertainty: SceneUncertainty, executor: Executor | Non
     is kept in ``pending.first``).  A pure function of `uncertainty`: it may run later, on
     another thread, and replay reproduces it.  Unchanged when nothing was deferred.
 
-    executor, parts: the rows dealt into `parts` interleaved shares, evaluated on the
-    executor's threads (the kernels release the interpreter lock); pause: called before each
-    step of COMPLETION_STEP rows (a caller's way to step aside).  The same bits either way:
-    rows are independent.
+    executor, parts: the rows evaluated on `parts` of the executor's threads (the kernels
+    release the interpreter lock), each taking the next block of rows when it is free;
+    pause: called by a thread before it takes each step of COMPLETION_STEP rows (a caller's
+    way to step aside; it may let some threads go on and hold others).  The same bits either
+    way: rows are independent.
     """
     pending = uncertainty.pending
     if pending is None:
@@ -539,29 +541,55 @@ def complete_uncertainty(uncertainty: SceneUncertainty, executor: Executor | Non
                                   screened_first=pending.first[rows], tolerance=pending.tolerance)
         return res.collision_probability, res.collision_probability_bound, res.plausible_time
 
-    def evaluate(share):
-        if pause is None:
-            return evaluate_rows(share)
-        rows = np.arange(pending.rows.size)[share]
-        steps = []
-        for at in range(0, rows.size, COMPLETION_STEP):
-            pause()
-            steps.append(evaluate_rows(rows[at:at + COMPLETION_STEP]))
-        return tuple(np.concatenate([s[c] for s in steps]) if steps else np.empty(0)
-                     for c in range(3))
-
     k = pending.rows.size
-    if executor is not None and parts > 1 and k > 1:
-        shares = [np.arange(j, k, parts) for j in range(parts)]
-        results = list(executor.map(evaluate, shares))
+    threads = parts if executor is not None and parts > 1 and k > 1 else 1
+    if pause is None and threads == 1:
+        blocks = [slice(0, k)]
+        results = [evaluate_rows(blocks[0])]
     else:
-        shares = [slice(None)]
-        results = [evaluate(shares[0])]
+        size = COMPLETION_STEP if pause is not None else -(-k // threads)
+        blocks = [slice(a, min(a + size, k)) for a in range(0, k, size)]
+        results = [None] * len(blocks)
+        errors = []
+        count = {"taken": 0, "done": 0}
+        cond = threading.Condition()
+
+        def work():
+            # a free thread takes the next block: a thread held by `pause` delays no block,
+            # and the answer does not wait for it to return
+            while True:
+                with cond:
+                    if count["taken"] >= len(blocks):
+                        return
+                if pause is not None:
+                    pause()
+                with cond:
+                    j = count["taken"]
+                    if j >= len(blocks):
+                        return
+                    count["taken"] += 1
+                try:
+                    results[j] = evaluate_rows(blocks[j])
+                except Exception as exc:  # (raised by the caller below)
+                    errors.append(exc)
+                with cond:
+                    count["done"] += 1
+                    cond.notify_all()
+
+        if threads > 1:
+            for _ in range(min(threads, len(blocks))):
+                executor.submit(work)
+        else:
+            work()
+        with cond:
+            cond.wait_for(lambda: count["done"] >= len(blocks))
+        if errors:
+            raise errors[0]
     prob, bound = uncertainty.probability.copy(), uncertainty.probability_bound.copy()
     plausible = uncertainty.plausible_ttc.copy()
-    for share, (p, e, tau) in zip(shares, results):
-        rows = pending.rows[share]
+    for block, (p, e, tau) in zip(blocks, results):
+        rows = pending.rows[block]
         prob[rows], bound[rows] = p, e
-        plausible[rows] = _from_reference(tau, pending.lag[share])
+        plausible[rows] = _from_reference(tau, pending.lag[block])
     return replace(uncertainty, probability=prob, probability_bound=bound, plausible_ttc=plausible,
                    deferred_rows=None, pending=None)

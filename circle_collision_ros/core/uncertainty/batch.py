@@ -32,10 +32,10 @@ import numpy as np
 
 from circle_collision_ros.core.narrow import time_to_collision
 from circle_collision_ros.core.uncertainty.interval import cheap_intervals
-from circle_collision_ros.core.uncertainty.pair import (OUT_SIZE, evaluate_uncertain_rows,
-                                                        finish_row, relative_rows)
-from circle_collision_ros.core.uncertainty.qmc import (factor, line_sampled_probability,
-                                                       normal_table, overcount_replicates,
+from circle_collision_ros.core.uncertainty.pair import (OUT_HI, OUT_QMC, OUT_SIZE, OUT_T1,
+                                                        evaluate_uncertain_rows, finish_row,
+                                                        overcount_answer, relative_rows)
+from circle_collision_ros.core.uncertainty.qmc import (line_sampled_probability, normal_table,
                                                        qmc_probability)
 from circle_collision_ros.core.uncertainty.tube import (BROAD_PHASE_SIGMAS, TUBE_TAIL,
                                                         max_sigma_rows, row_classes, screen_rows_at,
@@ -260,7 +260,8 @@ def uncertain_pairs(pa, va, aa, ra, cov_a, pb, vb, ab, rb, cov_b, horizon: float
         now = np.sort(order[:m])
         todo, dp, dv, da, rad, sig = todo[now], dp[now], dv[now], da[now], rad[now], sig[now]
     out = np.empty((todo.size, OUT_SIZE))
-    evaluate_uncertain_rows(dp, dv, da, rad, sig, H, thr, out)
+    # (the normal table: the accelerating rows' over-count runs inside the compiled pass)
+    evaluate_uncertain_rows(dp, dv, da, rad, sig, H, thr, out, tol, normal_table(2 * D))
     for j, i in enumerate(todo.tolist()):
         prob[i], bound[i], tpl[i] = r = finish_row(
             dp[j], dv[j], da[j], float(rad[j]), sig[j], H, out[j], tol
@@ -306,6 +307,8 @@ def load_fallback_kernels(dimensions: int) -> None:
     cov = np.eye(2 * dimensions) * 0.01
     Z = normal_table(2 * dimensions)
     qmc_probability(z + 1.5, z, z + 0.1, 1.0, cov, 1.0, Z)
-    overcount_replicates(z + 1.5, z, z + 0.1, 1.0, 1.0, factor(cov), Z, 1, np.empty(Z.shape[0]))
+    out = np.zeros(OUT_SIZE)
+    out[OUT_QMC], out[OUT_HI], out[OUT_T1] = 2.0, 1.0, 1.0
+    overcount_answer(z + 1.5, z, z + 0.1, 1.0, cov, 1.0, out, 0.0, Z)
     if dimensions == 3:
         line_sampled_probability(z + 1.5, z + 1.0, cov, 1.0, 1.0, normal_table(5))

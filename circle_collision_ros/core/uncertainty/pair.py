@@ -20,7 +20,7 @@ from circle_collision_ros.core.uncertainty.overlap import BALL_ERR_PER_TOL, DISC
 from circle_collision_ros.core.uncertainty.qmc import (QMC_CV_POINTS, QMC_CV_TARGET, QMC_POINTS,
                                                        QMC_REPLICATES, QMC_T, factor, line_sampled,
                                                        line_sampled_probability, normal_table,
-                                                       overcount_replicates, qmc_probability,
+                                                       overcount_counts, qmc_probability,
                                                        replicate_stats)
 from circle_collision_ros.core.uncertainty.reentry import (BRACKET_HALF_WIDTH, no_reentry,
                                                            overcount_tail)
@@ -36,16 +36,17 @@ from circle_collision_ros.core.uncertainty.walk import (CACHE_COLUMNS, P0_ERR, P
                                                         walk_panels)
 
 __all__ = ["pair_kernel", "pair_probability", "relative_rows", "evaluate_uncertain_rows",
-           "finish_row", "QMC_TOL_POINTS", "OUT_SIZE", "OUT_P", "OUT_BOUND", "OUT_TPL", "OUT_QMC",
-           "OUT_LO", "OUT_HI", "OUT_ERR"]
+           "finish_row", "overcount_answer", "QMC_TOL_POINTS", "OUT_SIZE", "OUT_P", "OUT_BOUND",
+           "OUT_TPL", "OUT_QMC", "OUT_LO", "OUT_HI", "OUT_ERR", "OUT_T0", "OUT_T1"]
 
 
 # pair_kernel's out: probability, bound, plausible time, then for the RQMC
 # fallback (needs_qmc = 1.0) the bracket [lo, hi] the RQMC mean is clipped to
 # (1.0: on the contact indicator; 2.0: on the over-count of an accelerating pair,
 # OUT_HI then is the computed upper = P0 + E[entries] and OUT_ERR its bound;
-# 3.0: line sampling of a straight 3-D pair, core.uncertainty.line_sampling)
-OUT_P, OUT_BOUND, OUT_TPL, OUT_QMC, OUT_LO, OUT_HI, OUT_ERR = 0, 1, 2, 3, 4, 5, 6
+# 3.0: line sampling of a straight 3-D pair, core.uncertainty.line_sampling); for the
+# over-count, [OUT_T0, OUT_T1] is the hull of the tube's ambiguous intervals
+OUT_P, OUT_BOUND, OUT_TPL, OUT_QMC, OUT_LO, OUT_HI, OUT_ERR, OUT_T0, OUT_T1 = range(9)
 
 
 @njit(cache=True, error_model="numpy")
@@ -219,13 +220,15 @@ def pair_kernel(dp, dv, da, R, Sigma, H, thr, out):
         out[OUT_LO] = lo
         out[OUT_HI] = upper
         out[OUT_ERR] = slack
+        out[OUT_T0] = t0
+        out[OUT_T1] = t1
         return
     out[OUT_QMC] = 1.0
     out[OUT_LO] = st[ST_PMAX] - pmax_err
     out[OUT_HI] = 1.0 if degenerate else upper + err + P0_ERR + 2 * TUBE_TAIL
 
 
-OUT_SIZE = 7
+OUT_SIZE = 9
 
 
 @njit(cache=True, error_model="numpy", nogil=True)
@@ -258,21 +261,72 @@ def relative_rows(pa, va, aa, ra, pb, vb, ab, rb, sigma, rows, dp, dv, da, rad, 
                 sig[j, r, c] = sigma[i, r, c]
 
 
-@njit(cache=True, error_model="numpy", nogil=True)
-def evaluate_uncertain_rows(dp, dv, da, rad, sig, H, thr, out):
-    """pair_kernel on every row (out (n, OUT_SIZE)), serially: on numba's threads the
-    node's tail latency suffered (docs/uncertainty.md, "Not guaranteed / weak");
-    rows with out[j, OUT_QMC] != 0 still need ``finish_row``'s sampling.  Releases the
-    interpreter lock (nogil): the node completes deferred rows on a thread beside its
-    prediction path (node/probabilities.py)."""
-    for j in range(dp.shape[0]):
-        pair_kernel(dp[j], dv[j], da[j], rad[j], sig[j], H, thr, out[j])
-
-
-# With a tolerance (finish_row): the over-count's first stages, points per replicate, each
-# tried when its floor 3 / (QMC_REPLICATES m) (5.9e-3, 2.9e-3) is within the tolerance,
+# With a tolerance (overcount_answer): the over-count's first stages, points per replicate,
+# each tried when its floor 3 / (QMC_REPLICATES m) (5.9e-3, 2.9e-3) is within the tolerance,
 # before QMC_CV_POINTS and QMC_POINTS
 QMC_TOL_POINTS = (32, 64)
+_OVERCOUNT_STAGES = QMC_TOL_POINTS + (QMC_CV_POINTS, QMC_POINTS)
+
+
+@njit(cache=True, error_model="numpy", nogil=True)
+def overcount_answer(dp, dv, da, R, Sigma, H, out, tolerance, Z):
+    """(probability, bound) of an accelerating row that pair_kernel left to the over-count
+    (out[OUT_QMC] == 2): P = upper - E[O], E[O] by the RQMC replicates Z.
+
+    QMC_CV_POINTS per replicate first, all QMC_POINTS when the stated bound would exceed
+    QMC_CV_TARGET.  tolerance > 0 (a scene's ``probability_tolerance``): the certified
+    bracket is taken when its half-width is within it (the kernel's bracket rule, the same
+    operations: the same bits where the kernel accepts it), and the stages start at
+    QMC_TOL_POINTS (those whose floor is within it) and stop at the first whose stated
+    bound is within it.  The stated bound holds either way.  Each stage adds its points
+    to the previous ones' (integer counts: the same bits as one pass)."""
+    upper = out[OUT_HI]
+    lo = out[OUT_LO]
+    err = out[OUT_ERR]
+    if tolerance > 0.0:
+        hi = upper + err
+        if lo <= hi and 0.5 * (hi - lo) <= tolerance:
+            return min(1.0, max(0.0, 0.5 * (lo + hi))), 0.5 * (hi - lo)
+    L = factor(np.ascontiguousarray(Sigma))
+    reps = Z.shape[0]
+    tot = np.zeros(reps, dtype=np.int64)
+    est = np.empty(reps)
+    k2 = BROAD_PHASE_SIGMAS * BROAD_PHASE_SIGMAS
+    done = 0
+    mean = 0.0
+    stat = 0.0
+    for s in range(len(_OVERCOUNT_STAGES)):
+        m = _OVERCOUNT_STAGES[s]
+        if s < len(QMC_TOL_POINTS) and not (tolerance > 0.0 and
+                                            3.0 / (QMC_REPLICATES * m) <= tolerance):
+            continue
+        overcount_counts(dp, dv, da, R, H, L, Z, done, m, out[OUT_T0], out[OUT_T1], k2, tot)
+        done = m
+        for r in range(reps):
+            est[r] = tot[r] / m
+        mean, se = replicate_stats(est)
+        stat = max(QMC_T * se, 3.0 / (QMC_REPLICATES * m))
+        if stat <= QMC_CV_TARGET or stat + err <= tolerance:
+            break
+    return min(1.0, max(0.0, min(max(upper - mean, lo), upper))), stat + err
+
+
+@njit(cache=True, error_model="numpy", nogil=True)
+def evaluate_uncertain_rows(dp, dv, da, rad, sig, H, thr, out, tolerance, Z):
+    """pair_kernel on every row (out (n, OUT_SIZE)), serially (on numba's threads the
+    node's tail latency suffered, docs/uncertainty.md "Not guaranteed / weak"), and the
+    over-count of the accelerating rows that need it (overcount_answer with `tolerance`
+    and the normal table Z of their dimension; out[j, OUT_QMC] then reads 0).  Rows with
+    out[j, OUT_QMC] != 0 still need ``finish_row``'s sampling.  Releases the interpreter
+    lock (nogil): the node completes deferred rows on threads beside its prediction path
+    (node/probabilities.py)."""
+    for j in range(dp.shape[0]):
+        pair_kernel(dp[j], dv[j], da[j], rad[j], sig[j], H, thr, out[j])
+        if out[j, OUT_QMC] == 2.0:
+            p, b = overcount_answer(dp[j], dv[j], da[j], rad[j], sig[j], H, out[j], tolerance, Z)
+            out[j, OUT_P] = p
+            out[j, OUT_BOUND] = b
+            out[j, OUT_QMC] = 0.0
 
 
 def finish_row(dp, dv, da, R, Sigma, H, out, tolerance: float = 0.0):
@@ -288,32 +342,9 @@ def finish_row(dp, dv, da, R, Sigma, H, out, tolerance: float = 0.0):
         return float(out[OUT_P]), float(out[OUT_BOUND]), float(out[OUT_TPL])
     D = dp.shape[0]
     if out[OUT_QMC] == 2.0:
-        upper = float(out[OUT_HI])
-        if tolerance > 0.0:
-            # the kernel's bracket rule (pair_kernel), accepted up to the tolerance: the
-            # same operations, so the same bits as where the kernel accepts it
-            lo, hi = float(out[OUT_LO]), upper + float(out[OUT_ERR])
-            if lo <= hi and 0.5 * (hi - lo) <= tolerance:
-                return (min(1.0, max(0.0, 0.5 * (lo + hi))), 0.5 * (hi - lo),
-                        float(out[OUT_TPL]))
-        # accelerating: P = upper - E[O]; QMC_CV_POINTS per replicate first, all
-        # QMC_POINTS when the stated bound would exceed QMC_CV_TARGET (with a
-        # tolerance: from QMC_TOL_POINTS, until the stated bound is within it)
-        Z = normal_table(2 * D)
-        L = factor(np.ascontiguousarray(Sigma))
-        est = np.empty(QMC_REPLICATES)
-        stages = (QMC_CV_POINTS, QMC_POINTS)
-        if tolerance > 0.0:  # first the stages whose floor can meet the tolerance
-            stages = tuple(m for m in QMC_TOL_POINTS
-                           if 3.0 / (QMC_REPLICATES * m) <= tolerance) + stages
-        for m in stages:
-            overcount_replicates(dp, dv, da, float(R), float(H), L, Z, m, est)
-            mean, se = replicate_stats(est)
-            stat = max(QMC_T * se, 3.0 / (QMC_REPLICATES * m))
-            if stat <= QMC_CV_TARGET or stat + float(out[OUT_ERR]) <= tolerance:
-                break
-        p = min(1.0, max(0.0, min(max(upper - mean, float(out[OUT_LO])), upper)))
-        return p, stat + float(out[OUT_ERR]), float(out[OUT_TPL])
+        p, b = overcount_answer(dp, dv, da, float(R), np.ascontiguousarray(Sigma), float(H), out,
+                                float(tolerance), normal_table(2 * D))
+        return float(p), float(b), float(out[OUT_TPL])
     if out[OUT_QMC] == 3.0:
         mean, stat = line_sampled_probability(
             dp, dv, np.ascontiguousarray(Sigma), float(R), float(H), normal_table(5)

@@ -3,7 +3,7 @@
 The fallbacks of the per-pair evaluation: scrambled Sobol replicates turned
 into standard normals (``normal_table``), the contact indicator through the
 exact solver (``qmc_probability``), the over-count of accelerating pairs
-(``overcount_replicates``, with the quartic's crossings) and line sampling of
+(``overcount_counts``, with the quartic's crossings) and line sampling of
 straight 3-D pairs with its control variate (``line_sampled_probability``).
 The stated bound is a Student t multiple of the replicates' standard error,
 never below the rule of three.
@@ -28,7 +28,8 @@ from circle_collision_ros.core.uncertainty.sobol import scrambled_directions, so
 __all__ = ["QMC_REPLICATES", "QMC_POINTS", "QMC_T", "QMC_CV_POINTS", "QMC_CV_TARGET",
            "QMC_LINE_POINTS", "QMC_LINE_TARGET", "QMC_T_CONTROLLED", "normal_table", "factor",
            "replicate_stats", "qmc_probability", "controlled_stats", "quartic_crossings",
-           "overcount_replicates", "line_sampled", "line_sampled_probability"]
+           "overcount_counts", "overcount_replicates", "line_sampled",
+           "line_sampled_probability"]
 
 
 # Randomized QMC: QMC_REPLICATES independent scrambles of QMC_POINTS Sobol
@@ -274,21 +275,27 @@ def quartic_crossings(p, v, a, R, H):
 
 
 @njit(cache=True, error_model="numpy", nogil=True)
-def overcount_replicates(dp, dv, da, R, H, L, Z, m, est):
-    """est[r] = mean over the first m points of replicate r of Z (r, M, 2D standard
-    normals) of the over-count O = (1{inside at 0} + #entries in (0, H] - 1)^+ of the
-    sampled path (dp, dv) + L z: the amount by which P0 + E[entries] exceeds
-    P(contact) for that path (docs/uncertainty.md, "Accelerating")."""
+def overcount_counts(dp, dv, da, R, H, L, Z, start, stop, t0, t1, k2, tot):
+    """tot[r] += the over-count O = (1{inside at 0} + #entries in (0, H] - 1)^+ summed
+    over points start .. stop - 1 of replicate r of Z (r, M, 2D standard normals), each
+    the path (dp, dv) + L z: the amount by which P0 + E[entries] exceeds P(contact) for
+    that path (docs/uncertainty.md, "Accelerating").  Integer sums, so a later stage adds
+    its points to an earlier one's with the same bits as one pass over all of them.
+
+    [t0, t1]: the hull of the pair's k-sigma tube intervals (k2 = k^2), where every sphere
+    crossing of a path with |z|^2 <= k2 lies (core.uncertainty.tube); (0, H, 0) when
+    unknown."""
     D = dp.shape[0]
     n = 2 * D
     p = np.empty(D)
     v = np.empty(D)
     # over-counting needs an exit followed by an entry, so a local maximum of
-    # f = |X|^2 - R^2 inside (0, H): impossible where f''/2 = |Xdot|^2 + X.da =
-    # |v|^2 + p.da + 3 t v.da + 1.5 t^2 |da|^2 > 0 on all of [0, H] (its minimum
-    # over [0, H] is checked), which is most paths.  p.da and v.da are linear in
-    # z (weights L^T da, formed once), so the test needs v and two dot products;
-    # p, the quartic and its crossings only for the paths that fail it
+    # f = |X|^2 - R^2 between two crossings: impossible where f''/2 = |Xdot|^2 + X.da =
+    # |v|^2 + p.da + 3 t v.da + 1.5 t^2 |da|^2 > 0 (a quadratic in t: its minimum over the
+    # interval is checked).  The crossings of a tube path lie in [t0, t1], so the test
+    # covers [t0, t1] there and all of [0, H] for any other path.  p.da and v.da are
+    # linear in z (weights L^T da, formed once), so the test needs v and two dot
+    # products; p, the quartic and its crossings only for the paths that fail it
     wp = np.zeros(n)
     wv = np.zeros(n)
     pa0 = 0.0
@@ -303,13 +310,16 @@ def overcount_replicates(dp, dv, da, R, H, L, Z, m, est):
             wv[j] += L[D + k, j] * da[k]
     a2 = 1.5 * aa
     for r in range(Z.shape[0]):
-        tot = 0
-        for i in range(m):
+        tot_r = 0
+        for i in range(start, stop):
             pda = pa0
             vda = va0
+            zz = 0.0
             for j in range(n):
-                pda += wp[j] * Z[r, i, j]
-                vda += wv[j] * Z[r, i, j]
+                z = Z[r, i, j]
+                pda += wp[j] * z
+                vda += wv[j] * z
+                zz += z * z
             vv = 0.0
             for k in range(D):
                 yv = dv[k]
@@ -317,8 +327,9 @@ def overcount_replicates(dp, dv, da, R, H, L, Z, m, est):
                     yv += L[D + k, j] * Z[r, i, j]
                 v[k] = yv
                 vv += yv * yv
+            lo, hi = (t0, t1) if zz <= k2 else (0.0, H)
             b1 = 3.0 * vda
-            tm = min(max(-b1 / (2.0 * a2), 0.0), H) if a2 > 0.0 else (0.0 if b1 >= 0.0 else H)
+            tm = min(max(-b1 / (2.0 * a2), lo), hi) if a2 > 0.0 else (lo if b1 >= 0.0 else hi)
             if vv + pda + (b1 + a2 * tm) * tm > 0.0:
                 continue
             for k in range(D):
@@ -329,8 +340,18 @@ def overcount_replicates(dp, dv, da, R, H, L, Z, m, est):
             inside0, entries = quartic_crossings(p, v, da, R, H)
             o = (1 if inside0 else 0) + entries - 1
             if o > 0:
-                tot += o
-        est[r] = tot / m
+                tot_r += o
+        tot[r] += tot_r
+
+
+@njit(cache=True, error_model="numpy", nogil=True)
+def overcount_replicates(dp, dv, da, R, H, L, Z, m, est):
+    """est[r] = mean over the first m points of replicate r of Z of the over-count O of
+    the sampled path (overcount_counts over [0, H], no tube)."""
+    tot = np.zeros(Z.shape[0], dtype=np.int64)
+    overcount_counts(dp, dv, da, R, H, L, Z, 0, m, 0.0, H, 0.0, tot)
+    for r in range(Z.shape[0]):
+        est[r] = tot[r] / m
 
 
 @njit(cache=True, error_model="numpy")

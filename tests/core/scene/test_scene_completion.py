@@ -6,9 +6,13 @@ Guarantees proved here:
   own pair time t_p < R), 2-D and 3-D; no row is left deferred;
 - it is a pure function of the call's result: computed after the scene has moved on (new
   states, new predictions), it gives the same bits as right away;
-- nothing deferred: the result is returned as it is.
+- nothing deferred: the result is returned as it is;
+- with a pause and threads, each free thread takes the next step: a thread held in its pause
+  delays no step, and the answer does not wait for it to return.
 """
 from __future__ import annotations
+
+import threading
 
 import numpy as np
 import pytest
@@ -110,5 +114,36 @@ def test_steps_with_a_pause_give_the_same_bits() -> None:
             calls.clear()
             stepped = complete_uncertainty(u, executor, parts, lambda: calls.append(1))
             _same(stepped, plain)
-            per_share = -(-u.pending.rows.size // parts)
-            assert len(calls) >= parts * (-(-per_share // COMPLETION_STEP)) - parts
+            assert len(calls) >= -(-u.pending.rows.size // COMPLETION_STEP)
+
+
+def test_a_thread_held_in_its_pause_delays_no_step() -> None:
+    """The node lets one thread go on beside its busy prediction path and holds the other:
+    the free thread takes every step, and the answer does not wait for the held one."""
+    from concurrent.futures import ThreadPoolExecutor
+
+    from circle_collision_ros.core.scene.uncertain import COMPLETION_STEP
+
+    scene = Scene(5.0, 2, method="grid")
+    _merge_batch(scene, _batch(40, seed=13, sigma=0.5, spread=6.0))
+    u = scene.uncertain_pairs(0.01, scene.predictions(), 1)
+    assert u.pending.rows.size > 2 * COMPLETION_STEP
+    release = threading.Event()
+    held = []
+    lock = threading.Lock()
+
+    def pause() -> None:  # the first thread to ask is held until the answer is in
+        with lock:
+            hold = not held
+            if hold:
+                held.append(threading.get_ident())
+        if hold:
+            assert release.wait(60.0)
+
+    with ThreadPoolExecutor(2) as pool:
+        try:
+            done = complete_uncertainty(u, pool, 2, pause)
+        finally:
+            release.set()
+    _same(done, complete_uncertainty(u))
+    assert held  # one thread was held throughout

@@ -20,6 +20,10 @@ Guarantees proved here:
 * ``quartic_crossings`` counts the inside-at-0 and the entries of a path as
   the exact solver and a 200,001-point time grid do;
 * ``overcount_replicates``' convexity shortcut changes no count;
+* ``overcount_counts`` in stages, with the shortcut on the tube's hull for tube paths,
+  counts exactly what every path's crossings give, and ``overcount_answer`` gives the
+  answer of the staged rule computed from those counts (every stage, with and without a
+  tolerance);
 * an accelerating pair whose paths often exit and come back (over-count
   E[O] ~ 0.3) is answered within its stated bound of 1e6-sample Monte Carlo;
 * ``no_reentry`` is a certificate: where it holds over the hull of the
@@ -42,9 +46,14 @@ import pytest
 
 from circle_collision_ros.core import time_to_collision
 from circle_collision_ros.core.uncertainty import uncertain_pairs
-from circle_collision_ros.core.uncertainty.pair import OUT_QMC, OUT_SIZE, pair_kernel
-from circle_collision_ros.core.uncertainty.qmc import (factor, normal_table, overcount_replicates,
-                                                       quartic_crossings)
+from circle_collision_ros.core.uncertainty.pair import (OUT_ERR, OUT_HI, OUT_LO, OUT_QMC,
+                                                        OUT_SIZE, OUT_T0, OUT_T1,
+                                                        QMC_TOL_POINTS, overcount_answer,
+                                                        pair_kernel)
+from circle_collision_ros.core.uncertainty.qmc import (QMC_CV_POINTS, QMC_CV_TARGET, QMC_POINTS,
+                                                       QMC_REPLICATES, QMC_T, factor,
+                                                       normal_table, overcount_counts,
+                                                       overcount_replicates, quartic_crossings)
 from circle_collision_ros.core.uncertainty.reentry import (BRACKET_HALF_WIDTH, REENTRY_SIGMAS,
                                                            no_reentry)
 from circle_collision_ros.core.uncertainty.tube import (BROAD_PHASE_SIGMAS, TUBE_DEPTH, TUBE_TAIL,
@@ -247,6 +256,72 @@ def test_overcount_shortcut_changes_no_count():
         assert round(est.sum() * 64) == direct
         seen += direct
     assert seen > 0
+
+
+def _path_overcounts(dp, dv, da, R, H, L, Z):
+    """(replicates, points) over-count of every path, from its crossings alone."""
+    o = np.zeros(Z.shape[:2], dtype=np.int64)
+    for r in range(Z.shape[0]):
+        for i in range(Z.shape[1]):
+            y = L @ Z[r, i]
+            inside0, entries = quartic_crossings(dp + y[:2], dv + y[2:], da, R, H)
+            o[r, i] = max(int(inside0) + entries - 1, 0)
+    return o
+
+
+def test_overcount_stages_and_tube_shortcut_count_every_path():
+    """Accelerating pairs whose paths often turn back, from the tracker family (slow, pairs
+    passing near each other) to paths that exit and come back: the counts of each stage,
+    added to the last stage's, with the f'' shortcut on the tube's hull, equal the paths'
+    own crossing counts; the answer is the staged rule's on those counts."""
+    rng = np.random.default_rng(12)
+    Z = normal_table(4)
+    leaves = np.empty((1 << TUBE_DEPTH, 2))
+    out = np.empty(OUT_SIZE)
+    seen = asked = 0
+    for it in range(40):
+        if it % 2:  # a tracker frame's pairs
+            H, R = 5.0, float(rng.uniform(1.0, 3.0))
+            Sigma = np.diag([0.18, 0.18, 0.08, 0.08]) * 10 ** rng.uniform(-1, 0.5)
+            dp, dv, da = rng.normal(size=2) * 4, rng.normal(size=2) * 1.2, rng.normal(size=2) * 0.4
+        else:  # strong accelerations: many paths exit and come back
+            H, R = 3.0, 1.0
+            Sigma = np.diag([0.3, 0.3, 0.2, 0.2]) * 10 ** rng.uniform(-1, 0.5)
+            dp, dv, da = rng.normal(size=2) * 2, rng.normal(size=2), rng.normal(size=2) * 3
+        cnt, _ = tube_intervals(dp, dv, da, R, Sigma, H, leaves, BROAD_PHASE_SIGMAS)
+        if cnt == 0:
+            continue
+        t0, t1 = leaves[0, 0], leaves[cnt - 1, 1]
+        L = factor(Sigma)
+        o = _path_overcounts(dp, dv, da, R, H, L, Z[:, :QMC_POINTS // 2])
+        tot = np.zeros(Z.shape[0], dtype=np.int64)
+        done = 0
+        for m in (32, 64, 128, 256):
+            overcount_counts(dp, dv, da, R, H, L, Z, done, m, t0, t1, BROAD_PHASE_SIGMAS**2, tot)
+            assert np.array_equal(tot, o[:, :m].sum(axis=1)), (it, m)
+            done = m
+        seen += int(o.sum() > 0)
+        # the staged rule, from the counts alone (the bracket taken only where it is within
+        # the tolerance); upper, lo and slack as a kernel could leave them
+        upper = float(rng.uniform(0.05, 1.0))
+        out[:] = 0.0
+        out[OUT_QMC], out[OUT_HI], out[OUT_LO], out[OUT_ERR] = 2.0, upper, 0.0, 1e-3
+        out[OUT_T0], out[OUT_T1] = t0, t1
+        full = _path_overcounts(dp, dv, da, R, H, L, Z)
+        for tol in (0.0, 0.005, 0.02):
+            stages = [m for m in QMC_TOL_POINTS if tol > 0 and 3.0 / (QMC_REPLICATES * m) <= tol]
+            for m in stages + [QMC_CV_POINTS, QMC_POINTS]:
+                est = full[:, :m].sum(axis=1) / m
+                mean = est.mean()
+                se = math.sqrt(((est - mean) ** 2).sum() / (len(est) - 1) / len(est))
+                stat = max(QMC_T * se, 3.0 / (QMC_REPLICATES * m))
+                if stat <= QMC_CV_TARGET or stat + 1e-3 <= tol:
+                    break
+            want = (min(1.0, max(0.0, min(max(upper - mean, 0.0), upper))), stat + 1e-3)
+            got = overcount_answer(dp, dv, da, R, Sigma, H, out, tol, Z)
+            assert got == pytest.approx(want, rel=1e-12, abs=1e-15), (it, tol)
+            asked += 1
+    assert seen >= 5 and asked >= 60  # paths that come back are in the mix
 
 
 def test_accelerating_pair_that_comes_back_is_within_its_bound():
