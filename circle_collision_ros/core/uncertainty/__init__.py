@@ -8,11 +8,11 @@ Method and guarantees: docs/uncertainty.md.
 
 Parts: ``covariance`` (the input check, numpy only), ``batch`` (the API over
 rows), ``pair`` (one pair's evaluation), ``tube`` (the k-sigma tube and the
-screen), ``interval`` (the cheap certified interval of rows left unevaluated),
-``walk`` (the plausible-time walk), ``reentry`` (accelerating pairs' re-entry
-bounds), ``qmc`` (the sampling fallbacks), ``entry_rate`` (Rice's entry rate),
-``overlap`` (instantaneous probabilities), ``line_sampling``, ``quadrature``,
-``sobol``.
+screen), ``projection`` (the screen's one-direction bound), ``interval`` (the
+cheap certified interval of rows left unevaluated), ``walk`` (the plausible-time
+walk), ``reentry`` (accelerating pairs' re-entry bounds), ``qmc`` (the sampling
+fallbacks), ``entry_rate`` (Rice's entry rate), ``overlap`` (instantaneous
+probabilities), ``line_sampling``, ``quadrature``, ``sobol``.
 
 Only ``covariance`` is imported with the package; the names of ``batch`` (and
 the numba kernels behind them) load on first use.

@@ -35,6 +35,7 @@ from circle_collision_ros.core.uncertainty.interval import cheap_intervals
 from circle_collision_ros.core.uncertainty.pair import (OUT_HI, OUT_QMC, OUT_SIZE, OUT_T1,
                                                         evaluate_uncertain_rows, finish_row,
                                                         overcount_answer, relative_rows)
+from circle_collision_ros.core.uncertainty.projection import projection_rows, projection_rows_at
 from circle_collision_ros.core.uncertainty.qmc import (line_sampled_probability, normal_table,
                                                        qmc_probability)
 from circle_collision_ros.core.uncertainty.tube import (BROAD_PHASE_SIGMAS, TUBE_TAIL,
@@ -84,7 +85,8 @@ def uncertain_pairs(pa, va, aa, ra, cov_a, pb, vb, ab, rb, cov_b, horizon: float
 
     screen=True: an uncertain row whose certified upper bound U on
     P(contact within [0, H]) is below threshold / 2 (the k-sigma tube with
-    P(chi^2_2D > k^2) = U never reaches the ball) is answered (0.0, U, +inf)
+    P(chi^2_2D > k^2) = U never reaches the ball, or else, for a row whose screen
+    is not known, ``projection.projection_bound`` = U) is answered (0.0, U, +inf)
     without the full evaluation: still |reported - true| <= bound, and the
     plausible time is certified absent (sup_t P(|X(t)| <= R) <= U < threshold).
     Such rows are never published (probability < threshold); the scene
@@ -197,14 +199,29 @@ def uncertain_pairs(pa, va, aa, ra, cov_a, pb, vb, ab, rb, cov_b, horizon: float
             c, f = np.zeros(int(unknown.sum()), dtype=np.bool_), np.empty(int(unknown.sum()))
             screen_rows_at(pa, va, aa, ra, pb, vb, ab, rb, sigma, todo[unknown], H, k, c, f)
             clear[unknown], t_first[unknown] = c, f
+        projected = np.full(todo.size, np.nan)  # projection bounds computed here
         if tail > 0.0:
+            cleared = np.full(todo.size, tail)
+            # rows the tube leaves and whose screen is not known: the projection bound (a
+            # near miss along one direction, which the tube bounds through all 2D
+            # coordinates' tail), the same rule at threshold / 2
+            probe = np.flatnonzero(~clear & unknown)
+            if probe.size:
+                ub = np.empty(probe.size)
+                projection_rows_at(pa, va, aa, ra, pb, vb, ab, rb, sigma, todo[probe], H, ub)
+                low = ub <= 0.5 * thr
+                clear[probe[low]] = True
+                cleared[probe[low]] = ub[low]
+                projected[probe] = ub
             done = todo[clear]
-            prob[done], bound[done], tpl[done] = 0.0, tail, np.inf
-            todo, t_first = todo[~clear], t_first[~clear]
+            prob[done], bound[done], tpl[done] = 0.0, cleared[clear], np.inf
+            todo, t_first, projected = todo[~clear], t_first[~clear], projected[~clear]
         todo_first = t_first  # where each remaining row's screening tube may first reach the ball
+        todo_projected = projected
     else:
         todo_first = np.empty(todo.size)
         todo_first.fill(np.inf)
+        todo_projected = np.full(todo.size, np.nan)
     # relative state from relative quantities (map offsets cancel first);
     # X -> -X leaves the problem unchanged (the ball and S are symmetric): one
     # sign per pair, so swapping a and b gives bitwise the same result
@@ -232,7 +249,7 @@ def uncertain_pairs(pa, va, aa, ra, cov_a, pb, vb, ab, rb, cov_b, horizon: float
             keep = ~hit
             todo, dp, dv, da, rad, sig = (todo[keep], dp[keep], dv[keep], da[keep], rad[keep],
                                           sig[keep])
-            todo_first = todo_first[keep]
+            todo_first, todo_projected = todo_first[keep], todo_projected[keep]
     if max_evaluated is not None and todo.size > max_evaluated:
         m = max(int(max_evaluated), 0)
         rank = (
@@ -252,6 +269,16 @@ def uncertain_pairs(pa, va, aa, ra, cov_a, pb, vb, ab, rb, cov_b, horizon: float
         anew = later[new]
         # on the sign-canonicalised relative rows: a swapped pair gets the same bits
         lo, hi = cheap_intervals(dp[anew], dv[anew], da[anew], rad[anew], sig[anew], H)
+        # the projection bound is an upper bound too (the screen's, or computed here: the same
+        # bits, the bound being symmetric under X -> -X)
+        ub = todo_projected[anew]
+        missing = np.flatnonzero(np.isnan(ub))
+        if missing.size:
+            m_rows = anew[missing]
+            ub[missing] = projection_rows(dp[m_rows], dv[m_rows], da[m_rows], rad[m_rows],
+                                          sig[m_rows], H)
+        hi = np.minimum(hi, ub)
+        lo = np.minimum(lo, hi)
         mid = 0.5 * (lo + hi)
         # hi - mid is exact (Sterbenz: mid >= hi / 2), so mid + bound reaches hi itself
         prob[rows[new]], bound[rows[new]] = mid, np.maximum(hi - mid, mid - lo)

@@ -25,7 +25,6 @@ import numpy as np
 
 from circle_collision_ros.core.scene import Scene
 from circle_collision_ros.core.uncertainty import batch, deferred_count, uncertain_pairs
-from circle_collision_ros.core.uncertainty.tube import screen_sigmas
 
 BASE = 1_700_000_000 * 1_000_000_000
 THR = 0.01
@@ -67,7 +66,6 @@ def test_budget_serves_the_longest_waiting_pairs_first() -> None:
     ids, p, v, r, cov = _crowd(14, seed=3)
     m = 2
     budgeted, twin, unlimited = Scene(H, 2), Scene(H, 2), Scene(H, 2)
-    _, U = screen_sigmas(THR, 4)
     frames = 30
     history = []  # per evaluation: {pair: "deferred" | "evaluated"} of the unscreened pairs
     for f in range(frames):
@@ -92,7 +90,8 @@ def test_budget_serves_the_longest_waiting_pairs_first() -> None:
         for key, (prob, bound, t) in _rows(got).items():
             if key in waiting:
                 state[key] = "deferred"
-            elif bound != U:  # not cleared by the screen: fully evaluated, the unbudgeted bits
+            elif not (prob == 0.0 and math.isinf(t) and 0.0 < bound <= THR / 2):
+                # not cleared by a screen: fully evaluated, the unbudgeted bits
                 assert (prob, bound, t) == want[key]
                 state[key] = "evaluated"
         assert sum(x == "evaluated" for x in state.values()) == min(m, len(state))
@@ -172,13 +171,13 @@ def test_a_body_removed_and_added_again_is_a_new_body_for_the_budget() -> None:
     v = np.zeros((3, 2))
     r = np.full(3, 0.5)
     cov = np.tile(np.diag([0.09, 0.09, 0.01, 0.01]), (3, 1, 1))
-    _, U = screen_sigmas(THR, 4)
 
     def kinds(u):
         waiting = _deferred(u)
         return {
-            k: "deferred" if k in waiting else ("screened" if e == U else "evaluated")
-            for k, (_, e, _) in _rows(u).items()
+            k: "deferred" if k in waiting else (
+                "screened" if q == 0.0 and math.isinf(t) and 0.0 < e <= THR / 2 else "evaluated")
+            for k, (q, e, t) in _rows(u).items()
         }
 
     runs = {}

@@ -1,10 +1,11 @@
 """The threshold screen of uncertain_pairs(screen=True) (docs/uncertainty.md, "Screening").
 
 Guarantees proved here:
-* a screened row reports (0.0, U, +inf) with U = P(chi^2_2D > k^2) < threshold / 2,
-  and U is a certified upper bound of P(contact within [0, H]): the full
-  evaluation's probability minus its own bound never exceeds U, and seeded
-  Monte Carlo on the exact solver agrees (MC <= U + 4 SE);
+* a screened row reports (0.0, U, +inf) with U <= threshold / 2: U = P(chi^2_2D > k^2) where
+  the k-sigma tube never reaches the ball, else the projection bound; U is a certified upper
+  bound of P(contact within [0, H]): the full evaluation's probability minus its own bound
+  never exceeds U, and seeded Monte Carlo on the exact solver agrees (MC <= U + 4 SE); both
+  kinds occur;
 * rows the screen does not clear are bit for bit the unscreened answer;
 * the screen is decided row by row, is invariant under swapping a and b, and
   is monotone in R (clear at R => clear at every smaller R);
@@ -20,6 +21,14 @@ import pytest
 from circle_collision_ros.core import time_to_collision
 from circle_collision_ros.core.uncertainty import uncertain_pairs
 from circle_collision_ros.core.uncertainty.tube import chi2_tail_even, screen_rows, screen_sigmas
+
+
+def screened(res, thr: float) -> np.ndarray:
+    """Rows a screen answered: (0.0, U <= threshold / 2, +inf) (a full evaluation gives 0.0
+    only where the tube never reaches the ball, which the screen clears first)."""
+    return ((res.collision_probability == 0.0) & np.isinf(res.plausible_time)
+            & (res.collision_probability_bound > 0.0)
+            & (res.collision_probability_bound <= thr / 2))
 
 
 def _near_pairs(rng, n, D, miss_sigmas):
@@ -60,8 +69,10 @@ def test_screened_rows_are_certified_below_the_threshold(D):
     scr = uncertain_pairs(*args, H, thr, screen=True)
     k, U = screen_sigmas(thr, 2 * D)
     assert U == chi2_tail_even(k * k, 2 * D) and U <= thr / 2
-    cleared = scr.collision_probability_bound == U
+    cleared = screened(scr, thr)
     assert cleared.any() and (~cleared).any(), "the mix must have screened and evaluated rows"
+    by_tube = scr.collision_probability_bound == U
+    assert by_tube.any() and (cleared & ~by_tube).any(), "both screens must clear rows"
     assert np.all(scr.collision_probability[cleared] == 0.0)
     assert np.all(np.isinf(scr.plausible_time[cleared]))
     # certified: the full answer (within its own bound) never exceeds U
@@ -73,7 +84,8 @@ def test_screened_rows_are_certified_below_the_threshold(D):
     for f, g in zip(full, scr):
         assert f[~cleared].tobytes() == g[~cleared].tobytes()
     # Monte Carlo on the exact solver (seeded) on the screened rows
-    for i in np.flatnonzero(cleared)[:6]:
+    rows = np.flatnonzero(cleared)
+    for i in np.concatenate((rows[by_tube[rows]][:3], rows[~by_tube[rows]][:4])):
         pa, va, aa, ra, ca, pb, vb, ab, rb, cb = (x[i] for x in args)
         m = 100_000
         g = np.random.default_rng(1000 + i)
@@ -84,7 +96,8 @@ def test_screened_rows_are_certified_below_the_threshold(D):
                               np.broadcast_to(aa - ab, (m, D)), np.full(m, ra + rb), z, z, z,
                               np.zeros(m), H)
         p = np.count_nonzero(t <= H) / m
-        assert p <= U + 4 * math.sqrt(max(p * (1 - p), 1 / m) / m)
+        u = scr.collision_probability_bound[i]
+        assert p <= u + 4 * math.sqrt(max(p * (1 - p), 1 / m) / m)
 
 
 def test_screen_is_swap_invariant_and_monotone_in_radius():
@@ -97,11 +110,14 @@ def test_screen_is_swap_invariant_and_monotone_in_radius():
     b = uncertain_pairs(pb, vb, ab, rb, cb, pa, va, aa, ra, ca, H, thr, screen=True)
     for x, y in zip(a, b):
         assert x.tobytes() == y.tobytes()
-    cleared = a.collision_probability_bound == U
+    cleared = screened(a, thr)
     smaller = uncertain_pairs(pa, va, aa, ra * 0.5, ca, pb, vb, ab, rb, cb, H, thr, screen=True)
-    assert np.all(smaller.collision_probability_bound[cleared] == U)
+    assert np.all(screened(smaller, thr)[cleared])
+    assert np.all(smaller.collision_probability_bound[cleared]
+                  <= a.collision_probability_bound[cleared])
     larger = uncertain_pairs(pa, va, aa, ra + 1.0, ca, pb, vb, ab, rb, cb, H, thr, screen=True)
-    assert np.count_nonzero(larger.collision_probability_bound == U) < np.count_nonzero(cleared)
+    assert np.count_nonzero(screened(larger, thr)) < np.count_nonzero(cleared)
+    assert np.count_nonzero(a.collision_probability_bound == U) < np.count_nonzero(cleared)
 
 
 def test_screen_leaves_exact_rows_alone():
@@ -128,7 +144,7 @@ def test_budget_defers_the_latest_pairs_honestly():
     H, thr = 3.0, 0.01
     full = uncertain_pairs(*args, H, thr, screen=True)
     _, U = screen_sigmas(thr, 4)
-    open_rows = np.flatnonzero(full.collision_probability_bound != U)
+    open_rows = np.flatnonzero(~screened(full, thr))
     assert open_rows.size > 5
     m = 3
     part = uncertain_pairs(*args, H, thr, screen=True, max_evaluated=m)
@@ -149,7 +165,8 @@ def test_budget_defers_the_latest_pairs_honestly():
     screen_rows(
         pa - pb, va - vb, aa - ab, ra + rb, np.ascontiguousarray(ca + cb), H, k, clear, t_first
     )
-    evaluated = kept & ~clear
+    evaluated = kept & ~screened(part, thr)
+    assert np.all(screened(part, thr)[clear])
     assert np.count_nonzero(evaluated) == m
     assert t_first[evaluated].max() <= t_first[deferred].min()
     assert np.array_equal(part.plausible_time[deferred], t_first[deferred])
