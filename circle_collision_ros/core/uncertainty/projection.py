@@ -41,7 +41,7 @@ import math
 import numpy as np
 from numba import njit
 
-from circle_collision_ros.core.uncertainty.tube import TUBE_DEPTH, chi2_tail_even, tube_intervals
+from circle_collision_ros.core.uncertainty.tube import chi2_tail_even, tube_window
 
 __all__ = ["projection_bound", "projection_rows", "projection_rows_at", "PROJECTION_BINS"]
 
@@ -53,6 +53,11 @@ _GRID = 33  # t samples for the mean path's nearest point (any u is valid)
 # 2-D, 4.0e-5 in 3-D, against the threshold / 2 (5e-3 by default) the screen compares with
 _TUBE_SIGMAS = 5.5
 _TUBE_TAILS = np.array([chi2_tail_even(_TUBE_SIGMAS**2, 2 * D) for D in (2, 3)])
+# Its walk stops at leaves of H / 32 (the window is then a little wider, never narrower)
+_WINDOW_DEPTH = 5
+# Phi(-8.5) < 1e-17: a bin whose h stays below -8.5 adds its mass times 1e-17, no erfc
+_PHI_FLOOR_AT = -8.5
+_PHI_FLOOR = 1e-17
 # P(|z| > _Z) plus the rounding of the 65 erfc values and the bin sums (each ~1e-16)
 _SLACK = math.erfc(_Z / math.sqrt(2.0)) + 1e-12
 
@@ -86,8 +91,8 @@ def projection_bound(dp, dv, da, R, Sigma, H):
     bound then).  Exactly symmetric
     under X -> -X (u turns with X), monotone in R.  The module doc gives the argument."""
     D = dp.shape[0]
-    leaves = np.empty((1 << TUBE_DEPTH, 2))
-    cnt, t_inside = tube_intervals(dp, dv, da, R, Sigma, H, leaves, _TUBE_SIGMAS)
+    leaves = np.empty((1 << _WINDOW_DEPTH, 2))
+    cnt, t_inside = tube_window(dp, dv, da, R, Sigma, H, leaves, _TUBE_SIGMAS, _WINDOW_DEPTH)
     tail = _TUBE_TAILS[D - 2]
     if t_inside <= H:
         return 1.0
@@ -149,7 +154,9 @@ def projection_bound(dp, dv, da, R, Sigma, H):
         beta = mb + sb * z
         h = (reach - _min_path(beta, c, t0, t1) - (ma + rho * sb * z)) / s
         if i > 0:
-            total += _MASS[i - 1] * 0.5 * math.erfc(-max(h, h_prev) / math.sqrt(2.0))
+            hm = max(h, h_prev)
+            phi = _PHI_FLOOR if hm < _PHI_FLOOR_AT else 0.5 * math.erfc(-hm / math.sqrt(2.0))
+            total += _MASS[i - 1] * phi
         h_prev = h
     return min(1.0, total + tail + _SLACK)
 

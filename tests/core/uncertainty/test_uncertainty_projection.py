@@ -8,6 +8,8 @@ Guarantees proved here:
   2-D and 3-D) it is never below the full evaluation's probability minus its stated bound,
   nor below seeded Monte Carlo on the exact solver minus 4 standard errors;
 * it is exactly symmetric under swapping the bodies (X -> -X) and monotone in the radius;
+* its window, the tube walk stopped at a smaller depth (``tube_window``), covers every
+  ambiguous interval of the full walk and finds the tube wholly inside no earlier;
 * it clears what the tube cannot: tracker-like near misses, passing 4 to 6 relative sigmas
   apart, whose 3.85-sigma screening tube reaches the ball, are bounded below threshold / 2
   (such pairs were deferred, and listed with wide intervals, before the projection screen).
@@ -22,7 +24,8 @@ import pytest
 from circle_collision_ros.core import time_to_collision
 from circle_collision_ros.core.uncertainty import uncertain_pairs
 from circle_collision_ros.core.uncertainty.projection import projection_bound, projection_rows
-from circle_collision_ros.core.uncertainty.tube import screen_rows, screen_sigmas
+from circle_collision_ros.core.uncertainty.tube import (TUBE_DEPTH, screen_rows, screen_sigmas,
+                                                        tube_intervals, tube_window)
 from tests.stress import examples
 
 H, THR = 5.0, 0.01
@@ -115,6 +118,24 @@ def test_projection_bound_is_swap_symmetric_and_monotone_in_radius():
     sig = np.array([r[4] for r in rows])
     want = [projection_bound(dp[j], dv[j], da[j], rad[j], sig[j], H) for j in range(12)]
     assert projection_rows(dp, dv, da, rad, sig, H).tolist() == want
+
+
+def test_tube_window_covers_the_full_walk():
+    rng = np.random.default_rng(5)
+    full, coarse = np.empty((1 << TUBE_DEPTH, 2)), np.empty((1 << TUBE_DEPTH, 2))
+    seen = 0
+    for it in range(200):
+        D = 2 + it % 2
+        dp, dv, da, R, S = _pair(rng, D, it)
+        for k in (3.0, 5.5, 7.5):
+            n, inside = tube_intervals(dp, dv, da, R, S, H, full, k)
+            for depth in (3, 5):
+                m, inside_w = tube_window(dp, dv, da, R, S, H, coarse, k, depth)
+                assert inside_w >= inside
+                for a, b in full[:n]:
+                    assert any(c <= a and b <= d for c, d in coarse[:m]), (it, k, depth, a, b)
+                seen += n > 0
+    assert seen > 100
 
 
 def test_projection_screens_near_misses_the_tube_cannot():
