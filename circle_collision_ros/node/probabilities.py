@@ -8,13 +8,12 @@ stamped as the prediction it completes, on `collision_probabilities`: the messag
 scene publishes with ``uncertain_pair_budget`` 0, bit for bit.
 
 - The exact times never wait: the prediction path only hands over a reference.
-- The heavy kernels release the interpreter lock (numba ``nogil``): the rows go to
-  ``PARTS`` threads at a lower scheduling priority (``NICE``), in steps of a few rows, each
-  taken by the next free thread. While the prediction path is busy (node/activity.py), the
-  threads beyond the cores it leaves free wait before their next step (``STEP_ASIDE`` of
-  them: one on a 2-core machine, where the one that starts first goes on beside the
-  prediction path on the second core; a step holds the interpreter lock only between its
-  kernel calls).
+- The heavy kernels release the interpreter lock (numba ``nogil``): the rows go to ``PARTS``
+  threads at a lower scheduling priority (``NICE``), in steps of a few rows, each taken by
+  the next free thread; before each step a thread waits while the prediction path is busy
+  (node/activity.py): the exact path is not slowed by the cores or the lock they hold. (A
+  thread left to go on beside a busy prediction path sped completions up but slowed large
+  scenes' predictions, whose kernels use both cores.)
 - Latest wins: a prediction superseded before the thread takes it is never completed
   (counted in ``superseded``). A prediction with nothing deferred is republished as it is.
 - Recording: each message is recorded with the log time of the prediction it completes, so
@@ -62,10 +61,6 @@ class ProbabilityPublisher:
     PARTS = min(2, os.cpu_count() or 1)
     #: Niceness of those threads (the prediction path keeps the process's, 0 by default).
     NICE = 10
-    #: Of those threads, how many wait while the prediction path is busy: all but one per
-    #: core the prediction path leaves free (its own thread takes one core); the first to
-    #: start a step of a completion go on.
-    STEP_ASIDE = max(PARTS - max((os.cpu_count() or 1) - 1, 0), 0)
 
     def __init__(self, publish: Callable[[bytes], None],
                  record: Callable[[bytes, int], None] | None = None,
@@ -84,27 +79,11 @@ class ProbabilityPublisher:
         self.superseded = 0  # offered predictions replaced before the thread took them
         self.last_compute_s = 0.0  # the last completion's evaluation time
         self.last_delay_s = 0.0  # the last message's offer-to-publish time
-        self._job = 0  # the completion in progress (the pause's roles are per job)
-        self._free_slots = 0
-        self._slots_lock = threading.Lock()
-        self._local = threading.local()
         self._pool = ThreadPoolExecutor(self.PARTS, "collision_node_probabilities",
                                         initializer=_lower_priority)
         self._thread = threading.Thread(target=self._run, name="collision_node_probabilities",
                                         daemon=True)
         self._thread.start()
-
-    def _pause(self) -> None:
-        """Before each step of a completion: the first threads of the job to ask (as many as
-        the prediction path leaves cores free) go on; the others wait while the node is busy."""
-        local = self._local
-        if getattr(local, "job", None) != self._job:
-            local.job = self._job
-            with self._slots_lock:
-                local.free = self._free_slots > 0
-                self._free_slots -= local.free
-        if not local.free:
-            self.activity.pause()
 
     def offer(self, prediction: ScenePrediction, data: bytes, log_time_ns: int) -> None:
         """Hand over the newest prediction, its published bytes and its log time."""
@@ -141,11 +120,8 @@ class ProbabilityPublisher:
                 data = job.data
                 if job.prediction.deferred:
                     started = time.monotonic()
-                    with self._slots_lock:
-                        self._job += 1
-                        self._free_slots = self.PARTS - self.STEP_ASIDE
                     data = job.prediction.completed(self._pool, self.PARTS,
-                                                    self._pause).to_cdr()
+                                                    self.activity.pause).to_cdr()
                     self.last_compute_s = time.monotonic() - started
                     self.completed += 1
                 self._publish(data)
