@@ -41,7 +41,7 @@ import math
 import numpy as np
 from numba import njit
 
-from circle_collision_ros.core.uncertainty.tube import chi2_tail_even, tube_window
+from circle_collision_ros.core.uncertainty.tube import chi2_tail_even, row_state, tube_window
 
 __all__ = ["projection_bound", "projection_rows", "projection_rows_at", "PROJECTION_BINS"]
 
@@ -171,10 +171,7 @@ def projection_rows_at(pa, va, aa, ra, pb, vb, ab, rb, sigma, rows, H, out):
     da = np.empty(D)
     for j in range(rows.shape[0]):
         i = rows[j]
-        for c in range(D):
-            dp[c] = pa[i, c] - pb[i, c]
-            dv[c] = va[i, c] - vb[i, c]
-            da[c] = aa[i, c] - ab[i, c]
+        row_state(pa, va, aa, pb, vb, ab, i, dp, dv, da)
         out[j] = projection_bound(dp, dv, da, ra[i] + rb[i], sigma[i], H)
 
 

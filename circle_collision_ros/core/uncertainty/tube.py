@@ -23,7 +23,8 @@ from circle_collision_ros.core.uncertainty.quadrature import push_halves
 
 __all__ = ["BROAD_PHASE_SIGMAS", "TUBE_TAIL", "TUBE_DEPTH", "chi2_tail_even", "S_at",
            "lam_max_sym3", "max_sigma_over", "max_sigma_rows", "mean_range", "tube_intervals",
-           "tube_window", "screen_rows", "screen_rows_at", "row_classes", "screen_sigmas"]
+           "tube_window", "screen_rows", "screen_rows_at", "row_state", "row_classes",
+           "screen_sigmas"]
 
 
 def chi2_tail_even(x: float, dof: int) -> float:
@@ -289,6 +290,15 @@ def screen_rows(dp, dv, da, R, Sigma, H, k, clear, t_first):
         clear[i] = not (t_first[i] <= H)
 
 
+@njit(cache=True, error_model="numpy", inline="always")
+def row_state(pa, va, aa, pb, vb, ab, i, dp, dv, da):
+    """The relative state a - b of row i of per-body arrays into dp, dv, da."""
+    for c in range(pa.shape[1]):
+        dp[c] = pa[i, c] - pb[i, c]
+        dv[c] = va[i, c] - vb[i, c]
+        da[c] = aa[i, c] - ab[i, c]
+
+
 @njit(cache=True, error_model="numpy", nogil=True)
 def screen_rows_at(pa, va, aa, ra, pb, vb, ab, rb, sigma, rows, H, k, clear, t_first):
     """screen_rows on the rows ``rows`` of the per-body arrays (relative state formed
@@ -301,10 +311,7 @@ def screen_rows_at(pa, va, aa, ra, pb, vb, ab, rb, sigma, rows, H, k, clear, t_f
     unused = np.empty((0, 2))
     for j in range(rows.shape[0]):
         i = rows[j]
-        for c in range(D):
-            dp[c] = pa[i, c] - pb[i, c]
-            dv[c] = va[i, c] - vb[i, c]
-            da[c] = aa[i, c] - ab[i, c]
+        row_state(pa, va, aa, pb, vb, ab, i, dp, dv, da)
         _, t_first[j] = _tube_walk(dp, dv, da, ra[i] + rb[i], sigma[i], H, unused, k, True,
                                    TUBE_DEPTH)
         clear[j] = not (t_first[j] <= H)
