@@ -17,17 +17,17 @@ m(beta) = min over t in [t0, t1] of (beta t + c t^2),
 that drift sideways long after the bodies have passed each other.)  k = ``_TUBE_SIGMAS``.
 
 m is a minimum of functions linear in beta, so concave; E[alpha | beta] is linear in beta: h
-is convex in beta.  On each of ``_BINS`` equal bins of the standardised beta over [-8, 8] the
-largest h is therefore at one of the bin's ends, and
+is convex in beta.  On each of ``PROJECTION_BINS`` equal bins of the standardised beta, w, over
+[-8, 8] the largest h is therefore at one of the bin's ends, and
 
-    P(...) <= sum over bins of P(beta in bin) Phi(max(h(end), h(other end))) + P(|z| > 8)
+    P(...) <= sum over bins of P(w in bin) Phi(max(h(end), h(other end))) + P(|w| > 8)
 
 is an upper bound, not an estimate (an upper Riemann sum of a monotone function of a convex
 one; the bin probabilities are fixed constants).  u points from the origin to the mean path's
 nearest point in [0, H] (sampled on a grid of t: any unit u gives a valid bound, this one a
-tight one for pairs that pass each other): a near miss projects onto u as a miss distance, which the
-k-sigma tube (core.uncertainty.tube) bounds only through the chi-square tail of all 2D
-whitened coordinates.
+tight one for pairs that pass each other): a near miss projects onto u as a miss distance,
+which the k-sigma tube bounds only through the chi-square tail of all 2D whitened
+coordinates.
 
 References
 ----------
