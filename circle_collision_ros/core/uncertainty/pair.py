@@ -188,7 +188,7 @@ def pair_kernel(dp, dv, da, R, Sigma, H, thr, out):
             return
         # da != 0: a path enters at most twice, so upper = P0 + E[entries]
         # over-counts exactly the re-entries: P = upper - E[O] with the
-        # per-path over-count O (overcount_replicates), whose mean the RQMC
+        # per-path over-count O (overcount_answer), whose mean the RQMC
         # estimates with far less variance than that of the contact indicator
         # (O is 0 but for the few paths that exit and come back)
         # a tube path crosses the sphere only within the ambiguous intervals (sorted:

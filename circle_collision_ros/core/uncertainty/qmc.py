@@ -28,8 +28,7 @@ from circle_collision_ros.core.uncertainty.sobol import scrambled_directions, so
 __all__ = ["QMC_REPLICATES", "QMC_POINTS", "QMC_T", "QMC_CV_POINTS", "QMC_CV_TARGET",
            "QMC_LINE_POINTS", "QMC_LINE_TARGET", "QMC_T_CONTROLLED", "normal_table", "factor",
            "replicate_stats", "qmc_probability", "controlled_stats", "quartic_crossings",
-           "overcount_counts", "overcount_replicates", "line_sampled",
-           "line_sampled_probability"]
+           "overcount_counts", "line_sampled", "line_sampled_probability"]
 
 
 # Randomized QMC: QMC_REPLICATES independent scrambles of QMC_POINTS Sobol
@@ -342,16 +341,6 @@ def overcount_counts(dp, dv, da, R, H, L, Z, start, stop, t0, t1, k2, tot):
             if o > 0:
                 tot_r += o
         tot[r] += tot_r
-
-
-@njit(cache=True, error_model="numpy", nogil=True)
-def overcount_replicates(dp, dv, da, R, H, L, Z, m, est):
-    """est[r] = mean over the first m points of replicate r of Z of the over-count O of
-    the sampled path (overcount_counts over [0, H], no tube)."""
-    tot = np.zeros(Z.shape[0], dtype=np.int64)
-    overcount_counts(dp, dv, da, R, H, L, Z, 0, m, 0.0, H, 0.0, tot)
-    for r in range(Z.shape[0]):
-        est[r] = tot[r] / m
 
 
 @njit(cache=True, error_model="numpy")

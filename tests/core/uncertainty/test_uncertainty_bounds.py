@@ -19,7 +19,7 @@ Guarantees proved here:
   rank-deficient, near-isotropic and near-rank-1 matrices, scales 1e-12 to 1e6);
 * ``quartic_crossings`` counts the inside-at-0 and the entries of a path as
   the exact solver and a 200,001-point time grid do;
-* ``overcount_replicates``' convexity shortcut changes no count;
+* ``overcount_counts``' convexity shortcut (over [0, H]) changes no count;
 * ``overcount_counts`` in stages, with the shortcut on the tube's hull for tube paths,
   counts exactly what every path's crossings give, and ``overcount_answer`` gives the
   answer of the staged rule computed from those counts (every stage, with and without a
@@ -53,7 +53,7 @@ from circle_collision_ros.core.uncertainty.pair import (OUT_ERR, OUT_HI, OUT_LO,
 from circle_collision_ros.core.uncertainty.qmc import (QMC_CV_POINTS, QMC_CV_TARGET, QMC_POINTS,
                                                        QMC_REPLICATES, QMC_T, factor,
                                                        normal_table, overcount_counts,
-                                                       overcount_replicates, quartic_crossings)
+                                                       quartic_crossings)
 from circle_collision_ros.core.uncertainty.reentry import (BRACKET_HALF_WIDTH, REENTRY_SIGMAS,
                                                            no_reentry)
 from circle_collision_ros.core.uncertainty.tube import (BROAD_PHASE_SIGMAS, TUBE_DEPTH, TUBE_TAIL,
@@ -245,8 +245,9 @@ def test_overcount_shortcut_changes_no_count():
         Sigma = np.diag([0.3, 0.3, 0.2, 0.2]) * 10 ** rng.uniform(-1, 0.5)
         dp, dv, da = rng.normal(size=2) * 2, rng.normal(size=2), rng.normal(size=2) * 3
         L = factor(Sigma)
-        est = np.empty(Z.shape[0])
-        overcount_replicates(dp, dv, da, 1.0, 3.0, L, Z, 64, est)
+        tot = np.zeros(Z.shape[0], dtype=np.int64)
+        overcount_counts(dp, dv, da, 1.0, 3.0, L, Z, 0, 64, 0.0, 3.0, 0.0, tot)
+        est = tot / 64
         direct = 0
         for r in range(Z.shape[0]):
             for i in range(64):
@@ -338,8 +339,10 @@ def test_accelerating_pair_that_comes_back_is_within_its_bound():
     assert b < 0.01
     # the over-count is large here: P0 + E[entries] alone would be far off
     Z = normal_table(4)
-    est = np.empty(Z.shape[0])
-    overcount_replicates(pair[0], pair[1], pair[2], 0.5, 3.0, factor(cov * 2), Z, 512, est)
+    tot = np.zeros(Z.shape[0], dtype=np.int64)
+    overcount_counts(pair[0], pair[1], pair[2], 0.5, 3.0, factor(cov * 2), Z, 0, 512, 0.0, 3.0,
+                     0.0, tot)
+    est = tot / 512
     assert est.mean() > 0.05
     assert math.isfinite(float(res.plausible_time[0]))
 
