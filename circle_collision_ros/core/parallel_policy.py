@@ -34,13 +34,14 @@ from contextlib import contextmanager
 
 import numba
 
-__all__ = ["cores_free", "threads_pay", "threads_forced"]
+__all__ = ["cores_free", "threads_pay", "threads_forced", "threads_wanted"]
 
 #: s after a yes during which our own pool's (possibly spinning) workers are not
 #: counted as other work.
 _GRACE_S = 0.05
 _last_yes = -math.inf
 _forced: bool | None = None  # threads_forced's answer, None: decide
+_wanted = 0  # threads_pay calls with enough work for threads (threads_wanted)
 
 try:
     _CORES = len(os.sched_getaffinity(0))
@@ -69,17 +70,27 @@ def threads_pay(work: int, min_work: int) -> bool:
     """True if a kernel with `work` items should run threaded: at least `min_work`
     items (below it a parallel launch costs more than it saves even on idle
     cores) and a core free for the worker thread now."""
-    global _last_yes
+    global _last_yes, _wanted
     if _forced is not None:
+        _wanted += _forced
         return _forced
     if work < min_work or _CORES <= 1:
         return False
+    _wanted += 1
     now = time.monotonic()
     own = numba.get_num_threads() - 1 if now - _last_yes < _GRACE_S else 0
     if cores_free(own) >= 1:
         _last_yes = now
         return True
     return False
+
+
+def threads_wanted() -> int:
+    """How many threads_pay calls so far had the work for threads, whether or not a core was
+    free: a caller compares two readings to learn whether the work between them wants both
+    cores (node/activity.py), which the answers themselves cannot tell while another thread
+    holds a core."""
+    return _wanted
 
 
 @contextmanager

@@ -10,10 +10,12 @@ scene publishes with ``uncertain_pair_budget`` 0, bit for bit.
 - The exact times never wait: the prediction path only hands over a reference.
 - The heavy kernels release the interpreter lock (numba ``nogil``): the rows go to ``PARTS``
   threads at a lower scheduling priority (``NICE``), in steps of a few rows, each taken by
-  the next free thread; before each step a thread waits while the prediction path is busy
-  (node/activity.py): the exact path is not slowed by the cores or the lock they hold. (A
-  thread left to go on beside a busy prediction path sped completions up but slowed large
-  scenes' predictions, whose kernels use both cores.)
+  the next free thread. Before each step a thread waits while the prediction path is busy
+  (node/activity.py), so that the exact path is not slowed by the cores or the lock they
+  hold; but the first of them goes on while the busy period is narrow, one whose kernels run
+  on one core: the other core is free then, and the completion does not fall a frame behind
+  each time the next input arrives. Beside a wide period, whose kernels use numba's threads
+  on both cores (large scenes), it waits too: there it slowed the predictions.
 - Latest wins: a prediction superseded before the thread takes it is never completed
   (counted in ``superseded``). A prediction with nothing deferred is republished as it is.
 - Recording: each message is recorded with the log time of the prediction it completes, so
@@ -79,8 +81,10 @@ class ProbabilityPublisher:
         self.superseded = 0  # offered predictions replaced before the thread took them
         self.last_compute_s = 0.0  # the last completion's evaluation time
         self.last_delay_s = 0.0  # the last message's offer-to-publish time
+        self._local = threading.local()  # .beside: this pool thread goes on beside narrow work
+        self._started = 0
         self._pool = ThreadPoolExecutor(self.PARTS, "collision_node_probabilities",
-                                        initializer=_lower_priority)
+                                        initializer=self._start_part)
         self._thread = threading.Thread(target=self._run, name="collision_node_probabilities",
                                         daemon=True)
         self._thread.start()
@@ -106,6 +110,18 @@ class ProbabilityPublisher:
         with self._cond:
             return self._cond.wait_for(lambda: self._latest is None and not self._busy, timeout)
 
+    def _start_part(self) -> None:
+        """A pool thread's start: lower priority; the first one started goes on beside a
+        narrow prediction path."""
+        _lower_priority()
+        with self._cond:
+            self._local.beside = self._started == 0 and self.PARTS > 1
+            self._started += 1
+
+    def _step_aside(self) -> None:
+        """complete_uncertainty's pause, before each step of rows."""
+        self.activity.pause(beside=getattr(self._local, "beside", False))
+
     def _run(self) -> None:
         _lower_priority()
         while True:
@@ -121,7 +137,7 @@ class ProbabilityPublisher:
                 if job.prediction.deferred:
                     started = time.monotonic()
                     data = job.prediction.completed(self._pool, self.PARTS,
-                                                    self.activity.pause).to_cdr()
+                                                    self._step_aside).to_cdr()
                     self.last_compute_s = time.monotonic() - started
                     self.completed += 1
                 self._publish(data)

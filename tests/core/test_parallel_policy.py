@@ -3,6 +3,8 @@
 Guarantee proved here: while as many busy processes run as this process has
 cores, ``cores_free()`` is 0 and ``threads_pay`` says serial, whatever the
 work, also right after a threaded kernel; below the work threshold it says serial on any machine.
+``threads_wanted`` counts the calls with the work for threads, granted or not (node/activity.py
+reads it: a count of the granted ones would read "narrow" whenever a side thread held a core).
 (Every threaded
 kernel is compared bit for bit with its serial twin in the kernels' own tests,
 so the choice can only change timing.)
@@ -20,8 +22,10 @@ from circle_collision_ros.core import parallel_policy as pp
 
 
 def test_below_the_threshold_is_serial():
+    before = pp.threads_wanted()
     assert not pp.threads_pay(4095, 4096)
     assert not pp.threads_pay(0, 1)
+    assert pp.threads_wanted() == before  # not work for threads
 
 
 def test_cores_free_is_within_the_affinity_set():
@@ -44,7 +48,10 @@ def test_busy_cores_make_kernels_serial():
             assert p.stdout.read(1) == b"r"  # this spinner is running
         seen = [pp.cores_free() for _ in range(20)]
         assert max(seen) == 0, seen
+        before = pp.threads_wanted()
         assert not pp.threads_pay(10**9, 1)
+        # serial, but work for threads all the same (on one core nothing is)
+        assert pp.threads_wanted() == before + (n > 1)
         # right after a threaded kernel our pool's workers are not counted as others'
         # work, but the spinners still are: serial
         pp._last_yes = time.monotonic()
@@ -60,9 +67,11 @@ def test_threads_forced_overrides_and_restores() -> None:
     """Warm-ups force each choice so both twins get compiled; the policy decides again after."""
     from circle_collision_ros.core.parallel_policy import threads_forced, threads_pay
 
+    before = pp.threads_wanted()
     with threads_forced(True):
         assert threads_pay(1, 10**9)  # below any threshold: threaded all the same
         with threads_forced(False):
             assert not threads_pay(10**9, 1)
         assert threads_pay(1, 10**9)
+    assert pp.threads_wanted() == before + 2  # the forced threaded answers
     assert not threads_pay(1, 10**9)  # deciding again: too little work

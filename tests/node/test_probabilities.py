@@ -7,7 +7,9 @@ Guarantees proved here:
 - latest wins: a prediction replaced before the thread takes it is never published, and is
   counted; the exact path's offer never waits for a completion in progress;
 - close() publishes what was offered before it; a failing publish is reported and the next
-  prediction is still completed.
+  prediction is still completed;
+- while the node is busy the completion waits, but for one thread beside a narrow prediction
+  path (node/activity.py): a completion offered then is published before the path is idle.
 """
 from __future__ import annotations
 
@@ -111,3 +113,24 @@ def test_completion_steps_aside_while_the_node_is_busy() -> None:
     finally:
         worker.close()
     assert published == [_prediction(0).to_cdr()]
+
+
+def test_one_thread_goes_on_beside_a_narrow_prediction_path(monkeypatch) -> None:
+    from circle_collision_ros.node.activity import NodeActivity
+
+    if ProbabilityPublisher.PARTS < 2:
+        pytest.skip("one core: nothing goes on beside the prediction path")
+    monkeypatch.setattr(NodeActivity, "MAX_PAUSE_S", 60.0)  # beyond the wait below
+    activity = NodeActivity()
+    with activity.busy():
+        pass  # no kernel wanted threads: the next period is narrow
+    published = []
+    worker = ProbabilityPublisher(published.append, activity=activity)
+    try:
+        part = _prediction(2)
+        with activity.busy():
+            worker.offer(part, part.to_cdr(), 1)
+            assert worker.wait_idle(30.0)  # every step taken while the path is busy
+            assert published == [_prediction(0).to_cdr()]
+    finally:
+        worker.close()
