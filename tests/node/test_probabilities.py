@@ -97,40 +97,30 @@ def test_completion_is_the_unbudgeted_prediction(budget) -> None:
     assert _prediction(budget, seed=4).completed().to_cdr() == _prediction(0, seed=4).to_cdr()
 
 
-def test_completion_steps_aside_while_the_node_is_busy() -> None:
+@pytest.mark.parametrize("narrow", [False, True], ids=["wide", "narrow"])
+def test_completion_steps_aside_while_the_node_is_busy(narrow, monkeypatch) -> None:
+    """A wide busy period (the first: nothing known yet) holds every step; in a narrow one (the
+    previous period's kernels wanted no threads) one thread goes on, and the completion is
+    published while the path is still busy."""
     from circle_collision_ros.node.activity import NodeActivity
 
+    if narrow and ProbabilityPublisher.PARTS < 2:
+        pytest.skip("one core: nothing goes on beside the prediction path")
+    monkeypatch.setattr(NodeActivity, "MAX_PAUSE_S", 60.0)  # beyond the waits below
     activity = NodeActivity()
+    if narrow:
+        with activity.busy():
+            pass
     published = []
     worker = ProbabilityPublisher(published.append, activity=activity)
     try:
         part = _prediction(2)
+        full = _prediction(0).to_cdr()
         with activity.busy():
             worker.offer(part, part.to_cdr(), 1)
-            time.sleep(0.1)  # within MAX_PAUSE_S: the first step still waits
-            assert published == []
+            assert worker.wait_idle(30.0 if narrow else 0.3) == narrow
+            assert published == ([full] if narrow else [])
         assert worker.wait_idle(30.0)
     finally:
         worker.close()
-    assert published == [_prediction(0).to_cdr()]
-
-
-def test_one_thread_goes_on_beside_a_narrow_prediction_path(monkeypatch) -> None:
-    from circle_collision_ros.node.activity import NodeActivity
-
-    if ProbabilityPublisher.PARTS < 2:
-        pytest.skip("one core: nothing goes on beside the prediction path")
-    monkeypatch.setattr(NodeActivity, "MAX_PAUSE_S", 60.0)  # beyond the wait below
-    activity = NodeActivity()
-    with activity.busy():
-        pass  # no kernel wanted threads: the next period is narrow
-    published = []
-    worker = ProbabilityPublisher(published.append, activity=activity)
-    try:
-        part = _prediction(2)
-        with activity.busy():
-            worker.offer(part, part.to_cdr(), 1)
-            assert worker.wait_idle(30.0)  # every step taken while the path is busy
-            assert published == [_prediction(0).to_cdr()]
-    finally:
-        worker.close()
+    assert published == [full]
