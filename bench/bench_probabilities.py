@@ -16,7 +16,9 @@ receives both topics. Per topic it prints:
 - uncertain rows published, placeholders (probability 1.0 with bound 1.0), and the share with a
   stated bound <= 0.01;
 - frames answered (a topic may answer fewer frames than were sent: the node coalesces inputs,
-  and collision_probabilities completes the newest prediction only).
+  and collision_probabilities completes the newest prediction only);
+- per third of the run: rows per collision_predictions message (the scene's work) and
+  collision_probabilities latency (the scene brings more pairs within reach as it runs).
 
 Then --check rows sampled from the last collision_probabilities messages are checked against an
 independent --samples Monte Carlo on the same states (core.narrow.time_to_collision on sampled
@@ -194,6 +196,21 @@ def main() -> int:
         say(f"| {topic} | {len(msgs)} | {np.percentile(lat, 50):.1f} | "
               f"{np.percentile(lat, 99):.1f} | {lat.max():.1f} | {bound.size} | {holders} | "
               f"{tight:.2f} % |")
+    say("\nBy third of the run: the completion's work grows with the pairs the scene brings within "
+        "reach of each other (rows per collision_predictions message):")
+    say("| third | collision_predictions rows per message | collision_probabilities p50 ms | "
+        "p99 ms |")
+    say("|---|---:|---:|---:|")
+    order = sorted(sent)
+    cuts = [order[len(order) * i // 3] for i in range(3)] + [order[-1] + 1]
+    for i in range(3):
+        def within(m, i=i):
+            return cuts[i] <= m.header[0] * 10**9 + m.header[1] < cuts[i + 1]
+        rows = [len(m.predictions) for _, m in decoded["collision_predictions"] if within(m)]
+        lat = [(t - (m.header[0] * 10**9 + m.header[1])) * 1e-6
+               for t, m in decoded["collision_probabilities"] if within(m)] or [np.nan]
+        say(f"| {i + 1} | {np.mean(rows) if rows else np.nan:.0f} | "
+            f"{np.percentile(lat, 50):.1f} | {np.percentile(lat, 99):.1f} |")
     msgs = decoded["collision_probabilities"][-5:]
     if opts.check and msgs:
         rng = np.random.default_rng(7)
