@@ -14,8 +14,9 @@ scene publishes with ``uncertain_pair_budget`` 0, bit for bit.
   (node/activity.py), so that the exact path is not slowed by the cores or the lock they
   hold; but the first of them goes on while the busy period is narrow, one whose kernels run
   on one core: the other core is free then, and the completion does not fall a frame behind
-  each time the next input arrives. Beside a wide period, whose kernels use numba's threads
-  on both cores (large scenes), it waits too: there it slowed the predictions.
+  each time the next input arrives; it runs at ``BESIDE_NICE``. Beside a wide period, whose
+  kernels use numba's threads on both cores (large scenes), it waits too: there it slowed
+  the predictions.
 - Latest wins: a prediction superseded before the thread takes it is never completed
   (counted in ``superseded``). A prediction with nothing deferred is republished as it is.
 - Recording: each message is recorded with the log time of the prediction it completes, so
@@ -43,11 +44,11 @@ class _Job(NamedTuple):
     offered: float  # time.monotonic() at the offer
 
 
-def _lower_priority() -> None:
-    """This thread at niceness ProbabilityPublisher.NICE (Linux: per thread; elsewhere or if
-    refused, unchanged: only the scheduling order is at stake, never a result)."""
+def _lower_priority(nice: int) -> None:
+    """This thread at niceness `nice` (Linux: per thread; elsewhere or if refused, unchanged:
+    only the scheduling order is at stake, never a result)."""
     try:
-        os.setpriority(os.PRIO_PROCESS, threading.get_native_id(), ProbabilityPublisher.NICE)
+        os.setpriority(os.PRIO_PROCESS, threading.get_native_id(), nice)
     except (AttributeError, OSError):
         pass
 
@@ -63,6 +64,10 @@ class ProbabilityPublisher:
     PARTS = min(2, os.cpu_count() or 1)
     #: Niceness of those threads (the prediction path keeps the process's, 0 by default).
     NICE = 10
+    #: Niceness of the one that goes on beside a narrow prediction path: it is running when
+    #: the exact prediction is published and its subscribers wake, and at NICE it still
+    #: delayed them measurably (live exact latency, bench/bench_probabilities.py).
+    BESIDE_NICE = 19
 
     def __init__(self, publish: Callable[[bytes], None],
                  record: Callable[[bytes, int], None] | None = None,
@@ -111,19 +116,19 @@ class ProbabilityPublisher:
             return self._cond.wait_for(lambda: self._latest is None and not self._busy, timeout)
 
     def _start_part(self) -> None:
-        """A pool thread's start: lower priority; the first one started goes on beside a
-        narrow prediction path."""
-        _lower_priority()
+        """A pool thread's start: the first one started goes on beside a narrow prediction
+        path, at BESIDE_NICE; the others at NICE."""
         with self._cond:
             self._local.beside = self._started == 0 and self.PARTS > 1
             self._started += 1
+        _lower_priority(self.BESIDE_NICE if self._local.beside else self.NICE)
 
     def _step_aside(self) -> None:
         """complete_uncertainty's pause, before each step of rows."""
         self.activity.pause(beside=getattr(self._local, "beside", False))
 
     def _run(self) -> None:
-        _lower_priority()
+        _lower_priority(self.NICE)
         while True:
             with self._cond:
                 while not self._stopped and self._latest is None:

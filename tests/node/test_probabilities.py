@@ -9,10 +9,12 @@ Guarantees proved here:
 - close() publishes what was offered before it; a failing publish is reported and the next
   prediction is still completed;
 - while the node is busy the completion waits, but for one thread beside a narrow prediction
-  path (node/activity.py): a completion offered then is published before the path is idle.
+  path (node/activity.py): a completion offered then is published before the path is idle;
+  that thread runs at BESIDE_NICE, the others at NICE (Linux).
 """
 from __future__ import annotations
 
+import os
 import threading
 import time
 
@@ -124,3 +126,31 @@ def test_completion_steps_aside_while_the_node_is_busy(narrow, monkeypatch) -> N
     finally:
         worker.close()
     assert published == [full]
+
+
+@pytest.mark.skipif(not hasattr(os, "getpriority"), reason="per-thread niceness: Linux")
+def test_the_thread_beside_runs_at_the_lowest_priority() -> None:
+    from circle_collision_ros.core.scene.uncertain import COMPLETION_STEP
+    from circle_collision_ros.node.activity import NodeActivity
+
+    if ProbabilityPublisher.PARTS < 2:
+        pytest.skip("one core: nothing goes on beside the prediction path")
+    seen = set()
+
+    class Recording(NodeActivity):
+        def pause(self, beside: bool = False) -> None:
+            seen.add((beside, os.getpriority(os.PRIO_PROCESS, threading.get_native_id())))
+            super().pause(beside)
+
+    predictor = CollisionPredictor(PredictorConfig(stale_timeout=3600.0, uncertain_pair_budget=1))
+    predictor.receive_batch(_batch(40, seed=13, sigma=0.5, spread=6.0), BASE)
+    part = predictor.predict()
+    # steps enough that the second thread starts before the first has taken them all
+    assert part.uncertainty.pending.rows.size > 4 * COMPLETION_STEP
+    worker = ProbabilityPublisher(lambda data: None, activity=Recording())
+    try:
+        worker.offer(part, part.to_cdr(), 1)
+        assert worker.wait_idle(60.0)
+    finally:
+        worker.close()
+    assert seen == {(True, ProbabilityPublisher.BESIDE_NICE), (False, ProbabilityPublisher.NICE)}
