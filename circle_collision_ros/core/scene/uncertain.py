@@ -526,7 +526,8 @@ def complete_uncertainty(uncertainty: SceneUncertainty, executor: Executor | Non
     executor, parts: the rows evaluated on `parts` of the executor's threads (the kernels
     release the interpreter lock), each taking the next block of rows when it is free;
     pause: called by a thread before it takes each step of COMPLETION_STEP rows (a caller's
-    way to step aside).  The same bits either way: rows are independent.
+    way to step aside; it may let some threads go on and hold others, as the node does).  The
+    same bits either way: rows are independent.
     """
     pending = uncertainty.pending
     if pending is None:
