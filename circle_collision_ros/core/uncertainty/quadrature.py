@@ -282,15 +282,20 @@ def make_adaptive_angle(fn):
 def make_adaptive_nested(fn, last_inner):
     """``adaptive(prm, a, b, tol) -> (integral, error estimate, weighted inner
     error)`` of ``fn(x, prm)``, an integrand whose own error estimate
-    ``last_inner(prm)`` reads after each evaluation (module doc)."""
+    ``last_inner(prm)`` reads after each evaluation (module doc).  A K15 panel
+    is judged by QUADPACK's estimate (``k15_error``), not |K15 - G7| alone: the
+    entry rate over a panel of a tube interval is a bump that K15 and G7 can
+    both miss alike when it falls between their nodes."""
 
     @njit(cache=True, error_model="numpy")
     def gk15(prm, a, b, share):
-        """(K15, |K15 - G7|, K15 of the inner errors) of fn over [a, b]; when
-        |K15 - G7| > share, (P31, |P31 - K15|, P31 of the inner errors)."""
+        """(K15, k15_error, K15 of the inner errors) of fn over [a, b]; when
+        that estimate > share, (P31, |P31 - K15|, P31 of the inner errors)."""
         c = 0.5 * (a + b)
         h = 0.5 * (b - a)
+        f15 = np.empty(15)  # the values at K15_NODES (ascending), for k15_error
         fc = fn(c, prm)
+        f15[7] = fc
         ec = last_inner(prm)
         ie = ec * _WGK[7]
         iep = ec * _WP_K[7]
@@ -303,6 +308,8 @@ def make_adaptive_nested(fn, last_inner):
             e1 = last_inner(prm)
             f2 = fn(c + dx, prm)
             e2 = last_inner(prm)
+            f15[j] = f1
+            f15[14 - j] = f2
             s = f1 + f2
             k += _WGK[j] * s
             p += _WP_K[j] * s
@@ -310,8 +317,9 @@ def make_adaptive_nested(fn, last_inner):
             iep += _WP_K[j] * (e1 + e2)
             if j % 2 == 1:
                 g += _WG[j // 2] * s
-        if not (abs((k - g) * h) > share):
-            return k * h, abs((k - g) * h), ie * h
+        est = k15_error(f15, h, k * h, abs((k - g) * h))
+        if not (est > share):
+            return k * h, est, ie * h
         for j in range(8):
             dx = h * _XP[j]
             f1 = fn(c - dx, prm)

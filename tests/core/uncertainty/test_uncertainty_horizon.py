@@ -22,7 +22,8 @@ from hypothesis import strategies as st
 from circle_collision_ros.core import time_to_collision
 from circle_collision_ros.core.uncertainty.overlap import overlap_probability
 from circle_collision_ros.core.uncertainty import uncertain_pairs
-from circle_collision_ros.core.uncertainty.tube import S_at
+from circle_collision_ros.core.uncertainty.entry_rate import entry_rate_integral, nu_plus_2d
+from circle_collision_ros.core.uncertainty.tube import BROAD_PHASE_SIGMAS, S_at, tube_intervals
 from circle_collision_ros.core.uncertainty.walk import PLAUSIBLE_RTOL
 
 
@@ -205,3 +206,24 @@ def test_peak_between_k15_nodes_pair_within_the_stated_bound():
     p, b = r.collision_probability[0], r.collision_probability_bound[0]
     ref, se = mc_probability(*pair, 5.0, 1_000_000, seed=600)
     assert abs(p - ref) <= b + 4 * se, (p, b, ref, se)
+
+
+def test_adaptive_entry_rate_rule_does_not_miss_a_peak_between_nodes():
+    """entry_rate_integral's adaptive t-rule judges its K15 panels by QUADPACK's estimate too.
+    Over the whole tube interval of the pair above (the rate's bump fills a fifth of it), K15 and
+    P31 fail and the rule splits; with |K15 - G7| alone it accepted the half holding the bump
+    9.7e-4 off with an estimate of 5.7e-4. A dense trapezoid of nu+ (4,001 points; nu+ is smooth
+    and its ends negligible) is the reference."""
+    c = PEAK_BETWEEN_NODES_PAIR
+    dp, dv, da = (np.array(c[k]) for k in ("dp", "dv", "da"))
+    R, Sigma = c["R"], c["Sigma"]
+    leaves = np.empty((64, 2))
+    cnt, t_inside = tube_intervals(dp, dv, da, R, Sigma, 5.0, leaves, BROAD_PHASE_SIGMAS)
+    assert cnt == 1 and t_inside == math.inf
+    a, b = leaves[0, 0], min(leaves[0, 1], 5.0)
+    acc = np.zeros(3)
+    value, err = entry_rate_integral(dp, dv, da, R, Sigma, a, b, 1e-3, acc)
+    ts = np.linspace(a, b, 4001)
+    nu = [nu_plus_2d(dp, dv, da, R, Sigma, t, 1e-9, acc) for t in ts]
+    ref = float(np.trapezoid(nu, ts))
+    assert abs(value - ref) <= err, (value, err, ref)
