@@ -16,6 +16,7 @@ import math
 import numpy as np
 from numba import njit
 
+from circle_collision_ros.core.uncertainty.interval import lower_bounds
 from circle_collision_ros.core.uncertainty.overlap import BALL_ERR_PER_TOL, DISC_ERR_PER_TOL
 from circle_collision_ros.core.uncertainty.qmc import (QMC_CV_POINTS, QMC_CV_TARGET, QMC_POINTS,
                                                        QMC_REPLICATES, QMC_T, factor, line_sampled,
@@ -181,6 +182,12 @@ def pair_kernel(dp, dv, da, R, Sigma, H, thr, out):
     for k in range(da.shape[0]):
         if da[k] != 0.0:
             straight = False
+    if not degenerate and _below_a_lower_bound(dp, dv, da, R, Sigma, H, st[ST_PMAX] - pmax_err,
+                                               upper + err + P0_ERR + 2 * TUBE_TAIL):
+        # the quadrature missed part of nu+ (its estimates did not show it): P is at least
+        # any instantaneous probability, so an upper bound below one is wrong; the contact
+        # indicator's RQMC answers instead, clipped below by that bound
+        degenerate = True
     if not degenerate:
         if straight:
             out[OUT_P] = min(1.0, max(0.0, upper))
@@ -229,6 +236,22 @@ def pair_kernel(dp, dv, da, R, Sigma, H, thr, out):
 
 
 OUT_SIZE = 9
+
+
+@njit(cache=True, error_model="numpy")
+def _below_a_lower_bound(dp, dv, da, R, Sigma, H, pmax, upper):
+    """Whether the computed upper bound of P(contact) lies below a certified lower one: the
+    largest instantaneous probability the walk computed (less its error), or the one at the
+    mean path's closest approach (``interval.lower_bounds``)."""
+    if pmax > upper:
+        return True
+    D = dp.shape[0]
+    lo = np.empty(1)
+    lower_bounds(np.ascontiguousarray(dp).reshape((1, D)),
+                 np.ascontiguousarray(dv).reshape((1, D)),
+                 np.ascontiguousarray(da).reshape((1, D)), np.full(1, R),
+                 np.ascontiguousarray(Sigma).reshape((1, 2 * D, 2 * D)), H, lo)
+    return lo[0] > upper
 
 
 @njit(cache=True, error_model="numpy", nogil=True)
