@@ -196,17 +196,21 @@ PEAK_BETWEEN_NODES_PAIR = {
 }
 
 
-def test_peak_between_k15_nodes_pair_within_the_stated_bound():
-    """rice_panel's one-K15 panel takes QUADPACK's error estimate (quadrature.k15_error)."""
-    c = PEAK_BETWEEN_NODES_PAIR
+def _within_monte_carlo(c: dict, seed: int) -> None:
+    """The relative pair c (H = 5 s, threshold 0.01) within its stated bound + 4 standard
+    errors of a 10^6-sample Monte Carlo."""
     z = np.zeros(2)
     pair = tuple(np.asarray(x, dtype=np.float64) for x in (
         c["dp"], c["dv"], c["da"], c["R"] / 2, c["Sigma"], z, z, z, c["R"] / 2, np.zeros((4, 4))))
     r = uncertain_pairs(*(x[None] for x in pair), 5.0, 0.01)
     p, b = r.collision_probability[0], r.collision_probability_bound[0]
-    ref, se = mc_probability(*pair, 5.0, 1_000_000, seed=600)
+    ref, se = mc_probability(*pair, 5.0, 1_000_000, seed=seed)
     assert abs(p - ref) <= b + 4 * se, (p, b, ref, se)
 
+
+def test_peak_between_k15_nodes_pair_within_the_stated_bound():
+    """rice_panel's one-K15 panel takes QUADPACK's error estimate (quadrature.k15_error)."""
+    _within_monte_carlo(PEAK_BETWEEN_NODES_PAIR, 600)
 
 
 # A 2-D accelerating pair of a 1,000-body tracker frame (test_uncertainty_node's) with its
@@ -230,21 +234,15 @@ def test_upper_bound_below_a_lower_bound_falls_back_to_sampling():
     walk's instantaneous probabilities, and the one at the mean path's closest approach):
     below one, the quadrature missed part of nu+, and the contact indicator's RQMC answers.
     Within the stated bound of a 10^6-sample Monte Carlo (not so before the check)."""
-    c = BUMP_AT_START_PAIR
-    z = np.zeros(2)
-    pair = tuple(np.asarray(x, dtype=np.float64) for x in (
-        c["dp"], c["dv"], c["da"], c["R"] / 2, c["Sigma"], z, z, z, c["R"] / 2, np.zeros((4, 4))))
-    r = uncertain_pairs(*(x[None] for x in pair), 5.0, 0.01)
-    p, b = r.collision_probability[0], r.collision_probability_bound[0]
-    ref, se = mc_probability(*pair, 5.0, 1_000_000, seed=601)
-    assert abs(p - ref) <= b + 4 * se, (p, b, ref, se)
+    _within_monte_carlo(BUMP_AT_START_PAIR, 601)
+
 
 def test_adaptive_entry_rate_rule_does_not_miss_a_peak_between_nodes():
     """entry_rate_integral's adaptive t-rule judges its K15 panels by QUADPACK's estimate too.
-    Over the whole tube interval of the pair above (the rate's bump fills a fifth of it), K15 and
-    P31 fail and the rule splits; with |K15 - G7| alone it accepted the half holding the bump
-    9.7e-4 off with an estimate of 5.7e-4. A dense trapezoid of nu+ (4,001 points; nu+ is smooth
-    and its ends negligible) is the reference."""
+    Over the whole tube interval of PEAK_BETWEEN_NODES_PAIR (the rate's bump fills a fifth of
+    it), K15 and P31 fail and the rule splits; with |K15 - G7| alone it accepted the half
+    holding the bump 9.7e-4 off with an estimate of 5.7e-4. A dense trapezoid of nu+ (4,001
+    points; nu+ is smooth and its ends negligible) is the reference."""
     c = PEAK_BETWEEN_NODES_PAIR
     dp, dv, da = (np.array(c[k]) for k in ("dp", "dv", "da"))
     R, Sigma = c["R"], c["Sigma"]
