@@ -237,6 +237,19 @@ def test_upper_bound_below_a_lower_bound_falls_back_to_sampling():
     _within_monte_carlo(BUMP_AT_START_PAIR, 601)
 
 
+
+def test_bump_on_few_k15_nodes_is_not_accepted():
+    """The same pair at twice its speed (velocities x 2, accelerations x 4, the velocity
+    covariance x 4: all exact in binary): the bump lies on few nodes of its K15 panel and the
+    estimates stay small. The consistency check does not catch it: it read 0.9850 +- 0.0044
+    against 0.9987, with no certified lower bound above that. k15_error's resolution rule
+    sends the panel on to P31 and halves."""
+    c = BUMP_AT_START_PAIR
+    T = np.diag([1.0, 1.0, 2.0, 2.0])
+    _within_monte_carlo({"dp": c["dp"], "dv": [2 * x for x in c["dv"]],
+                         "da": [4 * x for x in c["da"]], "R": c["R"],
+                         "Sigma": T @ c["Sigma"] @ T}, 602)
+
 def test_adaptive_entry_rate_rule_does_not_miss_a_peak_between_nodes():
     """entry_rate_integral's adaptive t-rule judges its K15 panels by QUADPACK's estimate too.
     Over the whole tube interval of PEAK_BETWEEN_NODES_PAIR (the rate's bump fills a fifth of

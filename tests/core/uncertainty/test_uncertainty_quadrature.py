@@ -253,6 +253,30 @@ def test_k15_error_is_quadpacks_and_never_below_the_difference(seed: int) -> Non
     diff = abs(value - h * float(G7_WEIGHTS @ f))
     resasc = h * float(q.K15_WEIGHTS @ np.abs(f - value / (2 * h)))
     expected = max(diff, resasc * min(1.0, (200 * diff / resasc) ** 1.5))
+    if np.sum(f >= 1e-3 * f.max()) < q.K15_MIN_NODES:  # not resolved: the whole value
+        expected = max(diff, value)
     assert k15_error(f, h, value, diff) == pytest.approx(expected, rel=1e-12)
     assert k15_error(f, h, value, diff) >= diff
     assert k15_error(np.full(15, 2.0), h, 4.0 * h, 0.0) == 0.0  # a constant: exact
+
+
+@pytest.mark.parametrize("centre", [-0.93, -0.6, 0.0, 0.45])
+def test_k15_error_rejects_a_bump_on_few_nodes(centre: float) -> None:
+    """A Gaussian bump too narrow for K15's node spacing where it sits (above 1e-3 of its
+    peak on fewer than K15_MIN_NODES nodes): K15's error can exceed QUADPACK's estimate, so
+    the estimate is the whole value; twice as wide, the same bump is resolved and the
+    QUADPACK estimate stands, above the error."""
+    from circle_collision_ros.core.uncertainty.quadrature import G7_WEIGHTS, k15_error
+
+    for width, resolved in ((0.04, False), (0.5, True)):
+        f = np.exp(-0.5 * ((q.K15_NODES - centre) / width) ** 2)
+        value = float(q.K15_WEIGHTS @ f)
+        diff = abs(value - float(G7_WEIGHTS @ f))
+        est = k15_error(f, 1.0, value, diff)
+        exact = float(mpmath.quad(lambda x: mpmath.exp(-((x - centre) / width) ** 2 / 2),
+                                  [-1, centre, 1]))
+        if resolved:
+            assert np.sum(f >= 1e-3 * f.max()) >= q.K15_MIN_NODES
+            assert abs(value - exact) <= est < value
+        else:
+            assert est >= value
