@@ -25,6 +25,7 @@ from circle_collision_ros.core.uncertainty import uncertain_pairs
 from circle_collision_ros.core.uncertainty.entry_rate import entry_rate_integral, nu_plus_2d
 from circle_collision_ros.core.uncertainty.tube import BROAD_PHASE_SIGMAS, S_at, tube_intervals
 from circle_collision_ros.core.uncertainty.walk import PLAUSIBLE_RTOL
+from tests.stress import examples
 
 
 def mc_probability(pa, va, aa, ra, ca, pb, vb, ab, rb, cb, H, n, seed):
@@ -196,15 +197,15 @@ PEAK_BETWEEN_NODES_PAIR = {
 }
 
 
-def _within_monte_carlo(c: dict, seed: int) -> None:
+def _within_monte_carlo(c: dict, seed: int, samples: int = 1_000_000) -> None:
     """The relative pair c (H = 5 s, threshold 0.01) within its stated bound + 4 standard
-    errors of a 10^6-sample Monte Carlo."""
+    errors of a Monte Carlo of `samples` paths."""
     z = np.zeros(2)
     pair = tuple(np.asarray(x, dtype=np.float64) for x in (
         c["dp"], c["dv"], c["da"], c["R"] / 2, c["Sigma"], z, z, z, c["R"] / 2, np.zeros((4, 4))))
     r = uncertain_pairs(*(x[None] for x in pair), 5.0, 0.01)
     p, b = r.collision_probability[0], r.collision_probability_bound[0]
-    ref, se = mc_probability(*pair, 5.0, 1_000_000, seed=seed)
+    ref, se = mc_probability(*pair, 5.0, samples, seed=seed)
     assert abs(p - ref) <= b + 4 * se, (p, b, ref, se)
 
 
@@ -249,6 +250,19 @@ def test_bump_on_few_k15_nodes_is_not_accepted():
     _within_monte_carlo({"dp": c["dp"], "dv": [2 * x for x in c["dv"]],
                          "da": [4 * x for x in c["da"]], "R": c["R"],
                          "Sigma": T @ c["Sigma"] @ T}, 602)
+
+
+@pytest.mark.parametrize("speed", np.linspace(0.5, 3.0, examples(6, 21)))
+def test_bump_pair_at_every_speed_within_monte_carlo(speed: float) -> None:
+    """The pair above at speeds from half to three times its own (times in [0, 5] s scale by
+    1 / speed, so nu+'s bump narrows and moves across the K15 nodes of its panel): within the
+    stated bound of a 2e5-sample Monte Carlo at each. Before k15_error's resolution rule, two
+    of these speeds (1 and 2) were outside."""
+    c = BUMP_AT_START_PAIR
+    T = np.diag([1.0, 1.0, speed, speed])
+    _within_monte_carlo({"dp": c["dp"], "dv": [speed * x for x in c["dv"]],
+                         "da": [speed * speed * x for x in c["da"]], "R": c["R"],
+                         "Sigma": T @ c["Sigma"] @ T}, 603, 200_000)
 
 def test_adaptive_entry_rate_rule_does_not_miss_a_peak_between_nodes():
     """entry_rate_integral's adaptive t-rule judges its K15 panels by QUADPACK's estimate too.
