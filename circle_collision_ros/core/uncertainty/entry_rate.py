@@ -284,21 +284,20 @@ def _window_steps(ia, ib, npieces):
 
 
 @njit(cache=True, error_model="numpy")
-def _window_bound(qmin, c, length, norm, gd_norm, k_norm, d_max, vc_trace):
+def _window_bound(qmin, c, length, norm, gd_norm, k_norm, d_max, vc_bound):
     """An upper bound of the arc integral over a window of arc length `length`,
     with no integrand value: qmin the smallest q of the arc's scan, c its step's
     Lipschitz constant of sqrt(q) (R step / sigma_min), norm the density factor,
-    gd_norm = |gd|, k_norm = |K|_F, d_max >= |x - g| on the arc (R + |g|), vc_trace
-    = tr Vc.
+    gd_norm = |gd|, k_norm = |K|_F, d_max >= |x - g| on the arc (R + |g|),
+    vc_bound >= n^T Vc n for every unit n.
 
-    Every arc point lies within half a step of a scan point, so sqrt(q) >=
-    sqrt(qmin) - c / 2 there (nu_plus_2d's scan) and the density is at most
-    norm exp(-q_lo / 2).  E[(-Y)^+] <= max(-m, 0) + s / sqrt(2 pi) (the
+    Every arc point lies within half a step of a scan point, so sqrt(q) >= r =
+    max(sqrt(qmin) - c / 2, 0) there (nu_plus_2d's scan) and the density is at
+    most norm exp(-r^2 / 2).  E[(-Y)^+] <= max(-m, 0) + s / sqrt(2 pi) (the
     positive part is subadditive), with |m| = |n.(gd + K (x - g))| <= |gd| +
-    |K|_F |x - g| and s^2 = n^T Vc n <= tr Vc (Vc is a conditional covariance,
-    positive semi-definite)."""
+    |K|_F |x - g| and s^2 = n^T Vc n <= vc_bound."""
     r = max(math.sqrt(qmin) - 0.5 * c, 0.0)
-    rate = gd_norm + k_norm * d_max + math.sqrt(max(vc_trace, 0.0)) * _RS2PI
+    rate = gd_norm + k_norm * d_max + math.sqrt(max(vc_bound, 0.0)) * _RS2PI
     return length * norm * math.exp(-0.5 * r * r) * rate
 
 
@@ -402,11 +401,13 @@ def nu_plus_2d(dp, dv, da, R, Sigma, t, tol, acc):
     npieces = _scan_pieces(qs, nscan, reach * reach, jmin, ia, ib)
     # Many of a Rice panel's nodes sit where nu+ is a tiny fraction of the
     # tolerance (the tube's interval is far wider than nu+'s bump): a bound of the
-    # window's integral that needs no integrand value settles them
+    # window's integral that needs no integrand value settles them.  Its velocity
+    # term |v00| + |v11| + |v01 + v10| / 2 >= |n^T Vc n| holds even where rounding
+    # leaves Vc slightly indefinite
     bound = _window_bound(qs[jmin], R * step / sig_min, step * R * _window_steps(ia, ib, npieces),
                           norm, math.sqrt(gd0 * gd0 + gd1 * gd1),
                           math.sqrt(k00 * k00 + k01 * k01 + k10 * k10 + k11 * k11), R + gn,
-                          v00 + v11)
+                          abs(v00) + abs(v11) + 0.5 * abs(v01 + v10))
     if bound <= _WINDOW_NEGLIGIBLE * tol:
         acc[2] = bound
         return 0.0
@@ -616,8 +617,9 @@ def entry_rate_integral(dp, dv, da, R, Sigma, ta, tb, tol, acc):
     """(int_ta^tb nu+ dt over the tube's arc/cap, error estimate).
 
     acc (3,) float64 scratch: acc[1] is set to 1 if S(t) was degenerate at a
-    node (the value is then not usable).  The error estimate is the t-rule's
-    |K15 - G7| sum plus its weighted sum of the nodes' own (arc/cap) estimates
+    node (the value is then not usable).  The error estimate is the sum of the
+    t-rule's panel estimates (``quadrature.k15_error``, or |P31 - K15|) plus its
+    weighted sum of the nodes' own (arc/cap) estimates
     (``quadrature.make_adaptive_nested``)."""
     prm = (dp, dv, da, R, Sigma, INNER_TOL_FACTOR * tol / max(tb - ta, 1e-300), acc)
     if dp.shape[0] == 2:

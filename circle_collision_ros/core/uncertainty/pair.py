@@ -37,6 +37,7 @@ from circle_collision_ros.core.uncertainty.walk import (CACHE_COLUMNS, P0_ERR, P
                                                         walk_panels)
 
 __all__ = ["pair_kernel", "pair_probability", "relative_rows", "evaluate_uncertain_rows",
+           "certified_lower_bound",
            "finish_row", "overcount_answer", "QMC_TOL_POINTS", "OUT_SIZE", "OUT_P", "OUT_BOUND",
            "OUT_TPL", "OUT_QMC", "OUT_LO", "OUT_HI", "OUT_ERR", "OUT_T0", "OUT_T1"]
 
@@ -182,12 +183,19 @@ def pair_kernel(dp, dv, da, R, Sigma, H, thr, out):
     for k in range(da.shape[0]):
         if da[k] != 0.0:
             straight = False
-    if not degenerate and _below_a_lower_bound(dp, dv, da, R, Sigma, H, st[ST_PMAX] - pmax_err,
-                                               upper + err + P0_ERR + 2 * TUBE_TAIL):
-        # the quadrature missed part of nu+ (its estimates did not show it): P is at least
-        # any instantaneous probability, so an upper bound below one is wrong; the contact
-        # indicator's RQMC answers instead, clipped below by that bound
-        degenerate = True
+    lower = st[ST_PMAX] - pmax_err
+    if not degenerate:
+        stated = upper + err + P0_ERR + 2 * TUBE_TAIL
+        lower = certified_lower_bound(dp, dv, da, R, Sigma, H, lower, stated)
+        if lower > stated:
+            # P is at least any certified lower bound, so an upper bound below one proves
+            # that the quadrature missed part of nu+ (its estimates did not show it): the
+            # pair is answered as a degenerate one, by the contact indicator's RQMC clipped
+            # below by that bound, and its plausible time by the grid (the walk certified
+            # its steps with the same integrals)
+            degenerate = True
+            tpl, pm = plausible_time_grid(dp, dv, da, R, Sigma, H, thr)
+            out[OUT_TPL] = tpl
     if not degenerate:
         if straight:
             out[OUT_P] = min(1.0, max(0.0, upper))
@@ -231,7 +239,7 @@ def pair_kernel(dp, dv, da, R, Sigma, H, thr, out):
         out[OUT_T1] = t1
         return
     out[OUT_QMC] = 1.0
-    out[OUT_LO] = st[ST_PMAX] - pmax_err
+    out[OUT_LO] = max(st[ST_PMAX] - pmax_err, lower)
     out[OUT_HI] = 1.0 if degenerate else upper + err + P0_ERR + 2 * TUBE_TAIL
 
 
@@ -239,19 +247,21 @@ OUT_SIZE = 9
 
 
 @njit(cache=True, error_model="numpy")
-def _below_a_lower_bound(dp, dv, da, R, Sigma, H, pmax, upper):
-    """Whether the computed upper bound of P(contact) lies below a certified lower one: the
-    largest instantaneous probability the walk computed (less its error), or the one at the
-    mean path's closest approach (``interval.lower_bounds``)."""
-    if pmax > upper:
-        return True
+def certified_lower_bound(dp, dv, da, R, Sigma, H, known, cap):
+    """A certified lower bound of P(contact within [0, H]) for one relative state: the larger
+    of `known` (one the caller holds, e.g. its largest instantaneous probability less its
+    error) and the instantaneous probability at the mean path's closest approach on a grid,
+    less its error (``interval.lower_bounds``).  The latter is skipped where it cannot
+    matter to a caller comparing with `cap`: `known` already exceeds it, or it is >= 1."""
+    if known > cap or cap >= 1.0:
+        return known
     D = dp.shape[0]
     lo = np.empty(1)
     lower_bounds(np.ascontiguousarray(dp).reshape((1, D)),
                  np.ascontiguousarray(dv).reshape((1, D)),
                  np.ascontiguousarray(da).reshape((1, D)), np.full(1, R),
                  np.ascontiguousarray(Sigma).reshape((1, 2 * D, 2 * D)), H, lo)
-    return lo[0] > upper
+    return max(known, lo[0])
 
 
 @njit(cache=True, error_model="numpy", nogil=True)

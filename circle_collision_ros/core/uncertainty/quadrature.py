@@ -17,7 +17,9 @@ detected by any such rule: callers place panels so that every peak of the
 integrand lies at a panel end (see overlap_probability, entry_rate).
 
 ``make_adaptive_nested(fn, last_inner)(prm, a, b, tol)`` is the same rule for an
-integrand that is itself an integral: ``last_inner(prm)`` returns the error
+integrand that is itself an integral, but judges a K15 panel by ``k15_error``
+(QUADPACK's rescaled estimate; the whole value on a panel that few nodes
+resolve) instead of |K15 - G7|: ``last_inner(prm)`` returns the error
 estimate of fn's latest evaluation, and the rule returns ``(value, err,
 inner)`` with inner = the accepted panels' sum of those estimates weighted by
 the accepted rule (K15 or P31; the outer rule applied to the inner errors: all
@@ -379,8 +381,9 @@ def subinterval_integral(f, xl, xr):
     return value, (xr - xl) * tail
 
 
-# A K15 panel is resolved when at least K15_MIN_NODES of its 15 values are at least
-# _SIGNIFICANT of the largest (k15_error)
+# A K15 panel counts as resolved when at least K15_MIN_NODES of its 15 values are at
+# least _SIGNIFICANT of the largest (k15_error): a bump that spans fewer nodes is one the
+# rule's estimates cannot judge
 K15_MIN_NODES = 6
 _SIGNIFICANT = 1e-3
 
@@ -398,10 +401,10 @@ def k15_error(f, h, value, diff):
     1983, section 2.2.1) grows a large difference relative to the integrand's spread, and the
     max keeps it never below |K15 - G7|.
 
-    Neither sees a feature that only a few nodes sample: a tracker pair's entry rate, a bump
-    on the first tenth of its panel, lay on 4 nodes above 1e-3 of its peak, and K15 was 1.4e-2
-    off with |K15 - G7| = 1.8e-5 and the rescaled estimate 1.6e-4.  Fewer than K15_MIN_NODES
-    such nodes: the whole value is the estimate, so the panel goes on to P31 or halves unless
+    Neither sees a feature that only a few nodes sample, such as an entry rate whose bump
+    fills the first tenth of a long panel (tests/core/uncertainty/test_uncertainty_horizon.py,
+    BUMP_AT_START_PAIR).  Where fewer than K15_MIN_NODES values are at least _SIGNIFICANT of
+    the largest, the whole value is the estimate, so the panel goes on to P31 or halves unless
     its integral is itself within the tolerance (a tail panel)."""
     fmax = 0.0
     for i in range(15):

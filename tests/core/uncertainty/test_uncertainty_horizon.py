@@ -23,6 +23,7 @@ from circle_collision_ros.core import time_to_collision
 from circle_collision_ros.core.uncertainty.overlap import overlap_probability
 from circle_collision_ros.core.uncertainty import uncertain_pairs
 from circle_collision_ros.core.uncertainty.entry_rate import entry_rate_integral, nu_plus_2d
+from circle_collision_ros.core.uncertainty.pair import certified_lower_bound
 from circle_collision_ros.core.uncertainty.tube import BROAD_PHASE_SIGMAS, S_at, tube_intervals
 from circle_collision_ros.core.uncertainty.walk import PLAUSIBLE_RTOL
 from tests.stress import examples
@@ -230,21 +231,37 @@ BUMP_AT_START_PAIR = {
 }
 
 
-def test_upper_bound_below_a_lower_bound_falls_back_to_sampling():
-    """pair_kernel checks the Rice integral's upper bound against certified lower bounds (the
-    walk's instantaneous probabilities, and the one at the mean path's closest approach):
-    below one, the quadrature missed part of nu+, and the contact indicator's RQMC answers.
-    Within the stated bound of a 10^6-sample Monte Carlo (not so before the check)."""
+def test_bump_at_start_pair_within_the_stated_bound():
+    """Within the stated bound of a 10^6-sample Monte Carlo: k15_error does not accept the
+    first panel's K15 (the bump lies on too few nodes) and the adaptive rule resolves it."""
     _within_monte_carlo(BUMP_AT_START_PAIR, 601)
+
+
+def test_certified_lower_bound_disproves_a_missed_bump():
+    """pair_kernel's consistency check: the closest-approach probability of the pair above
+    lies above the upper bound the missed bump gave (0.9849 + 0.0017), and below the Monte
+    Carlo value; it is not computed where it cannot decide (a known bound already above the
+    cap, or a cap of 1)."""
+    c = BUMP_AT_START_PAIR
+    state = tuple(np.asarray(c[k], dtype=np.float64) for k in ("dp", "dv", "da"))
+    args = (*state, c["R"], np.ascontiguousarray(c["Sigma"]), 5.0)
+    lower = certified_lower_bound(*args, 0.0, 0.9849 + 0.0017)
+    assert lower > 0.9849 + 0.0017
+    z = np.zeros(2)
+    ref, se = mc_probability(state[0], state[1], state[2], c["R"] / 2, c["Sigma"], z, z, z,
+                             c["R"] / 2, np.zeros((4, 4)), 5.0, 1_000_000, seed=604)
+    assert lower <= ref + 4 * se, (lower, ref, se)
+    assert certified_lower_bound(*args, 0.5, 0.4) == 0.5
+    assert certified_lower_bound(*args, 0.0, 1.0) == 0.0
 
 
 
 def test_bump_on_few_k15_nodes_is_not_accepted():
     """The same pair at twice its speed (velocities x 2, accelerations x 4, the velocity
     covariance x 4: all exact in binary): the bump lies on few nodes of its K15 panel and the
-    estimates stay small. The consistency check does not catch it: it read 0.9850 +- 0.0044
-    against 0.9987, with no certified lower bound above that. k15_error's resolution rule
-    sends the panel on to P31 and halves."""
+    estimates stay small. The consistency check alone does not catch this one (no certified
+    lower bound lies above the upper bound the missed bump gives); k15_error's resolution
+    rule sends the panel on to P31 and halves."""
     c = BUMP_AT_START_PAIR
     T = np.diag([1.0, 1.0, 2.0, 2.0])
     _within_monte_carlo({"dp": c["dp"], "dv": [2 * x for x in c["dv"]],
@@ -256,8 +273,8 @@ def test_bump_on_few_k15_nodes_is_not_accepted():
 def test_bump_pair_at_every_speed_within_monte_carlo(speed: float) -> None:
     """The pair above at speeds from half to three times its own (times in [0, 5] s scale by
     1 / speed, so nu+'s bump narrows and moves across the K15 nodes of its panel): within the
-    stated bound of a 2e5-sample Monte Carlo at each. Before k15_error's resolution rule, two
-    of these speeds (1 and 2) were outside."""
+    stated bound of a 2e5-sample Monte Carlo at each (speeds 1 and 2 are the two tests
+    above)."""
     c = BUMP_AT_START_PAIR
     T = np.diag([1.0, 1.0, speed, speed])
     _within_monte_carlo({"dp": c["dp"], "dv": [speed * x for x in c["dv"]],
