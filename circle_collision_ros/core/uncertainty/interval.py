@@ -31,7 +31,8 @@ from circle_collision_ros.core.uncertainty.overlap import overlap_probability
 from circle_collision_ros.core.uncertainty.tube import S_at, screen_rows, screen_sigmas
 from circle_collision_ros.core.uncertainty.walk import P0_ERR
 
-__all__ = ["INTERVAL_TAILS", "CLOSEST_GRID", "cheap_intervals", "lower_bounds", "upper_bounds"]
+__all__ = ["INTERVAL_TAILS", "CLOSEST_GRID", "cheap_intervals", "lower_bound", "lower_bounds",
+           "upper_bounds"]
 
 #: Upper bounds tried, smallest first (each P(chi^2_2D > k^2) of its k): ten steps up to
 #: 0.5, then 0.8; a row that no tube of these clears gets hi = 1.
@@ -41,30 +42,36 @@ CLOSEST_GRID = 64
 
 
 @njit(cache=True, error_model="numpy")
-def lower_bounds(dp, dv, da, R, Sigma, H, lo):
-    """lo[j] = max(0, P(|X(t*)| <= R[j]) - P0_ERR) for relative row j, t* the point of a
-    CLOSEST_GRID-step grid on [0, H] nearest the ball along the mean path
+def lower_bound(dp, dv, da, R, Sigma, H):
+    """max(0, P(|X(t*)| <= R) - P0_ERR) for one relative row (dp, dv, da (D,), Sigma (2D, 2D)),
+    t* the point of a CLOSEST_GRID-step grid on [0, H] nearest the ball along the mean path
     m(t) = dp + dv t + da t^2 / 2 (X(t) ~ N(m(t), S(t)), S_at).  A lower bound on
     P(contact within [0, H]) whatever t* is; the grid only makes it tight."""
-    D = dp.shape[1]
-    mean = np.empty(D)
-    for j in range(dp.shape[0]):
-        best_t, best = 0.0, np.inf
-        for g in range(CLOSEST_GRID + 1):
-            t = H * g / CLOSEST_GRID
-            d2 = 0.0
-            for c in range(D):
-                m = dp[j, c] + dv[j, c] * t + 0.5 * da[j, c] * t * t
-                d2 += m * m
-            if d2 < best:
-                best, best_t = d2, t
-        t = best_t
+    D = dp.shape[0]
+    best_t, best = 0.0, np.inf
+    for g in range(CLOSEST_GRID + 1):
+        t = H * g / CLOSEST_GRID
+        d2 = 0.0
         for c in range(D):
-            mean[c] = dp[j, c] + dv[j, c] * t + 0.5 * da[j, c] * t * t
-        p = overlap_probability(mean, S_at(Sigma[j], t), R[j])
-        # P0_ERR: overlap_probability's stated absolute error; 0 below it, and where S(t*)
-        # is indefinite by rounding (NaN fails the comparison): 0 is always a bound
-        lo[j] = p - P0_ERR if p - P0_ERR > 0.0 else 0.0
+            m = dp[c] + dv[c] * t + 0.5 * da[c] * t * t
+            d2 += m * m
+        if d2 < best:
+            best, best_t = d2, t
+    t = best_t
+    mean = np.empty(D)
+    for c in range(D):
+        mean[c] = dp[c] + dv[c] * t + 0.5 * da[c] * t * t
+    p = overlap_probability(mean, S_at(Sigma, t), R)
+    # P0_ERR: overlap_probability's stated absolute error; 0 below it, and where S(t*)
+    # is indefinite by rounding (NaN fails the comparison): 0 is always a bound
+    return p - P0_ERR if p - P0_ERR > 0.0 else 0.0
+
+
+@njit(cache=True, error_model="numpy")
+def lower_bounds(dp, dv, da, R, Sigma, H, lo):
+    """lo[j] = lower_bound of relative row j (dp, dv, da (n, D), R (n,), Sigma (n, 2D, 2D))."""
+    for j in range(dp.shape[0]):
+        lo[j] = lower_bound(dp[j], dv[j], da[j], R[j], Sigma[j], H)
 
 
 @njit(cache=True, error_model="numpy")

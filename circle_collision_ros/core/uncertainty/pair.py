@@ -16,7 +16,7 @@ import math
 import numpy as np
 from numba import njit
 
-from circle_collision_ros.core.uncertainty.interval import lower_bounds
+from circle_collision_ros.core.uncertainty.interval import lower_bound
 from circle_collision_ros.core.uncertainty.overlap import BALL_ERR_PER_TOL, DISC_ERR_PER_TOL
 from circle_collision_ros.core.uncertainty.qmc import (QMC_CV_POINTS, QMC_CV_TARGET, QMC_POINTS,
                                                        QMC_REPLICATES, QMC_T, factor, line_sampled,
@@ -251,17 +251,12 @@ def certified_lower_bound(dp, dv, da, R, Sigma, H, known, cap):
     """A certified lower bound of P(contact within [0, H]) for one relative state: the larger
     of `known` (one the caller holds, e.g. its largest instantaneous probability less its
     error) and the instantaneous probability at the mean path's closest approach on a grid,
-    less its error (``interval.lower_bounds``).  The latter is skipped where it cannot
-    matter to a caller comparing with `cap`: `known` already exceeds it, or it is >= 1."""
+    less its error (``interval.lower_bound``, the cheap interval's).  The latter is skipped
+    where it cannot matter to a caller comparing with `cap`: `known` already exceeds it, or
+    it is >= 1."""
     if known > cap or cap >= 1.0:
         return known
-    D = dp.shape[0]
-    lo = np.empty(1)
-    lower_bounds(np.ascontiguousarray(dp).reshape((1, D)),
-                 np.ascontiguousarray(dv).reshape((1, D)),
-                 np.ascontiguousarray(da).reshape((1, D)), np.full(1, R),
-                 np.ascontiguousarray(Sigma).reshape((1, 2 * D, 2 * D)), H, lo)
-    return max(known, lo[0])
+    return max(known, lower_bound(dp, dv, da, R, Sigma, H))
 
 
 @njit(cache=True, error_model="numpy", nogil=True)
