@@ -18,7 +18,12 @@ receives both topics. Per topic it prints:
 - frames answered (a topic may answer fewer frames than were sent: the node coalesces inputs,
   and collision_probabilities completes the newest prediction only);
 - per third of the run: rows per collision_predictions message (the scene's work) and
-  collision_probabilities latency (the scene brings more pairs within reach as it runs).
+  collision_probabilities latency (the scene brings more pairs within reach as it runs);
+- where the probabilities' latency goes: per frame answered on both topics, the exact answer's
+  latency and the completion after it (probabilities receive time minus the exact answer's),
+  p50 / p90 / p99, and the frames whose probabilities came later than one frame period
+  (1 / --rate), with how many of those followed another such frame (a completion that overran
+  delays the next one).
 
 Then --check rows sampled from the last collision_probabilities messages are checked against an
 independent --samples Monte Carlo on the same states (core.narrow.time_to_collision on sampled
@@ -211,6 +216,22 @@ def main() -> int:
                for t, m in decoded["collision_probabilities"] if within(m)] or [np.nan]
         say(f"| {i + 1} | {np.mean(rows) if rows else np.nan:.0f} | "
             f"{np.percentile(lat, 50):.1f} | {np.percentile(lat, 99):.1f} |")
+    exact_at = {m.header[0] * 10**9 + m.header[1]: t for t, m in decoded["collision_predictions"]}
+    both = [(exact_at[s] - s, t - exact_at[s], t - s) for t, m in decoded["collision_probabilities"]
+            for s in [m.header[0] * 10**9 + m.header[1]] if s in exact_at]
+    if both:
+        exact_ms, after_ms, total_ms = (np.array(x) * 1e-6 for x in zip(*both))
+        late = total_ms > 1e3 / opts.rate
+        say(f"\nWhere the probabilities' latency goes ({len(both)} frames answered on both "
+            "topics):")
+        say("| part | p50 ms | p90 ms | p99 ms |")
+        say("|---|---:|---:|---:|")
+        for name, x in (("exact answer (collision_predictions)", exact_ms),
+                        ("completion after it", after_ms), ("collision_probabilities", total_ms)):
+            say(f"| {name} | {np.percentile(x, 50):.1f} | {np.percentile(x, 90):.1f} | "
+                f"{np.percentile(x, 99):.1f} |")
+        say(f"frames later than one period ({1e3 / opts.rate:.1f} ms): {int(late.sum())}, of which "
+            f"{int((late[1:] & late[:-1]).sum())} right after another late one")
     msgs = decoded["collision_probabilities"][-5:]
     if opts.check and msgs:
         rng = np.random.default_rng(7)
