@@ -255,7 +255,16 @@ def main() -> int:
                   f"{'yes' if ok else 'NO'} |")
         say(f"rows outside: {bad} of {len(picks)}")
     if opts.out:
-        command = " ".join(["bench/bench_probabilities.py", *sys.argv[1:]])
+        root = Path(__file__).resolve().parent.parent
+
+        def shown(arg: str) -> str:
+            """A path argument inside the repository, relative to it (no machine paths)."""
+            path = Path(arg)
+            if path.is_absolute() and path.resolve().is_relative_to(root):
+                return str(path.resolve().relative_to(root))
+            return arg
+
+        command = " ".join(["bench/bench_probabilities.py", *map(shown, sys.argv[1:])])
         text = "\n".join(lines)
         Path(opts.out).write_text(f"# Probabilities at tracker scale, live\n\n"
                                   f"`.venv/bin/python {command}`\n\n{text}\n")

@@ -189,6 +189,20 @@ SECTIONS: tuple[Section, ...] = (
         quick_note="100 bodies only, 3 s instead of 10 s",
     ),
     Section(
+        "probabilities",
+        "Probabilities at tracker scale, live",
+        "1,000 bodies with covariance at 30 Hz through DDS: both topics' latency, placeholders "
+        "and stated bounds, where the completions' latency goes, and sampled rows against "
+        "10^6-sample Monte Carlo",
+        ("probabilities.md",),
+        script="bench_probabilities.py",
+        runs=(("--seconds", "20", "--out", "{out}/probabilities.md"),),
+        quick_runs=(("--seconds", "5", "--check", "5", "--samples", "100000", "--out",
+                     "{out}/probabilities.md"),),
+        quick_note="5 s instead of 20 s; 5 rows against 10^5-sample Monte Carlo",
+        own_md=True,
+    ),
+    Section(
         "static",
         "Static geometry",
         "first contact with maps, polygons and walls against an exact reference on the hard "
