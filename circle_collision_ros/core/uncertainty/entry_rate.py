@@ -255,12 +255,16 @@ def _piece_end(qs, j, end):
 
 
 @njit(cache=True, error_model="numpy")
-def _scan_pieces(qs, n, reach2, jmin, ia, ib):
+def _scan_pieces(qs, n, reach2, jmin):
     """The integration pieces of a scan qs[0..n]: the window's runs (_scan_runs)
-    cut at their local minima of q, as scan-index pairs [ia[i], ib[i]] (arrays of
-    length >= n); returns their number."""
-    ra = np.empty(n + 1, dtype=np.int64)
-    rb = np.empty(n + 1, dtype=np.int64)
+    cut at their local minima of q, as (count, ia, ib), the scan-index pairs
+    [ia[i], ib[i]].  One index allocation for the runs and the pieces (slices of
+    it: this runs at every nu+ value)."""
+    idx = np.empty(4 * (n + 1), dtype=np.int64)
+    ra = idx[: n + 1]
+    rb = idx[n + 1 : 2 * (n + 1)]
+    ia = idx[2 * (n + 1) : 3 * (n + 1)]
+    ib = idx[3 * (n + 1) :]
     nr = _scan_runs(qs, n, reach2, jmin, ra, rb)
     m = 0
     for r in range(nr):
@@ -271,7 +275,7 @@ def _scan_pieces(qs, n, reach2, jmin, ia, ib):
                 ib[m] = j
                 m += 1
                 start = j
-    return m
+    return m, ia, ib
 
 
 @njit(cache=True, error_model="numpy", inline="always")
@@ -396,9 +400,7 @@ def nu_plus_2d(dp, dv, da, R, Sigma, t, tol, acc):
             jmin = j
         cr, sr = cr * cd - sr * sd, sr * cd + cr * sd
     # the window's runs, cut into pieces at the density's peaks
-    ia = np.empty(nscan, dtype=np.int64)
-    ib = np.empty(nscan, dtype=np.int64)
-    npieces = _scan_pieces(qs, nscan, reach * reach, jmin, ia, ib)
+    npieces, ia, ib = _scan_pieces(qs, nscan, reach * reach, jmin)
     # Many of a Rice panel's nodes sit where nu+ is a tiny fraction of the
     # tolerance (the tube's interval is far wider than nu+'s bump): a bound of the
     # window's integral that needs no integrand value settles them.  Its velocity
@@ -513,9 +515,7 @@ def _cap_integrand(th, prm):
         )
         if qs[j] < qs[jmin]:
             jmin = j
-    ia = np.empty(n, dtype=np.int64)
-    ib = np.empty(n, dtype=np.int64)
-    npieces = _scan_pieces(qs, n, reach * reach, jmin, ia, ib)
+    npieces, ia, ib = _scan_pieces(qs, n, reach * reach, jmin)
     ptol = 2.0 * tol / npieces  # the two halves' total
     total = 0.0
     err = 0.0
