@@ -43,6 +43,7 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
+from _common import ROOT  # noqa: E402
 from bench_node import ArrayFrames  # noqa: E402  (sets the ROS environment defaults first)
 
 import rclpy  # noqa: E402
@@ -255,16 +256,9 @@ def main() -> int:
                   f"{'yes' if ok else 'NO'} |")
         say(f"rows outside: {bad} of {len(picks)}")
     if opts.out:
-        root = Path(__file__).resolve().parent.parent
-
-        def shown(arg: str) -> str:
-            """A path argument inside the repository, relative to it (no machine paths)."""
-            path = Path(arg)
-            if path.is_absolute() and path.resolve().is_relative_to(root):
-                return str(path.resolve().relative_to(root))
-            return arg
-
-        command = " ".join(["bench/bench_probabilities.py", *map(shown, sys.argv[1:])])
+        # path arguments inside the repository (run_all's --out) shown relative to it
+        command = " ".join(["bench/bench_probabilities.py",
+                            *(a.replace(f"{ROOT}/", "") for a in sys.argv[1:])])
         text = "\n".join(lines)
         Path(opts.out).write_text(f"# Probabilities at tracker scale, live\n\n"
                                   f"`.venv/bin/python {command}`\n\n{text}\n")
