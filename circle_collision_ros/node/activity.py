@@ -7,6 +7,11 @@ the node is idle and otherwise waits until it is, for at most MAX_PAUSE_S (so th
 is never idle still gets markers and completions, late). Python threads share one interpreter
 lock and this machine's cores are few: a side step running beside a prediction would delay it.
 
+Markers also step aside for the completion of probabilities, which are predictions too: the
+completion thread marks its evaluation with ``completing()`` and the marker thread pauses with
+``pause(completions=True)``, which waits for both (at most MAX_PAUSE_S in all). Markers are the
+only work for eyes alone, so they come last: drawn in the gaps, never beside a completion.
+
 One side thread may go on beside a narrow prediction: ``pause(beside=True)`` returns at once
 while the busy period is narrow, one whose prediction kernels run on one core. A wide one, whose
 kernels want numba's threads on every core (core/parallel_policy.py), holds it as any other.
@@ -18,6 +23,7 @@ later period would read narrow.)
 from __future__ import annotations
 
 import threading
+import time
 from collections.abc import Iterator
 from contextlib import contextmanager
 
@@ -36,6 +42,10 @@ class NodeActivity:
         self._idle.set()
         self._narrow = threading.Event()  # set while busy with a narrow period
         self._wide_next = True  # until a period has shown otherwise: every core wanted
+        self._completions_idle = threading.Event()
+        self._completions_idle.set()
+        self._completions = 0  # completions under way (completing() may nest across threads)
+        self._lock = threading.Lock()
 
     @property
     def wide(self) -> bool:
@@ -56,9 +66,42 @@ class NodeActivity:
             self._narrow.clear()
             self._idle.set()
 
-    def pause(self, beside: bool = False) -> None:
+    @property
+    def completions_running(self) -> bool:
+        """Whether a completion is being evaluated (``completing()``)."""
+        return not self._completions_idle.is_set()
+
+    @contextmanager
+    def completing(self) -> Iterator[None]:
+        """Around the evaluation of a completion (node/probabilities.py): markers wait meanwhile."""
+        with self._lock:
+            self._completions += 1
+            self._completions_idle.clear()
+        try:
+            yield
+        finally:
+            with self._lock:
+                self._completions -= 1
+                if self._completions == 0:
+                    self._completions_idle.set()
+
+    def pause(self, beside: bool = False, completions: bool = False) -> None:
         """Between two side steps: wait while the node is busy (at most MAX_PAUSE_S); with
-        `beside`, not while the busy period is narrow (one side thread, on the other core)."""
+        `beside`, not while the busy period is narrow (one side thread, on the other core);
+        with `completions` (markers), also while a completion is evaluated (MAX_PAUSE_S in
+        all)."""
         if beside and self._narrow.is_set():
             return
-        self._idle.wait(self.MAX_PAUSE_S)
+        if not completions:
+            self._idle.wait(self.MAX_PAUSE_S)
+            return
+        end = time.monotonic() + self.MAX_PAUSE_S
+        # each wait may end with the other flag raised again: wait until both are clear at once
+        while True:
+            left = end - time.monotonic()
+            if left <= 0.0 or not self._idle.wait(left):
+                return
+            if not self._completions_idle.wait(max(end - time.monotonic(), 0.0)):
+                return
+            if self._idle.is_set():
+                return

@@ -402,7 +402,7 @@ class MarkerPublisher:
 
     The drawing is cut into short steps (MarkerBuilder.CHUNK keys,
     MarkerArrayEncoder.CHUNK markers) and steps aside at each while the node
-    is busy (`activity`, node/activity.py).
+    is busy or a completion of probabilities is evaluated (`activity`, node/activity.py).
     """
 
     BUDGET = 0.1  # fraction of wall time markers may take
@@ -496,7 +496,7 @@ class MarkerPublisher:
                 if clear:
                     self._send(self.builder.clear_all())
                 else:
-                    self._send(self.builder.build(prediction, self.activity.pause))
+                    self._send(self.builder.build(prediction, self._step_aside))
                     self.drawn += 1
                 self.last_cost_s = time.monotonic() - started
                 if self._rate > 0:
@@ -507,6 +507,10 @@ class MarkerPublisher:
                 self._on_error(f"markers skipped: {exc!r}")
             finally:
                 self._busy = False
+
+    def _step_aside(self) -> None:
+        """MarkerBuilder's pause: markers wait for the prediction path and for completions."""
+        self.activity.pause(completions=True)
 
     def _send(self, data: bytes) -> None:
         try:

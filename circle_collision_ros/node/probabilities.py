@@ -141,8 +141,9 @@ class ProbabilityPublisher:
                 data = job.data
                 if job.prediction.deferred:
                     started = time.monotonic()
-                    data = job.prediction.completed(self._pool, self.PARTS,
-                                                    self._step_aside).to_cdr()
+                    with self.activity.completing():  # markers wait meanwhile
+                        done = job.prediction.completed(self._pool, self.PARTS, self._step_aside)
+                    data = done.to_cdr()
                     self.last_compute_s = time.monotonic() - started
                     self.completed += 1
                 self._publish(data)

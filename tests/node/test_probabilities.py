@@ -10,7 +10,9 @@ Guarantees proved here:
   prediction is still completed;
 - while the node is busy the completion waits, but for one thread beside a narrow prediction
   path (node/activity.py): a completion offered then is published before the path is idle;
-  that thread runs at BESIDE_NICE, the others at NICE (Linux).
+  that thread runs at BESIDE_NICE, the others at NICE (Linux);
+- every step of the evaluation runs inside ``NodeActivity.completing()``, so the marker thread
+  steps aside for it (tests/node/test_activity.py), and nothing is held after it.
 """
 from __future__ import annotations
 
@@ -154,3 +156,25 @@ def test_the_thread_beside_runs_at_the_lowest_priority() -> None:
     finally:
         worker.close()
     assert seen == {(True, ProbabilityPublisher.BESIDE_NICE), (False, ProbabilityPublisher.NICE)}
+
+
+def test_markers_step_aside_for_the_evaluation() -> None:
+    from circle_collision_ros.node.activity import NodeActivity
+
+    states = []
+
+    class Recording(NodeActivity):
+        def pause(self, beside: bool = False, completions: bool = False) -> None:
+            states.append(self.completions_running)
+            super().pause(beside, completions)
+
+    activity = Recording()
+    worker = ProbabilityPublisher(lambda data: None, activity=activity)
+    try:
+        part = _prediction(2)
+        worker.offer(part, part.to_cdr(), 1)
+        assert worker.wait_idle(30.0)
+    finally:
+        worker.close()
+    assert states and all(states)  # each step of rows, from each thread
+    assert not activity.completions_running
