@@ -38,6 +38,7 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import math
 import statistics
 import sys
 import time
@@ -132,6 +133,57 @@ def stream(
     )
 
 
+def completion(n: int, frames: int, every: int, sigma: float, velocity_sigma: float,
+               horizon: float, budget: int) -> None:
+    """The completion's CPU per frame (see the docstring)."""
+    from circle_collision_ros.core.scene.uncertain import COMPLETION_STEP, complete_uncertainty
+
+    scene = SyntheticScene(n, size=float(np.sqrt(n * 333.0)), dimensions=2, seed=n)
+    config = PredictorConfig(horizon=horizon, max_bodies=max(10_000, n), stale_timeout=3600.0,
+                             uncertain_pair_budget=budget,
+                             probability_tolerance=SPECS["probability_tolerance"].default)
+    predictor = CollisionPredictor(config)
+    cov = covariance_rows(n, sigma, velocity_sigma)
+    period_ns = 1_000_000_000 // 30
+    kept = []
+    for k in range(frames):
+        if k:
+            scene.step(period_ns * 1e-9)
+        stamp = BASE_NS + k * period_ns
+        predictor.receive_batch(frame(scene, stamp, cov), stamp)
+        u = predictor.predict().uncertainty
+        if k % every == every // 2 and u.pending is not None:
+            kept.append((k, u))
+
+    def cpu(u, pause) -> float:
+        best = math.inf
+        for _ in range(3):
+            t = time.thread_time()
+            complete_uncertainty(u, pause=pause)
+            best = min(best, time.thread_time() - t)
+        return best * 1e3
+
+    print(f"{n} bodies at 30 Hz, {frames} frames, every {every}th completed "
+          f"({len(kept)} frames); covariance: position sigma {sigma} m, velocity sigma "
+          f"{velocity_sigma} m/s on every body; uncertain_pair_budget {budget}, "
+          f"probability_tolerance {config.probability_tolerance}; thread CPU time, best of 3, "
+          "numba threads off")
+    print(f"| frame | deferred rows | one block ms | steps of {COMPLETION_STEP} ms | us per row |")
+    print("|---:|---:|---:|---:|---:|")
+    block, steps = [], []
+    with threads_forced(False):
+        complete_uncertainty(kept[0][1])  # first calls: caches
+        for k, u in kept:
+            block.append(cpu(u, None))
+            steps.append(cpu(u, lambda: None))
+            rows = u.pending.rows.size
+            print(f"| {k} | {rows} | {block[-1]:.1f} | {steps[-1]:.1f} | "
+                  f"{1e3 * block[-1] / rows:.0f} |")
+    print(f"per frame, in the node's steps: p50 {np.percentile(steps, 50):.1f} ms, largest "
+          f"{max(steps):.1f} ms of CPU (two threads share it: {np.percentile(steps, 50) / 2:.1f} "
+          f"and {max(steps) / 2:.1f} ms at best, against a {1e3 / 30:.1f} ms frame period)")
+
+
 def run_frames(frames, scene, exact, uncertain, cov, times, core_s, core_per_frame, evaluated,
                deferred, reported, contacts, bounds, clock) -> None:
     """The timed frames: exact and covariance interleaved frame by frame (see the docstring)."""
@@ -188,8 +240,18 @@ def main() -> int:
         "--stream", action="store_true", help="one-body updates (see the docstring)"
     )
     parser.add_argument("--updates", type=int, default=600, help="with --stream")
+    parser.add_argument("--completion", action="store_true",
+                        help="the completion's CPU per frame (see the docstring)")
+    parser.add_argument("--every", type=int, default=40, help="with --completion")
     opts = parser.parse_args()
     budget = NODE_BUDGET if opts.budget is None else opts.budget
+    if opts.completion:
+        given = set(sys.argv)
+        completion(opts.bodies, opts.frames if "--frames" in given else 600, opts.every,
+                   opts.sigma if "--sigma" in given else 0.3,
+                   opts.velocity_sigma if "--velocity-sigma" in given else 0.2, opts.horizon,
+                   budget)
+        return 0
     if opts.stream:
         stream(300 if opts.bodies == 1000 and "--bodies" not in sys.argv else opts.bodies,
                opts.updates, opts.sigma, opts.velocity_sigma, opts.horizon, budget)

@@ -148,12 +148,15 @@ SECTIONS: tuple[Section, ...] = (
         "uncertainty_scene",
         "Scene with covariance",
         "a scene with covariance on every body against "
-        "the same scene exact, frame by frame, and the per-body stream (--stream)",
+        "the same scene exact, frame by frame, the per-body stream (--stream) and the "
+        "completion's CPU per frame (--completion)",
         ("uncertainty_scene.md",),
         script="bench_uncertainty_scene.py",
-        runs=((), ("--stream",)),
-        quick_runs=(("--quick",), ("--stream", "--updates", "100")),
-        quick_note="5 frames instead of 30; the stream 100 updates instead of 600",
+        runs=((), ("--stream",), ("--completion",)),
+        quick_runs=(("--quick",), ("--stream", "--updates", "100"),
+                    ("--completion", "--frames", "120")),
+        quick_note="5 frames instead of 30; the stream 100 updates instead of 600; 3 completed "
+                   "frames instead of 15",
     ),
     Section(
         "node_targets",
