@@ -96,12 +96,10 @@ class NodeActivity:
             self._idle.wait(self.MAX_PAUSE_S)
             return
         end = time.monotonic() + self.MAX_PAUSE_S
-        # each wait may end with the other flag raised again: wait until both are clear at once
+        # until both are clear at once: one may be raised again while the other is awaited
         while True:
+            held = next((e for e in (self._idle, self._completions_idle) if not e.is_set()), None)
             left = end - time.monotonic()
-            if left <= 0.0 or not self._idle.wait(left):
+            if held is None or left <= 0.0:
                 return
-            if not self._completions_idle.wait(max(end - time.monotonic(), 0.0)):
-                return
-            if self._idle.is_set():
-                return
+            held.wait(left)
