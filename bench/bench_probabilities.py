@@ -23,7 +23,10 @@ receives both topics. Per topic it prints:
   latency and the completion after it (probabilities receive time minus the exact answer's),
   p50 / p90 / p99, and the frames whose probabilities came later than one frame period
   (1 / --rate), with how many of those followed another such frame (a completion that overran
-  delays the next one).
+  delays the next one);
+- what the node's /diagnostics said over the measured frames: its count of late completions
+  (``probabilities_late``: published after the next prediction was handed over) and
+  superseded predictions, and how many of its reports were WARN for falling behind.
 
 Then --check rows sampled from the last collision_probabilities messages are checked against an
 independent --samples Monte Carlo on the same states (core.narrow.time_to_collision on sampled
@@ -48,6 +51,7 @@ from bench_node import ArrayFrames  # noqa: E402  (sets the ROS environment defa
 
 import rclpy  # noqa: E402
 from rclpy.executors import SingleThreadedExecutor  # noqa: E402
+from diagnostic_msgs.msg import DiagnosticArray  # noqa: E402
 from rclpy.qos import QoSProfile, ReliabilityPolicy  # noqa: E402
 
 from circle_collision_msgs.msg import CircleStateArray, CollisionPredictionArray  # noqa: E402
@@ -136,6 +140,16 @@ def main() -> int:
                                    lambda data, t=topic: on_message(t, data),
                                    QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE),
                                    raw=True)
+    reports: list[dict[str, str]] = []  # the node's /diagnostics, values and message
+
+    def on_diagnostics(msg: DiagnosticArray) -> None:
+        for status in msg.status:
+            if status.name.endswith(": collision prediction"):
+                with lock:
+                    reports.append({**{kv.key: kv.value for kv in status.values},
+                                    "message": status.message})
+
+    client.create_subscription(DiagnosticArray, "/diagnostics", on_diagnostics, 10)
     pub = client.create_publisher(CircleStateArray, "circle_states",
                                   QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE))
     executor = SingleThreadedExecutor()
@@ -157,6 +171,7 @@ def main() -> int:
         with lock:
             for t in TOPICS:
                 received[t].clear()
+            reports.clear()
         sent: dict[int, dict] = {}
         start = time.monotonic()
         next_send = start
@@ -233,6 +248,17 @@ def main() -> int:
                 f"{np.percentile(x, 99):.1f} |")
         say(f"frames later than one period ({1e3 / opts.rate:.1f} ms): {int(late.sum())}, of which "
             f"{int((late[1:] & late[:-1]).sum())} right after another late one")
+    if len(reports) >= 2:
+        first, last = reports[0], reports[-1]
+
+        def grew(key: str) -> int:
+            return int(last[key]) - int(first[key])
+
+        behind = sum("falls behind" in r["message"] for r in reports[1:])
+        say(f"node /diagnostics over the run ({len(reports) - 1} reports): "
+            f"{grew('probabilities_late')} of {grew('probabilities_published')} completions late, "
+            f"{grew('probabilities_superseded')} predictions superseded; WARN for falling behind "
+            f"in {behind} reports")
     msgs = decoded["collision_probabilities"][-5:]
     if opts.check and msgs:
         rng = np.random.default_rng(7)

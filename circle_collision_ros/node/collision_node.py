@@ -84,7 +84,7 @@ from circle_collision_ros.cli import TransportProfile, parse_args, spin_node
 from circle_collision_ros.node.input_loss import InputLossMonitor
 from circle_collision_ros.node.activity import NodeActivity
 from circle_collision_ros.node.markers import MarkerPublisher
-from circle_collision_ros.node.probabilities import ProbabilityPublisher
+from circle_collision_ros.node.probabilities import ProbabilityPublisher, lag_problem
 from circle_collision_ros.node.static_inputs import StaticInputs
 from circle_collision_ros.pipeline.static_scene import StaticSettings
 from circle_collision_ros.pipeline.predictor import (RUNTIME_FIELDS, CollisionPredictor,
@@ -199,6 +199,7 @@ class CollisionNode(LifecycleNode):
     WARN_THROTTLE_S = 2.0
     LATENCY_WINDOW = 1000
     EXPIRY_PERIOD_S = 0.05
+    DIAGNOSTICS_PERIOD_S = 1.0
     #: How long a deactivation or shutdown waits for subscribers to acknowledge the final
     #: markers (DELETEALL), s.
     SHUTDOWN_ACK_S = 1.0
@@ -251,7 +252,9 @@ class CollisionNode(LifecycleNode):
         self.probabilities: ProbabilityPublisher | None = None
         # Counts of the side threads of earlier activations (diagnostics report totals).
         self._side_totals = {"markers_drawn": 0, "probabilities_published": 0,
-                             "probabilities_superseded": 0}
+                             "probabilities_superseded": 0, "probabilities_late": 0}
+        # (published, late, superseded) completions at the previous diagnostics report
+        self._lag_seen = (0, 0, 0)
         self._inputs: list[InputTopic] = []
         self._odometry_sources: dict = {}
         self.static: StaticInputs | None = None
@@ -478,7 +481,8 @@ class CollisionNode(LifecycleNode):
             self.static.activate()
         self._set_publish_rate(p("publish_rate"))
         self._expiry_timer = self.create_timer(self.EXPIRY_PERIOD_S, self._on_expiry_timer)
-        self._diagnostics_timer = self.create_timer(1.0, self._publish_diagnostics)
+        self._diagnostics_timer = self.create_timer(self.DIAGNOSTICS_PERIOD_S,
+                                                    self._publish_diagnostics)
         # Input publishers may appear after start: look for their QoS off the message path.
         if self._recorder is not None and self._qos_unknown:
             self._qos_timer = self.create_timer(1.0, self._record_offered_qos)
@@ -502,6 +506,7 @@ class CollisionNode(LifecycleNode):
             self.probabilities.close()  # publishes and records what it was given
             self._side_totals["probabilities_published"] += self.probabilities.published
             self._side_totals["probabilities_superseded"] += self.probabilities.superseded
+            self._side_totals["probabilities_late"] += self.probabilities.late
             self.probabilities = None
         if self.markers is not None:
             self.markers.close()  # clears the display while the publisher is enabled
@@ -831,6 +836,7 @@ class CollisionNode(LifecycleNode):
             + self.probabilities.published,
             "probabilities_superseded": totals["probabilities_superseded"]
             + self.probabilities.superseded,
+            "probabilities_late": totals["probabilities_late"] + self.probabilities.late,
             "probabilities_ms_last": f"{self.probabilities.last_compute_s * 1e3:.3f}",
             "probabilities_delay_ms_last": f"{self.probabilities.last_delay_s * 1e3:.3f}",
             "static_world_version": self.static.applied_version if self.static else 0,
@@ -865,6 +871,15 @@ class CollisionNode(LifecycleNode):
         if losses or self._unmatched_publishers:
             level = DiagnosticStatus.WARN
             problems += losses + self._unmatched_publishers
+        lag = tuple(int(values[f"probabilities_{k}"]) for k in ("published", "late", "superseded"))
+        behind = lag_problem(*(now - seen for now, seen in zip(lag, self._lag_seen)))
+        self._lag_seen = lag
+        if behind:
+            level = DiagnosticStatus.WARN
+            problems.append(f"{behind} since the last report")
+            self._warn("probabilities lag", f"{behind} in the last {self.DIAGNOSTICS_PERIOD_S:g} s "
+                       "(fewer bodies with covariance, a lower input rate or more cores keep up; "
+                       "docs/node.md)")
         status = DiagnosticStatus(level=level, name=f"{self.get_name()}: collision prediction",
                                   message="; ".join(problems) or "ok",
                                   hardware_id=self.get_fully_qualified_name(),

@@ -19,6 +19,9 @@ scene publishes with ``uncertain_pair_budget`` 0, bit for bit.
   the predictions.
 - Latest wins: a prediction superseded before the thread takes it is never completed
   (counted in ``superseded``). A prediction with nothing deferred is republished as it is.
+- Lag: a completion published when a newer prediction had been offered is counted in ``late``
+  (the exact answer of the next input went out before it); ``lag_problem`` says
+  when a share of them, or any superseded prediction, means the completions fall behind.
 - Recording: each message is recorded with the log time of the prediction it completes, so
   replay knows which prediction it belongs to and recomputes it (recording/replay_engine.py).
 """
@@ -34,7 +37,11 @@ from typing import NamedTuple
 from circle_collision_ros.node.activity import NodeActivity
 from circle_collision_ros.pipeline.prediction_messages import ScenePrediction
 
-__all__ = ["ProbabilityPublisher"]
+__all__ = ["ProbabilityPublisher", "lag_problem", "LATE_WARN_SHARE"]
+
+#: Share of a period's completions that may be late before ``lag_problem`` reports it: an
+#: occasional overrun (a loaded machine) is not a trend, a tenth of them is.
+LATE_WARN_SHARE = 0.1
 
 
 class _Job(NamedTuple):
@@ -42,6 +49,17 @@ class _Job(NamedTuple):
     data: bytes  # the prediction's published bytes (republished when nothing was deferred)
     log_time_ns: int
     offered: float  # time.monotonic() at the offer
+    seq: int  # offers made up to and including this one
+
+
+def lag_problem(published: int, late: int, superseded: int) -> str | None:
+    """What a period's counts of completions (published, late, superseded) say about
+    `collision_probabilities`, or None when it keeps up: any superseded prediction (it got
+    no completion), or more than LATE_WARN_SHARE of the published completions late."""
+    if superseded == 0 and not late > LATE_WARN_SHARE * published:
+        return None
+    return (f"collision_probabilities falls behind the inputs: {late} of {published} "
+            f"completions came after the next prediction, {superseded} predictions got none")
 
 
 def _lower_priority(nice: int) -> None:
@@ -84,6 +102,8 @@ class ProbabilityPublisher:
         self.published = 0  # messages published
         self.completed = 0  # of which had deferred rows evaluated here
         self.superseded = 0  # offered predictions replaced before the thread took them
+        self.late = 0  # of the published, those a newer prediction was offered before
+        self._offers = 0
         self.last_compute_s = 0.0  # the last completion's evaluation time
         self.last_delay_s = 0.0  # the last message's offer-to-publish time
         self._local = threading.local()  # .beside: this pool thread goes on beside narrow work
@@ -99,7 +119,8 @@ class ProbabilityPublisher:
         with self._cond:
             if self._latest is not None:
                 self.superseded += 1
-            self._latest = _Job(prediction, data, log_time_ns, time.monotonic())
+            self._offers += 1
+            self._latest = _Job(prediction, data, log_time_ns, time.monotonic(), self._offers)
             self._cond.notify_all()  # the thread, and wait_idle's callers, wait on it
 
     def close(self) -> None:
@@ -146,9 +167,13 @@ class ProbabilityPublisher:
                     data = done.to_cdr()
                     self.last_compute_s = time.monotonic() - started
                     self.completed += 1
+                with self._cond:  # the next input's exact answer is out already
+                    late = self._offers > job.seq
                 self._publish(data)
                 self.last_delay_s = time.monotonic() - job.offered
                 self.published += 1
+                if late:
+                    self.late += 1
                 self._record(data, job.log_time_ns)
             except Exception as exc:  # one failed completion never stops the next ones
                 self._on_error(f"probabilities of the prediction at {job.log_time_ns} ns "

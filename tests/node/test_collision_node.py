@@ -11,7 +11,8 @@ Guarantees proved here:
   reason, read-only ones cannot change;
 - every bad-input class is rejected while the rest of the scene is still
   predicted, no NaN is ever published, and the node survives a 50,000-body array;
-- markers and diagnostics are published (tests/node/test_stream.py: stream rules).
+- markers and diagnostics are published (tests/node/test_stream.py: stream rules); a period
+  in which completions on collision_probabilities came late reports WARN, once.
 """
 from __future__ import annotations
 
@@ -259,6 +260,32 @@ def test_markers_and_diagnostics_are_published(in_process, ros_node) -> None:
     values = {kv.key: kv.value for kv in harness.diagnostics[-1].status[0].values}
     assert values["bodies"] == "2" and int(values["predictions_published"]) >= 1
     assert float(values["latency_ms_p99"]) > 0.0 and "inputs_coalesced" in values
+    assert values["probabilities_late"] == "0"  # node/probabilities.py counts them
+
+
+def test_completions_falling_behind_show_on_diagnostics(in_process, ros_node) -> None:
+    """A diagnostics period in which completions came late (counted by node/probabilities.py,
+    tests/node/test_probabilities.py) reports WARN naming the counts, once: the next period,
+    with none late, is OK again.  The counters are advanced by hand: making a real node fall
+    behind takes a machine-dependent load."""
+    from diagnostic_msgs.msg import DiagnosticStatus
+
+    node, harness = in_process
+    assert spin_until(ros_node, lambda: harness.diagnostics, 15.0, (node,))
+    seen = len(harness.diagnostics)
+    node.probabilities.published += 10
+    node.probabilities.late += 5
+
+    def reports():
+        return [d.status[0] for d in harness.diagnostics[seen:]]
+
+    assert spin_until(ros_node, lambda: len(reports()) >= 2, 15.0, (node,))
+    warned = [r for r in reports() if r.level == DiagnosticStatus.WARN]
+    assert len(warned) == 1, [r.message for r in reports()]
+    assert "5 of 10 completions came after the next prediction" in warned[0].message
+    assert reports()[-1].level == DiagnosticStatus.OK and reports()[-1].message == "ok"
+    values = {kv.key: kv.value for kv in reports()[-1].values}
+    assert values["probabilities_late"] == "5"
 
 
 def test_parameters_validated_and_applied(in_process) -> None:

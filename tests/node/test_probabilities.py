@@ -6,6 +6,9 @@ Guarantees proved here:
   recorded with the log time it was offered with;
 - latest wins: a prediction replaced before the thread takes it is never published, and is
   counted; the exact path's offer never waits for a completion in progress;
+- a completion published when a newer prediction had been offered is counted late, one
+  published before is not; ``lag_problem`` reports any superseded prediction and more than
+  LATE_WARN_SHARE late completions, and nothing else (the node's /diagnostics WARN);
 - close() publishes what was offered before it; a failing publish is reported and the next
   prediction is still completed;
 - while the node is busy the completion waits, but for one thread beside a narrow prediction
@@ -22,7 +25,8 @@ import time
 
 import pytest
 
-from circle_collision_ros.node.probabilities import ProbabilityPublisher
+from circle_collision_ros.node.probabilities import (LATE_WARN_SHARE, ProbabilityPublisher,
+                                                     lag_problem)
 from circle_collision_ros.pipeline.predictor import CollisionPredictor, PredictorConfig
 from tests.core.scene.test_scene_uncertain import BASE, _batch
 
@@ -49,6 +53,46 @@ def test_completed_bytes_and_log_times() -> None:
     assert published == [full.to_cdr(), b"as published"]
     assert recorded == [(full.to_cdr(), 11), (b"as published", 12)]
     assert worker.completed == 1 and worker.published == 2
+    assert worker.late == 0 and worker.superseded == 0  # each published before the next offer
+
+
+def test_a_completion_overtaken_by_the_next_prediction_is_counted_late(monkeypatch) -> None:
+    """The first prediction's evaluation is held (the node is busy, a wide period) until the
+    next prediction has been offered: the first is published late, the second is not."""
+    from circle_collision_ros.node.activity import NodeActivity
+
+    taken = threading.Event()
+
+    class Recording(NodeActivity):
+        def pause(self, beside: bool = False, completions: bool = False) -> None:
+            taken.set()  # the thread holds the first prediction: it cannot be superseded now
+            super().pause(beside, completions)
+
+    monkeypatch.setattr(NodeActivity, "MAX_PAUSE_S", 60.0)  # beyond the waits below
+    activity = Recording()
+    published = []
+    worker = ProbabilityPublisher(published.append, activity=activity)
+    try:
+        part, full = _prediction(2), _prediction(0)
+        with activity.busy():
+            worker.offer(part, part.to_cdr(), 1)
+            assert taken.wait(30.0)
+            worker.offer(full, b"next, nothing deferred", 2)
+        assert worker.wait_idle(30.0)
+    finally:
+        worker.close()
+    assert published == [full.to_cdr(), b"next, nothing deferred"]
+    assert worker.late == 1 and worker.superseded == 0
+    assert "1 of 2 completions came after the next prediction" in lag_problem(2, 1, 0)
+
+
+def test_lag_problem_names_the_counts_past_its_share() -> None:
+    assert lag_problem(0, 0, 0) is None and lag_problem(30, 0, 0) is None
+    assert lag_problem(30, int(LATE_WARN_SHARE * 30), 0) is None  # at the share: not a trend
+    late = lag_problem(30, int(LATE_WARN_SHARE * 30) + 1, 0)
+    assert late == ("collision_probabilities falls behind the inputs: 4 of 30 completions came "
+                    "after the next prediction, 0 predictions got none")
+    assert "1 predictions got none" in lag_problem(0, 0, 1)  # none published, one dropped
 
 
 def test_latest_wins_and_the_offer_never_waits() -> None:
