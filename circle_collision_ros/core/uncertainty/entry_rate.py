@@ -43,6 +43,7 @@ from numba import njit
 
 from circle_collision_ros.core.special import (cody_erf_small, cody_erfcx_mid, cody_r3, inv_sym,
                                                mat_mul)
+from circle_collision_ros.core.uncertainty.panel_map import map_to_t
 from circle_collision_ros.core.uncertainty.quadrature import (G7_WEIGHTS, K15_NODES, K15_WEIGHTS,
                                                               P31_K15_WEIGHTS, P31_NEW_NODES,
                                                               P31_NEW_WEIGHTS, make_adaptive,
@@ -630,42 +631,39 @@ def entry_rate_integral(dp, dv, da, R, Sigma, ta, tb, tol, acc):
 
 
 @njit(cache=True, error_model="numpy")
-def entry_rate_k15(dp, dv, da, R, Sigma, ta, tb, tol, acc, f, fe):
+def entry_rate_k15(dp, dv, da, R, Sigma, ta, tb, tol, acc, f, fe, mp):
     """(K15 of nu+ over [ta, tb], |K15 - G7|, K15 of the nodes' own
-    estimates, the largest of those): the first panel of
-    ``entry_rate_integral`` (the same nodes and tolerances), with the 15
-    values kept in f (nodes ta + (tb - ta)(1 + K15_NODES) / 2, ascending) for
-    ``quadrature.subinterval_integral`` and ``entry_rate_p31``, their own
-    estimates in fe."""
-    h = 0.5 * (tb - ta)
-    c = ta + h
+    estimates, the largest of those) in the mapped variable s of
+    ``panel_map`` (mp = (c, w, alpha, h), t(s) onto [ta, tb]): the values
+    nu+(t(s)) dt/ds at K15_NODES (ascending) kept in f, for
+    ``quadrature.subinterval_integral`` (unit half-width) and
+    ``entry_rate_p31``; the nodes' own estimates (per unit t) in fe.  Each nu+
+    value takes the inner tolerance of ``entry_rate_integral`` over [ta, tb]."""
     itol = INNER_TOL_FACTOR * tol / max(tb - ta, 1e-300)
     k = 0.0
     g = 0.0
     ie = 0.0
     ie_max = 0.0
     for i in range(15):
-        t = c + h * K15_NODES[i]
-        f[i] = _nu(dp, dv, da, R, Sigma, t, itol, acc)
+        t, jac = map_to_t(mp, K15_NODES[i])
+        f[i] = _nu(dp, dv, da, R, Sigma, t, itol, acc) * jac
         fe[i] = acc[2]
         k += K15_WEIGHTS[i] * f[i]
         g += G7_WEIGHTS[i] * f[i]
-        ie += K15_WEIGHTS[i] * acc[2]
+        ie += K15_WEIGHTS[i] * acc[2] * jac
         ie_max = max(ie_max, acc[2])
-    return k * h, abs((k - g) * h), ie * h, ie_max
+    return k, abs(k - g), ie, ie_max
 
 
 @njit(cache=True, error_model="numpy")
-def entry_rate_p31(dp, dv, da, R, Sigma, ta, tb, tol, acc, f, fe, fnew):
+def entry_rate_p31(dp, dv, da, R, Sigma, ta, tb, tol, acc, f, fe, fnew, mp):
     """(P31 of nu+ over [ta, tb], |P31 - K15|, P31 of the nodes' own estimates,
     the largest of the new nodes' estimates): Patterson's extension of
-    ``entry_rate_k15``'s rule on the same interval and tolerance, from its 15
-    values f and estimates fe and 16 new nu+ values, kept in fnew (nodes
-    ta + (tb - ta)(1 + P31_NEW_NODES) / 2; the two K15 halves the adaptive rule
-    would take next cost 30).  |P31 - K15| is the estimate as |K15 - G7| is
-    K15's: P31 is exact to degree 46, K15 to 22."""
-    h = 0.5 * (tb - ta)
-    c = ta + h
+    ``entry_rate_k15``'s rule in the same mapped variable and tolerance, from
+    its 15 values f and estimates fe and 16 new values nu+(t(s)) dt/ds, kept
+    in fnew (at P31_NEW_NODES; the two K15 halves the adaptive rule would take
+    next cost 30).  |P31 - K15| is the estimate as |K15 - G7| is K15's: P31 is
+    exact to degree 46, K15 to 22."""
     itol = INNER_TOL_FACTOR * tol / max(tb - ta, 1e-300)
     p = 0.0
     k = 0.0
@@ -674,13 +672,14 @@ def entry_rate_p31(dp, dv, da, R, Sigma, ta, tb, tol, acc, f, fe, fnew):
     for i in range(15):
         p += P31_K15_WEIGHTS[i] * f[i]
         k += K15_WEIGHTS[i] * f[i]
-        ie += P31_K15_WEIGHTS[i] * fe[i]
+        ie += P31_K15_WEIGHTS[i] * fe[i] * map_to_t(mp, K15_NODES[i])[1]
     for i in range(16):
-        fnew[i] = _nu(dp, dv, da, R, Sigma, c + h * P31_NEW_NODES[i], itol, acc)
+        t, jac = map_to_t(mp, P31_NEW_NODES[i])
+        fnew[i] = _nu(dp, dv, da, R, Sigma, t, itol, acc) * jac
         p += P31_NEW_WEIGHTS[i] * fnew[i]
-        ie += P31_NEW_WEIGHTS[i] * acc[2]
+        ie += P31_NEW_WEIGHTS[i] * acc[2] * jac
         ie_max = max(ie_max, acc[2])
-    return p * h, abs((p - k) * h), ie * h, ie_max
+    return p, abs(p - k), ie, ie_max
 
 
 @njit(cache=True, error_model="numpy", inline="always")

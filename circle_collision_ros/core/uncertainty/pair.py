@@ -117,7 +117,7 @@ def pair_kernel(dp, dv, da, R, Sigma, H, thr, out):
     pb = np.empty(PANELS * cnt + 1)
     # the walk's panels end at t_inside; the Rice integral below runs only
     # when t_inside is +inf, where they are the full panels (cache shared)
-    npan = walk_panels(leaves, cnt, t_inside, pa, pb)
+    npan = walk_panels(dp, dv, da, R, Sigma, leaves, cnt, t_inside, pa, pb)
     cache = np.zeros((npan + 1, CACHE_COLUMNS))
 
     # plausible time: certified walk over the ambiguous panels before t_inside

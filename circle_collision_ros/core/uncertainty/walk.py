@@ -26,6 +26,8 @@ from circle_collision_ros.core.uncertainty.overlap import (overlap_probability,
                                                            overlap_probability_2d,
                                                            overlap_probability_2d_tol,
                                                            overlap_probability_tol)
+from circle_collision_ros.core.uncertainty.panel_map import (MAX_BUMPS, bump_cuts, bump_map,
+                                                             map_to_s)
 from circle_collision_ros.core.uncertainty.quadrature import (P31_K15_POS, P31_NEW_POS, k15_error,
                                                               push_halves, subinterval_integral)
 from circle_collision_ros.core.uncertainty.tube import TUBE_TAIL, S_at, max_sigma_over, mean_range
@@ -67,29 +69,40 @@ def instant_probability_tol(dp, dv, da, R, Sigma, t, tol):
     return overlap_probability(g, S_at(Sigma, t), R)
 
 
-# Ambiguous tube intervals are cut into PANELS panels for the entry-rate
-# integral; the plausible-time search certifies panel by panel.
-PANELS = 2
-_RICE_TOL = 1e-3  # quadrature tolerance of the entry-rate integral per panel
+# Ambiguous tube intervals are cut into panels, one per bump of the entry rate
+# (at most PANELS; core.uncertainty.panel_map), each panel's nodes mapped onto its
+# bump: two equal halves saw a bump with a few nodes each and took P31 on a third
+# of them (bench/bench_uncertainty_scene.py --completion).  The plausible-time
+# search certifies panel by panel.
+PANELS = MAX_BUMPS
+_PANEL_TOL = 2e-3  # quadrature tolerance of the entry-rate integral per panel
+_RICE_TOL = 1e-3  # of the walk's 3-point steps (entry_rate_gauss3)
 P0_ERR = 1e-9  # error of one instantaneous probability (overlap_probability)
 P0_SKIP = 1e-12  # P(0) is taken as 0 where instant_bound certifies it below this
 PLAUSIBLE_RTOL = 1e-6  # the plausible time's bracket width, relative to H
 
 
 @njit(cache=True, error_model="numpy")
-def walk_panels(leaves, cnt, t_end, pa, pb):
+def walk_panels(dp, dv, da, R, Sigma, leaves, cnt, t_end, pa, pb):
     """Panel ends of the ambiguous intervals before t_end into pa, pb (each
-    interval cut into PANELS equal panels); returns the count."""
+    interval cut between its bumps, panel_map.bump_cuts; at most PANELS
+    panels each); returns the count."""
     m = 0
+    cuts = np.empty(PANELS)
     for j in range(cnt):
         a = leaves[j, 0]
         b = min(leaves[j, 1], t_end)
         if not a < b:
             continue
-        for q in range(PANELS):
-            pa[m] = a + (b - a) * q / PANELS
-            pb[m] = b if q == PANELS - 1 else a + (b - a) * (q + 1) / PANELS
-            m += 1
+        k = bump_cuts(dp, dv, da, R, Sigma, a, b, cuts)
+        start = a
+        for q in range(k + 1):
+            end = b if q == k else cuts[q]
+            if start < end:
+                pa[m] = start
+                pb[m] = end
+                m += 1
+            start = end
     return m
 
 
@@ -127,12 +140,13 @@ def prob_at(dp, dv, da, R, Sigma, t, st):
 
 
 # The per-pair cache of panel integrals (one row per panel): computed flag,
-# value, error estimate; then, when the panel's single K15 or its P31 extension
-# was accepted (no split), the number of kept values (15 or 31; 0: none), the
-# largest of the nodes' own (arc/cap) error estimates and the values of nu+ at
-# the rule's nodes, ascending (the walk's short steps integrate their
+# value, error estimate; the panel's node map (panel_map.bump_map: c, w, alpha,
+# h); then, when the panel's single K15 or its P31 extension was accepted (no
+# split), the number of kept values (15 or 31; 0: none), the largest of the
+# nodes' own (arc/cap) error estimates and the values nu+(t(s)) dt/ds at the
+# rule's nodes s, ascending (the walk's short steps integrate their
 # interpolant instead of evaluating nu+ again).
-_C_DONE, _C_VALUE, _C_ERR, _C_NODES_OK, _C_INNER_MAX, _C_NODES = 0, 1, 2, 3, 4, 5
+_C_DONE, _C_VALUE, _C_ERR, _C_MAP, _C_NODES_OK, _C_INNER_MAX, _C_NODES = 0, 1, 2, 3, 7, 8, 9
 CACHE_COLUMNS = _C_NODES + 31
 
 
@@ -144,15 +158,13 @@ def _rice_short(dp, dv, da, R, Sigma, a, b, pa, pb, j, cache, plo, thr, acc, st)
     the 3-point Gauss rule."""
     nk = int(cache[j, _C_NODES_OK])
     if nk != 0:
-        h = 0.5 * (pb[j] - pa[j])
-        m = pa[j] + h
-        xl = min(max((a - m) / h, -1.0), 1.0)
-        xr = min(max((b - m) / h, -1.0), 1.0)
-        v, e = subinterval_integral(cache[j, _C_NODES : _C_NODES + nk], xl, xr)
-        v = max(v * h, 0.0)  # nu+ >= 0: a negative interpolant integral is rounding or ringing
+        mp = (cache[j, _C_MAP], cache[j, _C_MAP + 1], cache[j, _C_MAP + 2], cache[j, _C_MAP + 3])
+        v, e = subinterval_integral(cache[j, _C_NODES : _C_NODES + nk], map_to_s(mp, a),
+                                    map_to_s(mp, b))
+        v = max(v, 0.0)  # nu+ >= 0: a negative interpolant integral is rounding or ringing
         # the nodes' own estimates as the adaptive rule of entry_rate_integral
         # counted them before it weighted them: width times the largest
-        e = e * h + (b - a) * cache[j, _C_INNER_MAX]
+        e = e + (b - a) * cache[j, _C_INNER_MAX]
         if plo + v + e + st[ST_PERR] < thr:
             return v, e
     acc[1] = 0.0
@@ -231,14 +243,17 @@ def rice_panel(dp, dv, da, R, Sigma, pa, pb, j, cache, acc, st):
         acc[1] = 0.0
         f15 = np.empty(15)
         fe = np.empty(15)
+        mp = bump_map(dp, dv, da, R, Sigma, pa[j], pb[j])
+        for i in range(4):
+            cache[j, _C_MAP + i] = mp[i]
         v, e, inner, inner_max = entry_rate_k15(
-            dp, dv, da, R, Sigma, pa[j], pb[j], _RICE_TOL, acc, f15, fe
+            dp, dv, da, R, Sigma, pa[j], pb[j], _PANEL_TOL, acc, f15, fe, mp
         )
-        # the whole panel is one K15: QUADPACK's estimate, not |K15 - G7| alone, which
-        # can understate a peak between the nodes (k15_error); the halves below use the
-        # adaptive rule's own estimates
-        e = k15_error(f15, 0.5 * (pb[j] - pa[j]), v, e)
-        if not (e > _RICE_TOL):  # (a NaN estimate is accepted, as by the adaptive rule)
+        # the whole panel is one K15 (in s: half-width 1): QUADPACK's estimate, not
+        # |K15 - G7| alone, which can understate a peak between the nodes (k15_error);
+        # the halves below use the adaptive rule's own estimates
+        e = k15_error(f15, 1.0, v, e)
+        if not (e > _PANEL_TOL):  # (a NaN estimate is accepted, as by the adaptive rule)
             cache[j, _C_NODES_OK] = 15.0
             cache[j, _C_INNER_MAX] = inner_max
             cache[j, _C_NODES : _C_NODES + 15] = f15
@@ -249,9 +264,9 @@ def rice_panel(dp, dv, da, R, Sigma, pa, pb, j, cache, acc, st):
             # is ~100x K15's error and P31 settles it with 16 more values
             fnew = np.empty(16)
             v, e, inner, new_max = entry_rate_p31(
-                dp, dv, da, R, Sigma, pa[j], pb[j], _RICE_TOL, acc, f15, fe, fnew
+                dp, dv, da, R, Sigma, pa[j], pb[j], _PANEL_TOL, acc, f15, fe, fnew, mp
             )
-            if not (e > _RICE_TOL):
+            if not (e > _PANEL_TOL):
                 cache[j, _C_NODES_OK] = 31.0
                 cache[j, _C_INNER_MAX] = max(inner_max, new_max)
                 for i in range(15):
@@ -261,8 +276,9 @@ def rice_panel(dp, dv, da, R, Sigma, pa, pb, j, cache, acc, st):
                 e += inner
             else:  # the adaptive rule's next panels: the halves, half the tolerance each
                 m = 0.5 * (pa[j] + pb[j])
-                v, e = entry_rate_integral(dp, dv, da, R, Sigma, pa[j], m, 0.5 * _RICE_TOL, acc)
-                v2, e2 = entry_rate_integral(dp, dv, da, R, Sigma, m, pb[j], 0.5 * _RICE_TOL, acc)
+                v, e = entry_rate_integral(dp, dv, da, R, Sigma, pa[j], m, 0.5 * _PANEL_TOL, acc)
+                v2, e2 = entry_rate_integral(dp, dv, da, R, Sigma, m, pb[j], 0.5 * _PANEL_TOL,
+                                             acc)
                 v += v2
                 e += e2
         if acc[1] != 0.0:

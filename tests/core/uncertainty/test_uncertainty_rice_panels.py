@@ -5,12 +5,14 @@ the entry rate nu+ over the panels of a pair's tube interval, as ``pair_kernel``
 (K15, then P31, then halves), lies within the error it states of the integral itself.
 
 The failure this guards against is narrow in the pair's parameters. The entry rate is a
-bump that moves across the K15 nodes as the pair's speed changes. One panel per tube
-interval (``PANELS = 1``) put it between the nodes of every rule for speeds 2.872 to
-2.876 of ``BUMP_AT_START_PAIR`` only: the integral came out 0.029 low, against a stated
-error of 6e-4, and the pair read 0.967 +- 0.007 where contact is 0.9988. A Monte Carlo test
-at 21 speeds meets such a window only by chance. This sweep takes thousands of speeds,
-because its reference needs no sampling.
+bump that moves across the K15 nodes as the pair's speed changes. One equal-width panel per
+tube interval put it between the nodes of every rule for speeds 2.872 to 2.876 of
+``BUMP_AT_START_PAIR`` only: the integral came out 0.029 low, against a stated error of
+6e-4, and the pair read 0.967 +- 0.007 where contact is 0.9988. One panel mapped onto the
+first bump (core.uncertainty.panel_map) without the cuts between bumps missed the pair's
+second bump at x3.02 (6e-3 off, 1.8e-3 stated). A Monte Carlo test at 21 speeds meets such
+a window only by chance. This sweep takes thousands of speeds, because its reference needs
+no sampling.
 
 The reference is composite Simpson over each panel, on n and 2n intervals, of
 ``nu_plus_2d`` / ``nu_plus_3d`` at a tight tolerance (1e-10 / 1e-9 per value). nu+
@@ -53,7 +55,7 @@ def _panels_against_simpson(dp, dv, da, R, Sigma, n, out):
         acc = np.zeros(3)
         pa = np.empty(PANELS * cnt + 1)
         pb = np.empty(PANELS * cnt + 1)
-        npan = walk_panels(leaves, cnt, t_inside, pa, pb)
+        npan = walk_panels(dp[r], dv[r], da[r], R[r], Sigma[r], leaves, cnt, t_inside, pa, pb)
         cache = np.zeros((npan + 1, CACHE_COLUMNS))
         for j in range(npan):
             v, e = rice_panel(dp[r], dv[r], da[r], R[r], Sigma[r], pa, pb, j, cache, acc, st)
