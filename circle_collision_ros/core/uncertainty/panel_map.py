@@ -44,29 +44,25 @@ _W_MIN = 1e-3  # w at least this fraction of the panel width
 
 @njit(cache=True, error_model="numpy")
 def _z(dp, dv, da, R, Sigma, t):
-    """(|g(t)| - R) / sigma along g(t) (sqrt(tr S / D) where g = 0 or S(t) is not positive)."""
+    """(|g(t)| - R) / sigma along g(t) (sqrt(tr S / D) where g = 0 or S(t) is not positive):
+    scalar code, g's components formed once (this runs on every grid point of every panel)."""
     D = dp.shape[0]
-    gg = 0.0
+    g0 = dp[0] + t * (dv[0] + 0.5 * t * da[0])
+    g1 = dp[1] + t * (dv[1] + 0.5 * t * da[1])
+    g2 = dp[2] + t * (dv[2] + 0.5 * t * da[2]) if D == 3 else 0.0
+    gg = g0 * g0 + g1 * g1 + g2 * g2
+    q = 0.0  # g^T S(t) g
     tr = 0.0
     for i in range(D):
-        gi = dp[i] + t * (dv[i] + 0.5 * t * da[i])
-        gg += gi * gi
-        tr += Sigma[i, i] + t * (Sigma[i, D + i] + Sigma[D + i, i]) + t * t * Sigma[D + i, D + i]
-    gn = math.sqrt(gg)
-    var = tr / D
-    if gn > 0.0:
-        # u^T S(t) u along u = g / |g|
-        q = 0.0
-        for i in range(D):
-            ui = (dp[i] + t * (dv[i] + 0.5 * t * da[i])) / gn
-            for j in range(D):
-                uj = (dp[j] + t * (dv[j] + 0.5 * t * da[j])) / gn
-                s = (Sigma[i, j] + t * (Sigma[i, D + j] + Sigma[D + i, j])
-                     + t * t * Sigma[D + i, D + j])
-                q += ui * s * uj
-        if q > 0.0:
-            var = q
-    return (gn - R) / math.sqrt(max(var, 1e-300))
+        gi = g0 if i == 0 else (g1 if i == 1 else g2)
+        for j in range(D):
+            gj = g0 if j == 0 else (g1 if j == 1 else g2)
+            s = Sigma[i, j] + t * (Sigma[i, D + j] + Sigma[D + i, j]) + t * t * Sigma[D + i, D + j]
+            q += gi * s * gj
+            if i == j:
+                tr += s
+    var = q / gg if gg > 0.0 and q > 0.0 else tr / D
+    return (math.sqrt(gg) - R) / math.sqrt(max(var, 1e-300))
 
 
 @njit(cache=True, error_model="numpy")
