@@ -19,6 +19,7 @@ Guarantees proved here:
 """
 from __future__ import annotations
 
+import contextlib
 import os
 import threading
 import time
@@ -38,27 +39,11 @@ def _prediction(budget: int, seed: int = 9):
     return predictor.predict()
 
 
-def test_completed_bytes_and_log_times() -> None:
-    published, recorded = [], []
-    worker = ProbabilityPublisher(published.append, lambda d, t: recorded.append((d, t)))
-    try:
-        part, full = _prediction(2), _prediction(0)
-        assert part.deferred and not full.deferred
-        worker.offer(part, part.to_cdr(), 11)
-        assert worker.wait_idle(30.0)
-        worker.offer(full, b"as published", 12)
-        assert worker.wait_idle(30.0)
-    finally:
-        worker.close()
-    assert published == [full.to_cdr(), b"as published"]
-    assert recorded == [(full.to_cdr(), 11), (b"as published", 12)]
-    assert worker.completed == 1 and worker.published == 2
-    assert worker.late == 0 and worker.superseded == 0  # each published before the next offer
-
-
-def test_a_completion_overtaken_by_the_next_prediction_is_counted_late(monkeypatch) -> None:
-    """The first prediction's evaluation is held (the node is busy, a wide period) until the
-    next prediction has been offered: the first is published late, the second is not."""
+@pytest.mark.parametrize("overtaken", [False, True], ids=["in_turn", "overtaken"])
+def test_completed_bytes_log_times_and_lateness(overtaken, monkeypatch) -> None:
+    """In turn, each prediction is published before the next is offered: none late.
+    Overtaken, the first prediction's evaluation is held (the node is busy, a wide period)
+    until the next has been offered: the first is published late, the second is not."""
     from circle_collision_ros.node.activity import NodeActivity
 
     taken = threading.Event()
@@ -70,20 +55,23 @@ def test_a_completion_overtaken_by_the_next_prediction_is_counted_late(monkeypat
 
     monkeypatch.setattr(NodeActivity, "MAX_PAUSE_S", 60.0)  # beyond the waits below
     activity = Recording()
-    published = []
-    worker = ProbabilityPublisher(published.append, activity=activity)
+    published, recorded = [], []
+    worker = ProbabilityPublisher(published.append, lambda d, t: recorded.append((d, t)),
+                                  activity=activity)
     try:
         part, full = _prediction(2), _prediction(0)
-        with activity.busy():
-            worker.offer(part, part.to_cdr(), 1)
-            assert taken.wait(30.0)
-            worker.offer(full, b"next, nothing deferred", 2)
+        assert part.deferred and not full.deferred
+        with activity.busy() if overtaken else contextlib.nullcontext():
+            worker.offer(part, part.to_cdr(), 11)
+            assert taken.wait(30.0) if overtaken else worker.wait_idle(30.0)
+            worker.offer(full, b"as published", 12)
         assert worker.wait_idle(30.0)
     finally:
         worker.close()
-    assert published == [full.to_cdr(), b"next, nothing deferred"]
-    assert worker.late == 1 and worker.superseded == 0
-    assert "1 of 2 completions came after the next prediction" in lag_problem(2, 1, 0)
+    assert published == [full.to_cdr(), b"as published"]
+    assert recorded == [(full.to_cdr(), 11), (b"as published", 12)]
+    assert worker.completed == 1 and worker.published == 2
+    assert worker.late == int(overtaken) and worker.superseded == 0
 
 
 def test_lag_problem_names_the_counts_past_its_share() -> None:
@@ -93,6 +81,7 @@ def test_lag_problem_names_the_counts_past_its_share() -> None:
     assert late == ("collision_probabilities falls behind the inputs: 4 of 30 completions came "
                     "after the next prediction, 0 predictions got none")
     assert "1 predictions got none" in lag_problem(0, 0, 1)  # none published, one dropped
+    assert "1 of 2 completions came after the next prediction" in lag_problem(2, 1, 0)
 
 
 def test_latest_wins_and_the_offer_never_waits() -> None:
