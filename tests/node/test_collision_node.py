@@ -12,7 +12,7 @@ Guarantees proved here:
 - every bad-input class is rejected while the rest of the scene is still
   predicted, no NaN is ever published, and the node survives a 50,000-body array;
 - markers and diagnostics are published (tests/node/test_stream.py: stream rules); a period
-  in which completions on collision_probabilities came late reports WARN, once.
+  in which collision_probabilities published nothing it was given reports WARN, once.
 """
 from __future__ import annotations
 
@@ -264,17 +264,17 @@ def test_markers_and_diagnostics_are_published(in_process, ros_node) -> None:
 
 
 def test_completions_falling_behind_show_on_diagnostics(in_process, ros_node) -> None:
-    """A diagnostics period in which completions came late (counted by node/probabilities.py,
-    tests/node/test_probabilities.py) reports WARN naming the counts, once: the next period,
-    with none late, is OK again.  The counters are advanced by hand: making a real node fall
-    behind takes a machine-dependent load."""
+    """A diagnostics period in which predictions were superseded and no completion published
+    (node/probabilities.py, tests/node/test_probabilities.py) reports WARN naming the counts,
+    once: the next period is OK again.  The counters are advanced by hand: making a real node
+    fall behind takes a machine-dependent load."""
     from diagnostic_msgs.msg import DiagnosticStatus
 
     node, harness = in_process
     assert spin_until(ros_node, lambda: harness.diagnostics, 15.0, (node,))
     seen = len(harness.diagnostics)
-    node.probabilities.published += 10
-    node.probabilities.late += 5
+    node.probabilities.superseded += 3
+    node.probabilities.late += 2
 
     def reports():
         return [d.status[0] for d in harness.diagnostics[seen:]]
@@ -282,10 +282,10 @@ def test_completions_falling_behind_show_on_diagnostics(in_process, ros_node) ->
     assert spin_until(ros_node, lambda: len(reports()) >= 2, 15.0, (node,))
     warned = [r for r in reports() if r.level == DiagnosticStatus.WARN]
     assert len(warned) == 1, [r.message for r in reports()]
-    assert "5 of 10 completions came after the next prediction" in warned[0].message
+    assert "3 predictions got none" in warned[0].message
     assert reports()[-1].level == DiagnosticStatus.OK and reports()[-1].message == "ok"
     values = {kv.key: kv.value for kv in reports()[-1].values}
-    assert values["probabilities_late"] == "5"
+    assert values["probabilities_late"] == "2" and values["probabilities_superseded"] == "3"
 
 
 def test_parameters_validated_and_applied(in_process) -> None:
