@@ -10,9 +10,11 @@ error estimate, and took Patterson's 16 more values.  The rule runs instead in s
 alpha = asinh((a - c) / w), h = (asinh((b - c) / w) - alpha) / 2, so that t(-1) = a, t(1) = b
 and the nodes crowd within ~w of c (the sinh map of Johnston and Elliott [1] for near-peaked
 integrands).  The integral is the same (a change of variables); nu+(t(s)) dt/ds is smooth
-wherever nu+ is, so the rules and their error estimates apply to it unchanged, and a bump away
-from c is resolved less well, never mis-stated: its estimate grows as it does on an unmapped
-panel (Patterson's extension, then halves).
+wherever nu+ is, so the rules and their error estimates apply to it unchanged.  A second bump
+away from c falls where the nodes are sparse, and there K15 and its Patterson extension can
+agree on a value that misses it (as on any panel whose nodes a feature falls between): so each
+interval is first cut midway between the bumps the grid shows (``bump_cuts``), and each panel
+maps onto its own bump.
 
 c and w come from the mean path, not from nu+: z(t) = (|g(t)| - R) / sigma_g(t), the mean
 distance to the sphere in units of the position sigma along g, on a _GRID-step grid; c is where
